@@ -1,0 +1,25 @@
+//! Why a simulation stopped.
+
+use crate::friction::SolveError;
+use crate::params::ParamError;
+
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SimError {
+    #[error("invalid parameters: {0}")]
+    Params(#[from] ParamError),
+    #[error(
+        "unstable at step {step}: cell {cell} has {quantity} = {value} at site ({x}, {y}), outside [{min}, {max}]; \
+         the state before this step is kept"
+    )]
+    Unstable { step: u64, cell: usize, x: usize, y: usize, quantity: &'static str, value: f64, min: f64, max: f64 },
+    #[error("step {step}: {source}; the state before this step is kept")]
+    Friction {
+        step: u64,
+        #[source]
+        source: SolveError,
+    },
+    #[error("step {step}: cell {cell} {what}")]
+    CellLost { step: u64, cell: usize, what: String },
+    #[error("{0}")]
+    Invalid(String),
+}

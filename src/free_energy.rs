@@ -1,0 +1,154 @@
+//! The free energy F = F_CH + F_area + F_rep (Supplementary Eqs. S1–S3) and its functional
+//! derivative μ_i = δF/δφ_i (model-notes §2):
+//!
+//!   μ_i = (γ/λ)·8 φ_i(1−φ_i)(1−2φ_i) − 2γλ ∇²φ_i − (4μ/πR²)(1 − A_i/πR²) φ_i
+//!         + (c κ/λ) φ_i Σ_{j≠i} φ_j²,
+//!
+//! with A_i = ∫ φ_i², the area term read as squared, and c = `repulsion_factor` (4 as printed).
+
+use crate::lattice::Patch;
+use crate::params::{Laplacian, Params};
+
+/// The coefficients of μ_i, derived once from the parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FreeEnergy {
+    /// 8γ/λ: bulk double well.
+    pub bulk: f64,
+    /// 2γλ: gradient term.
+    pub gradient: f64,
+    /// 4μ/πR²: area constraint.
+    pub area: f64,
+    /// πR².
+    pub target_area: f64,
+    /// cκ/λ: repulsion.
+    pub repulsion: f64,
+    pub laplacian: Laplacian,
+}
+
+impl FreeEnergy {
+    pub fn new(p: &Params) -> Self {
+        FreeEnergy {
+            bulk: 8.0 * p.gamma / p.lambda,
+            gradient: 2.0 * p.gamma * p.lambda,
+            area: 4.0 * p.mu / p.target_area(),
+            target_area: p.target_area(),
+            repulsion: p.repulsion_factor * p.kappa / p.lambda,
+            laplacian: p.laplacian,
+        }
+    }
+
+    /// μ_i at every site of the patch. `others_phi2(i)` is Σ_j φ_j² on the lattice at the
+    /// lattice index of padded site i, all cells included (this cell's own φ_i² is taken out
+    /// here); `area` is A_i.
+    pub fn chemical_potential(&self, patch: Patch, phi: &[f64], area: f64, sum_phi2: &[f64], l: usize, mu: &mut [f64]) {
+        let s = patch.stride();
+        let area_term = self.area * (1.0 - area / self.target_area);
+        for run in patch.runs(l) {
+            let g = &sum_phi2[run.global..][..run.len];
+            for (k, &sp2) in g.iter().enumerate() {
+                let i = run.padded + k;
+                let c = phi[i];
+                let lap = laplacian(self.laplacian, phi, i, s);
+                mu[i] = self.bulk * c * (1.0 - c) * (1.0 - 2.0 * c) - self.gradient * lap - area_term * c
+                    + self.repulsion * c * (sp2 - c * c);
+            }
+        }
+    }
+}
+
+/// The discrete Laplacian at padded index i of a patch with row stride s.
+#[inline(always)]
+pub fn laplacian(kind: Laplacian, f: &[f64], i: usize, s: usize) -> f64 {
+    let nn = f[i - 1] + f[i + 1] + f[i - s] + f[i + s];
+    match kind {
+        Laplacian::FivePoint => nn - 4.0 * f[i],
+        Laplacian::NinePoint => {
+            let diag = f[i - s - 1] + f[i - s + 1] + f[i + s - 1] + f[i + s + 1];
+            (4.0 * nn + diag - 20.0 * f[i]) / 6.0
+        }
+    }
+}
+
+/// A_i = Σ φ_i² over the patch.
+pub fn area(phi: &[f64]) -> f64 {
+    phi.iter().map(|v| v * v).sum()
+}
+
+/// The free energy of one cell alone (F_CH + F_area, no repulsion), with the gradient squared
+/// by forward differences: used by tests to check that μ is its derivative.
+pub fn single_cell_energy(p: &Params, patch: Patch, phi: &[f64]) -> f64 {
+    let s = patch.stride();
+    let mut ch = 0.0;
+    // Sum over the padded patch including the halo, so that every bond is counted.
+    for b in 0..patch.h + 1 {
+        for a in 0..patch.w + 1 {
+            let i = b * s + a;
+            let c = phi[i];
+            let gx = phi[i + 1] - c;
+            let gy = phi[i + s] - c;
+            ch += 4.0 * c * c * (1.0 - c) * (1.0 - c) + p.lambda * p.lambda * (gx * gx + gy * gy);
+        }
+    }
+    let a = area(phi) / p.target_area();
+    p.gamma / p.lambda * ch + p.mu * (1.0 - a) * (1.0 - a)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// μ must be the derivative of F: compare with finite differences of the energy.
+    #[test]
+    fn mu_is_the_functional_derivative() {
+        let p = Params { radius: 3.0, ..Params::default() };
+        let patch = Patch { x0: 0, y0: 0, w: 12, h: 12 };
+        let l = 32;
+        let mut phi = vec![0.0; patch.padded_len()];
+        for b in 0..12 {
+            for a in 0..12 {
+                let r = ((a as f64 - 5.5).powi(2) + (b as f64 - 5.0).powi(2)).sqrt();
+                phi[patch.idx(a, b)] = 1.0 / (1.0 + (r - 3.2).exp()) + 0.01 * ((a * b) as f64).sin();
+            }
+        }
+        let fe = FreeEnergy::new(&p);
+        // Σφ² of this cell alone: the repulsion term vanishes.
+        let mut sum_phi2 = vec![0.0; l * l];
+        for b in 0..12 {
+            for a in 0..12 {
+                sum_phi2[b * l + a] = phi[patch.idx(a, b)].powi(2);
+            }
+        }
+        let mut mu = vec![0.0; patch.padded_len()];
+        fe.chemical_potential(patch, &phi, area(&phi), &sum_phi2, l, &mut mu);
+        let h = 1e-6;
+        for (a, b) in [(5, 5), (2, 7), (8, 3), (0, 0), (11, 6)] {
+            let i = patch.idx(a, b);
+            let mut up = phi.clone();
+            up[i] += h;
+            let mut dn = phi.clone();
+            dn[i] -= h;
+            let fd = (single_cell_energy(&p, patch, &up) - single_cell_energy(&p, patch, &dn)) / (2.0 * h);
+            assert!((fd - mu[i]).abs() < 1e-6 * (1.0 + fd.abs()), "site ({a},{b}): δF/δφ {fd} vs μ {}", mu[i]);
+        }
+    }
+
+    #[test]
+    fn repulsion_counts_only_the_other_cells() {
+        let p = Params::default();
+        let fe = FreeEnergy::new(&p);
+        let patch = Patch { x0: 0, y0: 0, w: 3, h: 3 };
+        let l = 16;
+        let mut phi = vec![0.0; patch.padded_len()];
+        let i = patch.idx(1, 1);
+        phi[i] = 0.5;
+        let mut sum_phi2 = vec![0.0; l * l];
+        sum_phi2[l + 1] = 0.25 + 0.36; // itself, and another cell with φ_j = 0.6
+        let mut mu_with = vec![0.0; patch.padded_len()];
+        fe.chemical_potential(patch, &phi, 0.25, &sum_phi2, l, &mut mu_with);
+        sum_phi2[l + 1] = 0.25;
+        let mut mu_alone = vec![0.0; patch.padded_len()];
+        fe.chemical_potential(patch, &phi, 0.25, &sum_phi2, l, &mut mu_alone);
+        // (cκ/λ) φ_i φ_j² = 4·0.5/2 · 0.5 · 0.36
+        assert!((mu_with[i] - mu_alone[i] - 0.18).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,513 @@
+//! The monolayer: N cells on the periodic lattice, stepped by Heun's predictor–corrector through
+//! the paper's protocol (relaxation, then activity with cell–cell friction).
+//!
+//! One evaluation of the right-hand side R(φ) runs these stages (see [`crate::counters`]):
+//! 1. gather Σ_j φ_j² onto the lattice (for the repulsion term);
+//! 2. per cell: A_i and μ_i ([`crate::free_energy`]);
+//! 3. per cell: Q_i, Q̂_i ([`crate::shape`]) and f_i ([`crate::forces`]);
+//! 4. the friction solve for V ([`crate::friction`]) — active phase only;
+//! 5. per cell: v_i and ∂_t φ_i ([`crate::motion`]).
+//!
+//! A step is φ* = φ + Δt R(φ), φ' = φ + ½Δt [R(φ) + R(φ*)], then the patches follow the cells.
+
+use num_complex::Complex64 as C64;
+
+use crate::cell::Cell;
+use crate::counters::{Counters, Stage};
+use crate::error::SimError;
+use crate::forces::force_density;
+use crate::free_energy::{area, FreeEnergy};
+use crate::friction::{FrictionProblem, FrictionSolver, SolveStats};
+use crate::init::random_disks;
+use crate::lattice::{wrap, Patch};
+use crate::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
+use crate::par;
+use crate::params::Params;
+use crate::shape::{normalise, shape_tensor};
+
+const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
+
+/// Which part of the protocol a step belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    /// ζ = 0, ξ_cell = 0, v = f/ξ_relax, square patches of fixed size.
+    Relaxation,
+    /// Activity ζ, friction ξ_s and ξ_cell, adaptive patches.
+    Active,
+}
+
+/// Fields on the whole L×L lattice, row-major (index y·L + x).
+#[derive(Clone, Debug)]
+pub struct LatticeFields {
+    /// Σ_j φ_j².
+    pub sum_phi2: Vec<f64>,
+    /// n(x) = Σ_j w_j(x), the friction weights.
+    pub weight: Vec<f64>,
+    /// F(x) = Σ_j w_j f_j.
+    pub force: Vec<C64>,
+    /// ξ_s(x) + ξ_c N(x): the denominator of every cell's velocity.
+    pub denominator: Vec<f64>,
+    /// ξ_c S(x).
+    pub pull: Vec<C64>,
+    /// Per-site multiplier of ξ_s (soft < 1 < stiff substrate); 1 everywhere by default.
+    pub substrate: Vec<f64>,
+    /// ξ_s(x) = xi_substrate × substrate(x).
+    pub xi_s: Vec<f64>,
+    /// Σ_i φ_i, filled on request.
+    pub phi_sum: Vec<f64>,
+    /// Σ_i φ_i v_i (Eq. S4), filled on request.
+    pub velocity: Vec<C64>,
+}
+
+impl LatticeFields {
+    fn new(l: usize) -> Self {
+        let n = l * l;
+        LatticeFields {
+            sum_phi2: vec![0.0; n],
+            weight: vec![0.0; n],
+            force: vec![ZERO; n],
+            denominator: vec![0.0; n],
+            pull: vec![ZERO; n],
+            substrate: vec![1.0; n],
+            xi_s: vec![0.0; n],
+            phi_sum: vec![0.0; n],
+            velocity: vec![ZERO; n],
+        }
+    }
+}
+
+/// Everything a checkpoint must hold to continue bit for bit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    pub step: u64,
+    /// Each cell's patch and φ on its padded storage.
+    pub cells: Vec<(Patch, Vec<f64>)>,
+    /// u = V/n of the last friction solve: the next solve's warm start.
+    pub warm_start: Vec<C64>,
+    pub substrate: Vec<f64>,
+}
+
+/// The simulated monolayer.
+#[derive(Clone, Debug)]
+pub struct Monolayer {
+    params: Params,
+    seed: u64,
+    step: u64,
+    cells: Vec<Cell>,
+    free_energy: FreeEnergy,
+    lattice: LatticeFields,
+    solver: FrictionSolver,
+    counters: Counters,
+    last_solve: SolveStats,
+}
+
+/// Adds `value(cell, padded index)` of every cell onto the lattice array `out`. Each thread
+/// owns a band of rows and visits the cells in order, so every site sums in cell order.
+fn gather<T>(out: &mut [T], zero: T, cells: &[Cell], l: usize, value: impl Fn(&Cell, usize) -> T + Sync)
+where
+    T: Copy + Send + Sync + std::ops::AddAssign,
+{
+    let rows = par::band_rows(l);
+    par::for_each_chunk_mut(out, rows * l, |band, chunk| {
+        chunk.fill(zero);
+        let y0 = band * rows;
+        let y1 = y0 + chunk.len() / l;
+        for cell in cells {
+            let p = cell.patch;
+            for gy in y0..y1 {
+                let Some(b) = p.row_of(gy, l) else { continue };
+                for run in p.row_runs(b, l).into_iter().flatten() {
+                    let start = (gy - y0) * l + run.global % l;
+                    for (k, o) in chunk[start..start + run.len].iter_mut().enumerate() {
+                        *o += value(cell, run.padded + k);
+                    }
+                }
+            }
+        }
+    });
+}
+
+impl Monolayer {
+    /// The protocol's start: random disks of radius R/2, seeded.
+    pub fn new(params: Params, seed: u64) -> Result<Self, SimError> {
+        params.validate()?;
+        let cells = random_disks(&params, seed);
+        Ok(Self::with_cells(params, seed, cells, 0))
+    }
+
+    fn with_cells(params: Params, seed: u64, cells: Vec<Cell>, step: u64) -> Self {
+        let l = params.box_size;
+        let mut m = Monolayer {
+            free_energy: FreeEnergy::new(&params),
+            lattice: LatticeFields::new(l),
+            solver: FrictionSolver::new(l),
+            counters: Counters::default(),
+            last_solve: SolveStats::default(),
+            params,
+            seed,
+            step,
+            cells,
+        };
+        m.update_substrate();
+        m
+    }
+
+    /// Continues from a checkpointed state.
+    pub fn from_state(params: Params, seed: u64, state: State) -> Result<Self, SimError> {
+        params.validate()?;
+        let l = params.box_size;
+        if state.cells.len() != params.n_cells {
+            return Err(SimError::Invalid(format!(
+                "checkpoint has {} cells, parameters say n_cells = {}",
+                state.cells.len(),
+                params.n_cells
+            )));
+        }
+        if state.warm_start.len() != l * l || state.substrate.len() != l * l {
+            return Err(SimError::Invalid(format!("checkpoint lattice is not {l}×{l}")));
+        }
+        let mut cells = Vec::with_capacity(state.cells.len());
+        for (i, (patch, phi)) in state.cells.into_iter().enumerate() {
+            let ok = patch.x0 < l && patch.y0 < l && patch.w < l && patch.h < l && phi.len() == patch.padded_len();
+            if !ok {
+                return Err(SimError::Invalid(format!("checkpoint cell {i}: patch {patch:?} does not fit the box")));
+            }
+            cells.push(Cell::new(patch, phi));
+        }
+        let mut m = Self::with_cells(params, seed, cells, state.step);
+        m.lattice.substrate = state.substrate;
+        m.update_substrate();
+        m.solver.mean_velocity = state.warm_start;
+        Ok(m)
+    }
+
+    /// A copy of everything needed to continue bit for bit.
+    pub fn state(&self) -> State {
+        State {
+            step: self.step,
+            cells: self.cells.iter().map(|c| (c.patch, c.phi.clone())).collect(),
+            warm_start: self.solver.mean_velocity.clone(),
+            substrate: self.lattice.substrate.clone(),
+        }
+    }
+
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// Steps taken since the random disks (relaxation included).
+    pub fn step_count(&self) -> u64 {
+        self.step
+    }
+
+    /// Phase of the next step.
+    pub fn phase(&self) -> Phase {
+        if self.step < self.params.relax_steps {
+            Phase::Relaxation
+        } else {
+            Phase::Active
+        }
+    }
+
+    pub fn cells(&self) -> &[Cell] {
+        &self.cells
+    }
+
+    pub fn lattice(&self) -> &LatticeFields {
+        &self.lattice
+    }
+
+    pub fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    pub fn counters_mut(&mut self) -> &mut Counters {
+        &mut self.counters
+    }
+
+    /// Iterations and residual of the last friction solve.
+    pub fn last_solve(&self) -> SolveStats {
+        self.last_solve
+    }
+
+    /// Changes parameters between steps. The lattice size and the number of cells are fixed.
+    pub fn set_params(&mut self, params: Params) -> Result<(), SimError> {
+        params.validate()?;
+        if params.box_size != self.params.box_size || params.n_cells != self.params.n_cells {
+            return Err(SimError::Invalid(
+                "box_size and n_cells cannot change in a running simulation: start a new one".into(),
+            ));
+        }
+        self.free_energy = FreeEnergy::new(&params);
+        self.params = params;
+        self.update_substrate();
+        Ok(())
+    }
+
+    /// Sets the per-site multiplier of ξ_s (L² values, each finite and > 0).
+    pub fn set_substrate(&mut self, map: &[f64]) -> Result<(), SimError> {
+        let l = self.params.box_size;
+        if map.len() != l * l {
+            return Err(SimError::Invalid(format!("substrate map has {} values, the lattice {}", map.len(), l * l)));
+        }
+        if let Some((i, v)) = map.iter().enumerate().find(|(_, v)| !(v.is_finite() && **v > 0.0)) {
+            return Err(SimError::Invalid(format!(
+                "substrate map at site ({}, {}) = {v}: must be finite and > 0",
+                i % l,
+                i / l
+            )));
+        }
+        self.lattice.substrate.copy_from_slice(map);
+        self.update_substrate();
+        Ok(())
+    }
+
+    fn update_substrate(&mut self) {
+        let xi = self.params.xi_substrate;
+        for (x, m) in self.lattice.xi_s.iter_mut().zip(&self.lattice.substrate) {
+            *x = xi * m;
+        }
+    }
+
+    /// Σ_i φ_i on the lattice.
+    pub fn phi_sum(&mut self) -> &[f64] {
+        let l = self.params.box_size;
+        gather(&mut self.lattice.phi_sum, 0.0, &self.cells, l, |c, i| c.phi[i]);
+        &self.lattice.phi_sum
+    }
+
+    /// The coarse-grained velocity Σ_i φ_i v_i (Eq. S4) as of the last evaluation.
+    pub fn velocity_field(&mut self) -> &[C64] {
+        let l = self.params.box_size;
+        gather(&mut self.lattice.velocity, ZERO, &self.cells, l, |c, i| {
+            C64::new(c.phi[i] * c.vx[i], c.phi[i] * c.vy[i])
+        });
+        &self.lattice.velocity
+    }
+
+    /// Evaluates forces and velocities for the current φ without stepping (fills every
+    /// per-cell field and the lattice fields).
+    pub fn evaluate_now(&mut self) -> Result<(), SimError> {
+        self.evaluate(self.phase())
+    }
+
+    /// Runs `n` steps, stopping at the first error.
+    pub fn advance(&mut self, n: u64) -> Result<(), SimError> {
+        for _ in 0..n {
+            self.step()?;
+        }
+        Ok(())
+    }
+
+    /// One Heun step of the protocol.
+    pub fn step(&mut self) -> Result<(), SimError> {
+        let phase = self.phase();
+        let dt = self.params.dt;
+        self.evaluate(phase)?;
+        let mut counters = std::mem::take(&mut self.counters);
+        counters.time(Stage::Update, || {
+            par::for_each_mut(&mut self.cells, |_, c| {
+                c.phi0.copy_from_slice(&c.phi);
+                c.k1.copy_from_slice(&c.rate);
+                for ((phi, &p0), &k) in c.phi.iter_mut().zip(&c.phi0).zip(&c.rate) {
+                    *phi = p0 + dt * k;
+                }
+            })
+        });
+        self.counters = counters;
+        if let Err(e) = self.evaluate(phase) {
+            self.restore();
+            return Err(e);
+        }
+        let (lo, hi) = (self.params.phi_min, self.params.phi_max);
+        let mut counters = std::mem::take(&mut self.counters);
+        counters.time(Stage::Update, || {
+            par::for_each_mut(&mut self.cells, |_, c| {
+                let half = 0.5 * dt;
+                for ((phi, &p0), (&k1, &k2)) in c.phi.iter_mut().zip(&c.phi0).zip(c.k1.iter().zip(&c.rate)) {
+                    *phi = p0 + half * (k1 + k2);
+                }
+                c.fault = first_out_of_range(c, lo, hi);
+            });
+        });
+        self.counters = counters;
+        if let Some((i, (a, b, v))) = self.cells.iter().enumerate().find_map(|(i, c)| c.fault.map(|f| (i, f))) {
+            let l = self.params.box_size;
+            let (x, y) = self.cells[i].patch.global_xy(a, b, l);
+            self.restore();
+            return Err(SimError::Unstable {
+                step: self.step,
+                cell: i,
+                x,
+                y,
+                quantity: "phi",
+                value: v,
+                min: lo,
+                max: hi,
+            });
+        }
+        self.step += 1;
+        self.counters.steps += 1;
+        let mut counters = std::mem::take(&mut self.counters);
+        let r = counters.time(Stage::Patches, || self.update_patches(phase));
+        self.counters = counters;
+        r
+    }
+
+    /// Puts every φ back to the start of the failed step.
+    fn restore(&mut self) {
+        par::for_each_mut(&mut self.cells, |_, c| c.phi.copy_from_slice(&c.phi0));
+    }
+
+    fn evaluate(&mut self, phase: Phase) -> Result<(), SimError> {
+        let p = &self.params;
+        let l = p.box_size;
+        let active = phase == Phase::Active;
+        let zeta = if active { p.zeta } else { 0.0 };
+        let xi_c = if active { p.xi_cell } else { 0.0 };
+        let (q_mag, q_eps, passive) = (p.q_magnitude, p.q_epsilon, p.passive_force);
+        let (weights, threshold) = (p.friction_weights, p.presence_threshold);
+        let (j0, advection) = (p.j0, p.advection);
+        let fe = self.free_energy;
+        let counters = &mut self.counters;
+        let cells = &mut self.cells;
+        let lat = &mut self.lattice;
+
+        counters.time(Stage::Gather, || gather(&mut lat.sum_phi2, 0.0, cells, l, |c, i| c.phi[i] * c.phi[i]));
+        counters.time(Stage::ChemicalPotential, || {
+            let sum_phi2 = &lat.sum_phi2;
+            par::for_each_mut(cells, |_, c| {
+                c.area = area(&c.phi);
+                fe.chemical_potential(c.patch, &c.phi, c.area, sum_phi2, l, &mut c.mu);
+            })
+        });
+        counters.time(Stage::Forces, || {
+            par::for_each_mut(cells, |_, c| {
+                c.shape = shape_tensor(c.patch, &c.phi);
+                c.q_hat = normalise(c.shape, q_mag, q_eps);
+                force_density(c.patch, &c.phi, &c.mu, c.q_hat, zeta, passive, &mut c.fx, &mut c.fy);
+            })
+        });
+
+        if xi_c > 0.0 {
+            counters.time(Stage::Gather, || {
+                gather(&mut lat.weight, 0.0, cells, l, |c, i| friction_weight(weights, c.phi[i], threshold));
+                gather(&mut lat.force, ZERO, cells, l, |c, i| {
+                    let w = friction_weight(weights, c.phi[i], threshold);
+                    C64::new(w * c.fx[i], w * c.fy[i])
+                });
+            });
+            let solver = &mut self.solver;
+            let problem = FrictionProblem {
+                weight: &lat.weight,
+                force: &lat.force,
+                xi_s: &lat.xi_s,
+                xi_c,
+                tolerance: p.friction_tolerance,
+                max_iterations: p.friction_max_iterations,
+            };
+            let stats = counters
+                .time(Stage::FrictionSolve, || solver.solve(&problem))
+                .map_err(|source| SimError::Friction { step: self.step, source })?;
+            counters.solves += 1;
+            counters.iterations += stats.iterations as u64;
+            counters.max_residual = counters.max_residual.max(stats.residual);
+            self.last_solve = stats;
+            for (((d, pl), (&xs, &nb)), &s) in lat
+                .denominator
+                .iter_mut()
+                .zip(lat.pull.iter_mut())
+                .zip(lat.xi_s.iter().zip(&solver.weight_nb))
+                .zip(&solver.velocity_nb)
+            {
+                *d = xs + xi_c * nb;
+                *pl = s * xi_c;
+            }
+        } else if active {
+            lat.denominator.copy_from_slice(&lat.xi_s);
+            lat.pull.fill(ZERO);
+        } else {
+            lat.denominator.fill(p.xi_relax);
+            lat.pull.fill(ZERO);
+        }
+
+        counters.time(Stage::Velocity, || {
+            let drag = Drag { denominator: &lat.denominator, pull: &lat.pull };
+            par::for_each_mut(cells, |_, c| {
+                let fields = MotionFields {
+                    phi: &c.phi,
+                    mu: &c.mu,
+                    fx: &c.fx,
+                    fy: &c.fy,
+                    vx: &mut c.vx,
+                    vy: &mut c.vy,
+                    rate: &mut c.rate,
+                };
+                velocity_and_rate(c.patch, fields, &drag, l, j0, advection);
+            })
+        });
+        Ok(())
+    }
+
+    /// Relaxation: fixed square patches re-centred on each cell. Active: each side sits
+    /// `patch_margin` sites beyond the last site with φ > `presence_threshold` (paper Sec. A).
+    fn update_patches(&mut self, phase: Phase) -> Result<(), SimError> {
+        let p = &self.params;
+        let l = p.box_size;
+        let (size, margin, thr) = (p.relax_patch_size, p.patch_margin, p.presence_threshold);
+        par::for_each_mut(&mut self.cells, |_, c| {
+            c.lost = None;
+            let old = c.patch;
+            let new = match phase {
+                Phase::Relaxation => {
+                    let (ca, cb) = c.local_centre();
+                    let half = (size / 2) as i64;
+                    Patch {
+                        x0: wrap(old.x0 as i64 + ca.round() as i64 - half, l),
+                        y0: wrap(old.y0 as i64 + cb.round() as i64 - half, l),
+                        w: size,
+                        h: size,
+                    }
+                }
+                Phase::Active => {
+                    let Some((a0, a1, b0, b1)) = c.support(thr) else {
+                        c.lost = Some(format!("vanished: no site has φ > {thr}"));
+                        return;
+                    };
+                    let (w, h) = (a1 - a0 + 1 + 2 * margin, b1 - b0 + 1 + 2 * margin);
+                    if w >= l || h >= l {
+                        c.lost = Some(format!("spans the box: its patch would be {w}×{h} on a {l}×{l} lattice"));
+                        return;
+                    }
+                    Patch {
+                        x0: wrap(old.x0 as i64 + a0 as i64 - margin as i64, l),
+                        y0: wrap(old.y0 as i64 + b0 as i64 - margin as i64, l),
+                        w,
+                        h,
+                    }
+                }
+            };
+            c.relayout(new, l);
+        });
+        if let Some((cell, what)) = self.cells.iter().enumerate().find_map(|(i, c)| c.lost.clone().map(|w| (i, w))) {
+            return Err(SimError::CellLost { step: self.step, cell, what });
+        }
+        Ok(())
+    }
+}
+
+/// The first site (a, b, value) of the patch where φ is not finite or outside [lo, hi].
+fn first_out_of_range(c: &Cell, lo: f64, hi: f64) -> Option<(usize, usize, f64)> {
+    let p = c.patch;
+    for b in 0..p.h {
+        let row = &c.phi[p.idx(0, b)..][..p.w];
+        if let Some(a) = row.iter().position(|v| !(*v >= lo && *v <= hi)) {
+            return Some((a, b, row[a]));
+        }
+    }
+    None
+}

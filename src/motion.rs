@@ -1,0 +1,123 @@
+//! The equation of motion (Eq. 1) on each patch, given the lattice friction fields:
+//!
+//!   v_i(x) = [f_i(x) + ξ_c S(x)] / [ξ_s(x) + ξ_c N(x)]        (Eq. 2, see [`crate::friction`])
+//!   ∂_t φ_i = −v_i · ∇φ_i − J₀ μ_i                           (Eq. 1)
+//!
+//! During relaxation ξ_c = 0 and ξ_s is replaced by ξ_relax, so v_i = f_i / ξ_relax.
+
+use num_complex::Complex64 as C64;
+
+use crate::lattice::Patch;
+use crate::params::{Advection, FrictionWeights};
+use crate::shape::gradient;
+
+/// The weight w_j(x) with which cell j counts in the friction sum of Eq. 2 (model-notes §4).
+#[inline(always)]
+pub fn friction_weight(kind: FrictionWeights, phi: f64, threshold: f64) -> f64 {
+    match kind {
+        // φ undershoots 0 and overshoots 1 near interfaces; unclamped, n could vanish or turn
+        // negative at the edge of a hole.
+        FrictionWeights::Phi => phi.clamp(0.0, 1.0),
+        FrictionWeights::Presence => {
+            if phi > threshold {
+                1.0
+            } else {
+                0.0
+            }
+        }
+    }
+}
+
+/// Lattice fields the velocity of every cell is built from.
+pub struct Drag<'a> {
+    /// ξ_s(x) + ξ_c N(x).
+    pub denominator: &'a [f64],
+    /// ξ_c S(x), x and y as re and im.
+    pub pull: &'a [C64],
+}
+
+/// The cell's fields on its patch that this stage reads and writes.
+pub struct MotionFields<'a> {
+    pub phi: &'a [f64],
+    pub mu: &'a [f64],
+    pub fx: &'a [f64],
+    pub fy: &'a [f64],
+    pub vx: &'a mut [f64],
+    pub vy: &'a mut [f64],
+    pub rate: &'a mut [f64],
+}
+
+/// v_i and ∂_t φ_i at every site of the patch.
+pub fn velocity_and_rate(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j0: f64, advection: Advection) {
+    let s = patch.stride();
+    for run in patch.runs(l) {
+        let den = &drag.denominator[run.global..][..run.len];
+        let pull = &drag.pull[run.global..][..run.len];
+        for (k, (&d, &p)) in den.iter().zip(pull).enumerate() {
+            let i = run.padded + k;
+            let vx = (c.fx[i] + p.re) / d;
+            let vy = (c.fy[i] + p.im) / d;
+            c.vx[i] = vx;
+            c.vy[i] = vy;
+            let adv = match advection {
+                Advection::Central => {
+                    let (gx, gy) = gradient(c.phi, i, s);
+                    vx * gx + vy * gy
+                }
+                Advection::Upwind => {
+                    let f = c.phi;
+                    let gx = if vx > 0.0 { f[i] - f[i - 1] } else { f[i + 1] - f[i] };
+                    let gy = if vy > 0.0 { f[i] - f[i - s] } else { f[i + s] - f[i] };
+                    vx * gx + vy * gy
+                }
+            };
+            c.rate[i] = -adv - j0 * c.mu[i];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniform_velocity_translates_a_profile() {
+        // φ = x on a patch, f = (ξ, 0) with denominator ξ: v = (1, 0) and ∂_t φ = −1.
+        let patch = Patch { x0: 0, y0: 0, w: 5, h: 3 };
+        let l = 8;
+        let mut phi = vec![0.0; patch.padded_len()];
+        for b in 0..patch.h + 2 {
+            for a in 0..patch.w + 2 {
+                phi[b * patch.stride() + a] = a as f64;
+            }
+        }
+        let n = phi.len();
+        let mu = vec![0.0; n];
+        let fx = vec![2.0; n];
+        let fy = vec![0.0; n];
+        let (mut vx, mut vy, mut rate) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let den = vec![2.0; l * l];
+        let pull = vec![C64::new(0.0, 0.0); l * l];
+        for adv in [Advection::Central, Advection::Upwind] {
+            velocity_and_rate(
+                patch,
+                MotionFields { phi: &phi, mu: &mu, fx: &fx, fy: &fy, vx: &mut vx, vy: &mut vy, rate: &mut rate },
+                &Drag { denominator: &den, pull: &pull },
+                l,
+                1.0,
+                adv,
+            );
+            let i = patch.idx(2, 1);
+            assert_eq!((vx[i], vy[i], rate[i]), (1.0, 0.0, -1.0));
+        }
+    }
+
+    #[test]
+    fn weights_are_clamped_or_counted() {
+        assert_eq!(friction_weight(FrictionWeights::Phi, 1.2, 0.01), 1.0);
+        assert_eq!(friction_weight(FrictionWeights::Phi, -0.1, 0.01), 0.0);
+        assert_eq!(friction_weight(FrictionWeights::Phi, 0.3, 0.01), 0.3);
+        assert_eq!(friction_weight(FrictionWeights::Presence, 0.02, 0.01), 1.0);
+        assert_eq!(friction_weight(FrictionWeights::Presence, 0.005, 0.01), 0.0);
+    }
+}

@@ -1,0 +1,51 @@
+//! Data parallelism that never changes a result.
+//!
+//! Every parallel loop here writes disjoint outputs, and every sum over many terms is made in a
+//! fixed order (per cell in cell order, per row then rows in row order), so the bits do not
+//! depend on how many threads run. Without the `parallel` feature (the wasm build) the same loops
+//! run sequentially.
+
+/// Runs `f(i, item)` for every item, in parallel where threads are available.
+pub fn for_each_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter_mut().enumerate().for_each(|(i, t)| f(i, t));
+    }
+    #[cfg(not(feature = "parallel"))]
+    for (i, t) in items.iter_mut().enumerate() {
+        f(i, t);
+    }
+}
+
+/// Runs `f(k, chunk)` over consecutive chunks of `chunk` elements (the last may be shorter).
+pub fn for_each_chunk_mut<T: Send>(data: &mut [T], chunk: usize, f: impl Fn(usize, &mut [T]) + Sync + Send) {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        data.par_chunks_mut(chunk).enumerate().for_each(|(k, c)| f(k, c));
+    }
+    #[cfg(not(feature = "parallel"))]
+    for (k, c) in data.chunks_mut(chunk).enumerate() {
+        f(k, c);
+    }
+}
+
+/// Threads available to the loops above.
+pub fn threads() -> usize {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::current_num_threads()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        1
+    }
+}
+
+/// Rows per band when a lattice of `l` rows is split for the threads. Any value gives the same
+/// bits; this one balances load.
+pub fn band_rows(l: usize) -> usize {
+    let bands = (threads() * 4).max(1);
+    l.div_ceil(bands).max(1)
+}
