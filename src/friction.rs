@@ -30,6 +30,10 @@ use crate::par;
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 
+/// Weight ω of the Jacobi sweeps in the preconditioner: D⁻¹C has its spectrum in (0, 2), and
+/// ω < 1 keeps the combined preconditioner positive definite; 2/3 damps the highest modes best.
+const JACOBI_WEIGHT: f64 = 2.0 / 3.0;
+
 /// What a solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SolveStats {
@@ -85,6 +89,7 @@ pub struct FrictionSolver {
     z: Vec<C64>,
     p: Vec<C64>,
     q: Vec<C64>,
+    t: Vec<C64>,
     row_sums: Vec<f64>,
     /// u = V/n: the solution, and the warm start of the next solve.
     pub mean_velocity: Vec<C64>,
@@ -112,6 +117,7 @@ impl FrictionSolver {
             z: vec![ZERO; n],
             p: vec![ZERO; n],
             q: vec![ZERO; n],
+            t: vec![ZERO; n],
             row_sums: vec![0.0; l],
             mean_velocity: vec![ZERO; n],
             velocity: vec![ZERO; n],
@@ -193,7 +199,7 @@ impl FrictionSolver {
         if res <= pb.tolerance {
             return Ok(SolveStats { iterations: 0, residual: res });
         }
-        self.precondition();
+        self.precondition(pb.xi_c);
         self.p.copy_from_slice(&self.z);
         let mut rz = dot(&self.r, &self.z, &mut self.row_sums, self.l);
         for it in 1..=pb.max_iterations {
@@ -211,7 +217,7 @@ impl FrictionSolver {
             if res <= pb.tolerance {
                 return Ok(SolveStats { iterations: it, residual: res });
             }
-            self.precondition();
+            self.precondition(pb.xi_c);
             let rz_new = dot(&self.r, &self.z, &mut self.row_sums, self.l);
             let beta = rz_new / rz;
             rz = rz_new;
@@ -230,18 +236,35 @@ impl FrictionSolver {
         dot(&self.rhs, &self.rhs, &mut self.row_sums, self.l)
     }
 
-    /// z = Σ K⁻¹ Σ r.
-    fn precondition(&mut self) {
-        for ((z, r), s) in self.z.iter_mut().zip(&self.r).zip(&self.scale) {
-            *z = r * *s;
+    /// z = M r, the symmetric multiplicative combination of a damped Jacobi sweep (the local
+    /// variations of n at cell edges), the FFT solve Σ K⁻¹ Σ (the long wavelengths) and a second
+    /// Jacobi sweep. Symmetric positive definite for a Jacobi weight below 1.
+    fn precondition(&mut self, xi_c: f64) {
+        let l = self.l;
+        // z = ω D⁻¹ r
+        for ((z, r), d) in self.z.iter_mut().zip(&self.r).zip(&self.diag) {
+            *z = if *d > 0.0 { r * (JACOBI_WEIGHT / d) } else { ZERO };
         }
-        self.fft.forward(&mut self.z);
-        for (z, g) in self.z.iter_mut().zip(&self.inv_symbol) {
-            *z *= *g;
+        // t = Σ (r − C z), then z += Σ K⁻¹ t
+        apply_c(&self.z, &mut self.np, &mut self.q, &self.diag, &self.weight, xi_c, l);
+        for (((t, r), q), s) in self.t.iter_mut().zip(&self.r).zip(&self.q).zip(&self.scale) {
+            *t = (r - q) * *s;
         }
-        self.fft.inverse(&mut self.z);
-        for (z, s) in self.z.iter_mut().zip(&self.scale) {
-            *z *= *s;
+        // The symbol is symmetric in (kx, ky), so the transposed spectrum needs no transpose back.
+        self.fft.forward_transposed(&mut self.t);
+        for (t, g) in self.t.iter_mut().zip(&self.inv_symbol) {
+            *t *= *g;
+        }
+        self.fft.inverse_transposed(&mut self.t);
+        for ((z, t), s) in self.z.iter_mut().zip(&self.t).zip(&self.scale) {
+            *z += t * *s;
+        }
+        // z += ω D⁻¹ (r − C z)
+        apply_c(&self.z, &mut self.np, &mut self.q, &self.diag, &self.weight, xi_c, l);
+        for (((z, r), q), d) in self.z.iter_mut().zip(&self.r).zip(&self.q).zip(&self.diag) {
+            if *d > 0.0 {
+                *z += (r - q) * (JACOBI_WEIGHT / d);
+            }
         }
     }
 
@@ -251,10 +274,7 @@ impl FrictionSolver {
             Which::Solution => &self.mean_velocity,
             Which::Direction => &self.p,
         };
-        for ((np, x), n) in self.np.iter_mut().zip(x).zip(&self.weight) {
-            *np = x * *n;
-        }
-        apply_c(x, &self.np, &mut self.q, &self.diag, &self.weight, xi_c, self.l);
+        apply_c(x, &mut self.np, &mut self.q, &self.diag, &self.weight, xi_c, self.l);
     }
 
     /// ‖F − C u‖/‖F‖ of the current solution for the problem last solved (for tests).
@@ -272,8 +292,12 @@ enum Which {
     Direction,
 }
 
-/// out = C x = diag·x − ξ_c n A₈(n x) on sites with diag > 0, and 0 elsewhere; `nx` = n x.
-fn apply_c(x: &[C64], nx: &[C64], out: &mut [C64], diag: &[f64], n: &[f64], xi_c: f64, l: usize) {
+/// out = C x = diag·x − ξ_c n A₈(n x) on sites with diag > 0, and 0 elsewhere; `nx` is work space.
+fn apply_c(x: &[C64], nx: &mut [C64], out: &mut [C64], diag: &[f64], n: &[f64], xi_c: f64, l: usize) {
+    for ((nx, x), n) in nx.iter_mut().zip(x).zip(n) {
+        *nx = x * *n;
+    }
+    let nx = &*nx;
     par::for_each_chunk_mut(out, l, |y, row| {
         neighbour_sum8_row(nx, row, y, l);
         let d = &diag[y * l..][..l];

@@ -149,7 +149,7 @@ impl Default for Params {
             dt: 0.1,
             laplacian: Laplacian::FivePoint,
             advection: Advection::Central,
-            friction_tolerance: 1e-6,
+            friction_tolerance: 1e-5,
             friction_max_iterations: 500,
             relax_patch_size: 30,
             patch_margin: 4,
