@@ -138,10 +138,10 @@ impl Default for Params {
             mu: 20.0,
             repulsion_factor: 4.0,
             j0: 1.0,
-            zeta: 0.5,
+            zeta: 0.3,
             q_magnitude: 0.5,
             q_epsilon: 1e-2,
-            xi_substrate: 0.001,
+            xi_substrate: 0.01,
             xi_cell: 1.0,
             passive_force: PassiveForce::GradMu,
             friction_weights: FrictionWeights::Phi,
@@ -324,7 +324,7 @@ mod tests {
         assert_eq!((p.lambda, p.gamma, p.kappa, p.mu, p.j0, p.dt), (2.0, 0.06, 0.5, 20.0, 1.0, 0.1));
         assert_eq!(p.relax_steps, 10_000);
         assert_eq!(p.active_steps, 100_000);
-        assert!((p.chi() - 0.001).abs() < 1e-15);
+        assert!((p.chi() - 0.01).abs() < 1e-15);
     }
 
     #[test]

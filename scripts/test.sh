@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# The whole test suite: formatting, lints for both targets, the WebAssembly build of the core,
+# and every native test (unit and full-size integration) in release mode.
+# This is the README's test command; .ci/run calls it after installing what it needs.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n== %s\n' "$*"; }
+
+step "format"
+cargo fmt --all -- --check
+
+step "lints (native)"
+cargo clippy --all-targets --release -- -D warnings
+
+step "lints and build (wasm32-unknown-unknown, the browser's core)"
+cargo clippy --target wasm32-unknown-unknown --lib --no-default-features -- -D warnings
+cargo build --target wasm32-unknown-unknown --lib --no-default-features --release
+
+step "tests (release: the integration tests run the paper's full size)"
+cargo test --release

@@ -1,0 +1,105 @@
+//! The command line as a user drives it: errors, frames, resume, and a run that blows up.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn monolayer(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A small, quick version of the protocol.
+const SMALL: [&str; 10] =
+    ["--set", "box_size=60", "--set", "n_cells=18", "--relax-steps", "200", "--chi", "0.01", "--threads", "2"];
+
+#[test]
+fn bad_parameters_are_refused_with_their_name_and_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let out = out.to_str().unwrap();
+    let o = monolayer(&["run", "--set", "dt=0", "--out", out]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("`dt`") && stderr(&o).contains("(0, 0.5]"), "{}", stderr(&o));
+    assert!(!Path::new(out).exists(), "nothing may be written for a bad config");
+
+    let o = monolayer(&["run", "--set", "zeta_typo=1", "--out", out]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("zeta_typo"), "{}", stderr(&o));
+
+    let cfg = dir.path().join("bad.toml");
+    std::fs::write(&cfg, "n_cells = 300\n").unwrap();
+    let o = monolayer(&["run", "--config", cfg.to_str().unwrap(), "--out", out]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("`n_cells`"), "{}", stderr(&o));
+
+    let o = monolayer(&["run", "--config", "/no/such/file.toml", "--out", out]);
+    assert!(stderr(&o).contains("/no/such/file.toml"), "{}", stderr(&o));
+}
+
+/// A run interrupted after its checkpoint and resumed writes the same final frame and checkpoint,
+/// bit for bit, as a run that went straight through.
+#[test]
+fn resume_continues_bit_identically() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let run = |out: &Path, steps: &str| {
+        let mut args =
+            vec!["run", "--quiet", "--frame-interval", "50", "--steps", steps, "--out", out.to_str().unwrap()];
+        args.extend(SMALL);
+        let o = monolayer(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    run(&a, "100");
+    // b stops at step 250, as if killed there; its record says the run was meant to go on.
+    run(&b, "50");
+    let record = b.join("run.json");
+    let text = std::fs::read_to_string(&record).unwrap();
+    std::fs::write(&record, text.replace("\"active_steps\": 50", "\"active_steps\": 100")).unwrap();
+    let o = monolayer(&["run", "--quiet", "--resume", b.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("resuming"), "{}", stderr(&o));
+    for f in ["checkpoint.npz", "frames/frame_0000300.npz", "frames/frame_0000250.npz"] {
+        let (x, y) = (std::fs::read(a.join(f)).unwrap(), std::fs::read(b.join(f)).unwrap());
+        assert!(x == y, "{f} differs after resume");
+    }
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(b.join("run.json")).unwrap()).unwrap();
+    assert_eq!(record["status"], "finished");
+    assert_eq!(record["last_frame_step"], 300);
+    // An existing run is never overwritten.
+    let o = monolayer(&["run", "--out", a.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--resume"), "{}", stderr(&o));
+}
+
+/// Resuming something that is not a run says what is wrong.
+#[test]
+fn resume_refuses_foreign_directories() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = monolayer(&["run", "--resume", dir.path().to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("run.json"), "{}", stderr(&o));
+    std::fs::write(dir.path().join("run.json"), "{\"format\": \"something-else\"}").unwrap();
+    let o = monolayer(&["run", "--resume", dir.path().to_str().unwrap()]);
+    assert!(stderr(&o).contains("not a record of this program"), "{}", stderr(&o));
+}
+
+/// A run that goes unstable stops, says when and where, and keeps the last good state.
+#[test]
+fn instability_stops_with_step_cell_and_last_good_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("blowup");
+    let mut args = vec!["run", "--quiet", "--steps", "2000", "--zeta", "8", "--set", "q_magnitude=2", "--out"];
+    args.push(out.to_str().unwrap());
+    args.extend(SMALL);
+    let o = monolayer(&args);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(e.contains("unstable at step") && e.contains("cell") && e.contains("phi"), "{e}");
+    assert!(out.join("last_good_state.npz").exists());
+    let record = std::fs::read_to_string(out.join("run.json")).unwrap();
+    assert!(record.contains("failed: unstable"), "{record}");
+}

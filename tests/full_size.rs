@@ -1,0 +1,116 @@
+//! The paper's full size (N = 100, L = 140): relaxation, the active phase, determinism, resume.
+
+mod common;
+
+use common::{correlation, correlation_length, phi_bits, relaxed_full_size};
+use monolayer::io::{read_checkpoint, write_checkpoint};
+use monolayer::{Monolayer, Params};
+
+/// After the protocol's 10,000 relaxation steps the tissue is confluent: more than 95 % of the
+/// box covered (Σφ ≥ ½), no void site (Σφ < 0.01), and no cell has leaked or lost area.
+///
+/// Areas: N·πR² is 103 % of the box, so every cell is compressed; A_i = ∫φ² also counts the
+/// diffuse edges at less than full weight (a lone cell settles at 0.974 πR²). What a leak or a
+/// lost cell would show is a cell far below its peers: none may be 10 % below the mean area, and
+/// the mean must stay above 80 % of πR².
+#[test]
+fn relaxation_reaches_confluence() {
+    let mut m = relaxed_full_size().clone();
+    let p = m.params().clone();
+    let phi_sum = m.phi_sum().to_vec();
+    let n = phi_sum.len() as f64;
+    let covered = phi_sum.iter().filter(|&&s| s >= 0.5).count() as f64 / n;
+    let void = phi_sum.iter().filter(|&&s| s < 0.01).count();
+    assert!(covered > 0.95, "covered fraction {covered}");
+    assert_eq!(void, 0, "void sites after relaxation");
+    m.evaluate_now().unwrap();
+    let areas: Vec<f64> = m.cells().iter().map(|c| c.area()).collect();
+    let mean = areas.iter().sum::<f64>() / areas.len() as f64;
+    assert!(mean > 0.8 * p.target_area(), "mean area {mean}");
+    for (i, a) in areas.iter().enumerate() {
+        assert!(*a > 0.9 * mean, "cell {i}: area {a} vs mean {mean}");
+        // Not leaking: almost all of A_i inside the cell (φ ≥ ½).
+        let c = &m.cells()[i];
+        let outside: f64 = c.phi().interior().iter().filter(|&&v| v < 0.5).map(|v| v * v).sum();
+        assert!(outside < 0.1 * a, "cell {i} leaks: {outside} of {a} outside φ = ½");
+    }
+}
+
+/// A few hundred active steps at χ = 0.001 stay finite, and the velocity field is correlated
+/// over a longer range than at χ = 1 from the same relaxed state.
+#[test]
+fn low_friction_runs_and_correlates_velocities_further() {
+    let relaxed = relaxed_full_size();
+    let l = relaxed.params().box_size;
+    let mut lengths = Vec::new();
+    for chi in [1.0, 0.001] {
+        let mut m = relaxed.clone();
+        let mut p = m.params().clone();
+        p.set_chi(chi);
+        m.set_params(p).unwrap();
+        m.advance(300).unwrap_or_else(|e| panic!("χ = {chi}: {e}"));
+        let v = m.velocity_field().to_vec();
+        assert!(v.iter().all(|z| z.re.is_finite() && z.im.is_finite()));
+        let c = correlation(&v, l);
+        lengths.push(correlation_length(&c));
+    }
+    let r = relaxed.params().radius;
+    assert!(lengths[1] > lengths[0], "correlation length χ = 0.001: {} vs χ = 1: {}", lengths[1], lengths[0]);
+    assert!(lengths[0] < r, "at χ = 1 velocities decorrelate within a cell radius: {}", lengths[0]);
+}
+
+fn active_copy(chi: f64) -> Monolayer {
+    let mut m = relaxed_full_size().clone();
+    let mut p = m.params().clone();
+    p.set_chi(chi);
+    m.set_params(p).unwrap();
+    m
+}
+
+/// The same state stepped on one thread and on two gives the same bits.
+#[test]
+fn bits_do_not_depend_on_thread_count() {
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let mut m = active_copy(0.01);
+            m.advance(40).unwrap();
+            (phi_bits(&m), m.state().warm_start)
+        })
+    };
+    let (a, wa) = run(1);
+    let (b, wb) = run(2);
+    assert!(a == b, "φ differs between 1 and 2 threads");
+    assert!(wa == wb, "solver state differs between 1 and 2 threads");
+}
+
+/// Stopping at a checkpoint and continuing from the file gives the same bits as running on.
+#[test]
+fn resume_from_checkpoint_is_bit_identical() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("checkpoint.npz");
+    let mut straight = active_copy(0.01);
+    let mut first = straight.clone();
+    straight.advance(60).unwrap();
+    first.advance(30).unwrap();
+    write_checkpoint(&first, &path).unwrap();
+    let state = read_checkpoint(&path, first.params().box_size).unwrap();
+    assert_eq!(state, first.state(), "the checkpoint must hold the exact state");
+    let mut resumed = Monolayer::from_state(first.params().clone(), first.seed(), state).unwrap();
+    resumed.advance(30).unwrap();
+    assert_eq!(resumed.step_count(), straight.step_count());
+    assert!(phi_bits(&resumed) == phi_bits(&straight), "resumed run differs");
+}
+
+/// The same seed gives the same bits through the whole protocol; another seed does not.
+#[test]
+fn same_seed_same_bits() {
+    let p = Params { box_size: 60, n_cells: 18, relax_steps: 400, xi_substrate: 0.01, ..Params::default() };
+    let run = |seed| {
+        let mut m = Monolayer::new(p.clone(), seed).unwrap();
+        m.advance(500).unwrap();
+        phi_bits(&m)
+    };
+    assert!(run(5) == run(5));
+    assert!(run(5) != run(6));
+}

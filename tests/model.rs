@@ -1,0 +1,227 @@
+//! The model's equations checked on small hand-made configurations: relaxation of one cell,
+//! pair forces, the shape tensor and active force, and the friction solve.
+
+mod common;
+
+use common::{ellipse, with_cells};
+use monolayer::friction::{FrictionProblem, FrictionSolver};
+use monolayer::lattice::Patch;
+use monolayer::params::PassiveForce;
+use monolayer::{Monolayer, Params};
+use num_complex::Complex64 as C64;
+use rustfft::FftPlanner;
+
+fn small(n_cells: usize, l: usize) -> Params {
+    Params { box_size: l, n_cells, relax_steps: 0, ..Params::default() }
+}
+
+/// Net force Σ_x f_i(x) on each cell.
+fn net_forces(m: &Monolayer) -> Vec<[f64; 2]> {
+    m.cells()
+        .iter()
+        .map(|c| {
+            let (fx, fy) = c.force();
+            [fx.interior().iter().sum(), fy.interior().iter().sum()]
+        })
+        .collect()
+}
+
+/// A lone cell started as a disk of radius R/2 grows to a round cell of area close to πR².
+/// Tolerance 5 %: the Cahn–Hilliard line tension (Laplace pressure ~ γ/R) balances the area
+/// constraint (4μ/πR²) slightly below target; measured A = 0.974 πR² with φ = 1.04 inside, the
+/// same from 2,500 steps on. A wrong sign or factor in the area term lands far outside (μ with
+/// the wrong sign shrinks the cell away; without its square the cell never stops growing).
+#[test]
+fn a_single_cell_relaxes_to_a_round_cell_of_area_near_pi_r_squared() {
+    let mut p = small(1, 48);
+    p.relax_steps = 10_000;
+    let mut m = Monolayer::new(p.clone(), 3).unwrap();
+    m.advance(4000).unwrap();
+    m.evaluate_now().unwrap();
+    let cell = &m.cells()[0];
+    let ratio = cell.area() / p.target_area();
+    assert!((ratio - 1.0).abs() < 0.05, "A / πR² = {ratio}");
+    // Round: |Q| tiny next to the interface's ∫|∇φ|² (≈ 2πR/6 ≈ 8); measured 4e-5 at 4,000 steps.
+    let q = cell.shape_tensor();
+    let qn = (q[0] * q[0] + q[1] * q[1]).sqrt();
+    assert!(qn < 1e-3, "|Q| = {qn}");
+    // At rest: measured max |v| ≈ 7e-8 (from 0.002 while growing).
+    let (vx, vy) = cell.velocity();
+    let vmax = vx.interior().iter().chain(vy.interior().iter()).fold(0.0f64, |a, v| a.max(v.abs()));
+    assert!(vmax < 1e-5, "max |v| = {vmax}");
+}
+
+/// Two overlapping disks. With the usual form −φ_i∇μ_i the repulsion gives equal and opposite
+/// net forces that push them apart; with the printed form −∇μ_i each cell's net force vanishes
+/// (it integrates to a boundary term): the cells can only deform, not push each other as a whole.
+#[test]
+fn pair_forces_are_equal_and_opposite() {
+    // Patches large enough that φ ≈ 1e-4 at their edges (the boundary terms of the sums).
+    let (w, h) = (38, 38);
+    let disk = ellipse(w, h, 8.0, 8.0, 0.0);
+    let cells = vec![(Patch { x0: 10, y0: 20, w, h }, disk.clone()), (Patch { x0: 22, y0: 23, w, h }, disk)];
+    for passive in [PassiveForce::PhiGradMu, PassiveForce::GradMu] {
+        let p = Params { passive_force: passive, zeta: 0.0, ..small(2, 80) };
+        let mut m = with_cells(p, cells.clone(), 0);
+        m.evaluate_now().unwrap();
+        let f = net_forces(&m);
+        let scale = f[0][0].abs() + f[0][1].abs() + 1e-300;
+        let sum = [f[0][0] + f[1][0], f[0][1] + f[1][1]];
+        match passive {
+            PassiveForce::PhiGradMu => {
+                assert!(scale > 1e-2, "the overlap must repel: {f:?}");
+                assert!(sum[0].abs() + sum[1].abs() < 1e-9 * scale, "not opposite: {f:?}");
+                // Cell 0 sits at lower x and y than cell 1: pushed towards −x, −y.
+                assert!(f[0][0] < 0.0 && f[0][1] < 0.0, "not repulsive: {f:?}");
+            }
+            PassiveForce::GradMu => {
+                // Zero up to the boundary terms (μ at the patch edge, ~1e-4 of the −φ∇μ force).
+                let total: f64 = m
+                    .cells()
+                    .iter()
+                    .map(|c| {
+                        c.force().0.interior().iter().chain(c.force().1.interior().iter()).map(|v| v.abs()).sum::<f64>()
+                    })
+                    .sum();
+                for fi in &f {
+                    assert!(fi[0].abs() + fi[1].abs() < 1e-5 * total, "net −∇μ force {fi:?} of Σ|f| = {total}");
+                }
+            }
+        }
+    }
+}
+
+/// An ellipse's Q̂ points along its long axis; extensile activity pulls its tips outward and
+/// contractile activity pushes them in.
+#[test]
+fn shape_axis_and_extensile_tips() {
+    let (w, h) = (44, 44);
+    for deg in [0.0f64, 35.0, 90.0, 120.0] {
+        let th = deg.to_radians();
+        let phi = ellipse(w, h, 13.0, 6.0, th);
+        let run = |zeta: f64| {
+            let p = Params { zeta, q_magnitude: 0.5, ..small(1, 64) };
+            let mut m = with_cells(p, vec![(Patch { x0: 5, y0: 5, w, h }, phi.clone())], 0);
+            m.evaluate_now().unwrap();
+            m
+        };
+        let active = run(1.0);
+        let passive = run(0.0);
+        let q = active.cells()[0].q_hat();
+        let angle = 0.5 * q[1].atan2(q[0]);
+        let mut d = (angle - th).rem_euclid(std::f64::consts::PI);
+        if d > std::f64::consts::FRAC_PI_2 {
+            d -= std::f64::consts::PI;
+        }
+        assert!(d.abs() < 0.01, "θ = {deg}°: Q̂ axis at {}°", angle.to_degrees());
+        assert!(((q[0] * q[0] + q[1] * q[1]).sqrt() - 0.5).abs() < 0.01, "|Q̂| = {q:?}");
+        // Active force at the tip (a site on the long axis, 12 sites out): outward along the axis.
+        let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+        let (tx, ty) = ((cx + 12.0 * th.cos()).round() as usize, (cy + 12.0 * th.sin()).round() as usize);
+        let fa = |m: &Monolayer| {
+            let (fx, fy) = m.cells()[0].force();
+            (fx.at(tx, ty), fy.at(tx, ty))
+        };
+        let (ax, ay) = fa(&active);
+        let (px, py) = fa(&passive);
+        let outward = (ax - px) * th.cos() + (ay - py) * th.sin();
+        assert!(outward > 0.0, "θ = {deg}°: active force at the tip points inwards ({outward})");
+        let (cxf, cyf) = fa(&run(-1.0));
+        assert!((cxf - px) * th.cos() + (cyf - py) * th.sin() < 0.0, "contractile must reverse it");
+    }
+}
+
+fn symbol(l: usize, xi_s: f64, xi_c: f64, kx: usize, ky: usize) -> f64 {
+    let c = |k: usize| (2.0 * std::f64::consts::PI * k as f64 / l as f64).cos();
+    let (cx, cy) = (c(kx), c(ky));
+    xi_s + 8.0 * xi_c - xi_c * (2.0 * cx + 2.0 * cy + 4.0 * cx * cy)
+}
+
+/// With n ≡ 1 and uniform ξ_s the friction equation has constant coefficients: its exact
+/// solution by FFT (rustfft, independent of the solver's own FFT) must match, in one iteration.
+#[test]
+fn friction_solve_is_exact_for_a_full_uniform_tissue() {
+    let l = 40;
+    let (xi_s, xi_c) = (0.001, 1.0);
+    let force: Vec<C64> = (0..l * l)
+        .map(|i| {
+            let (x, y) = ((i % l) as f64, (i / l) as f64);
+            C64::new((0.3 * x).sin() + (0.15 * y).cos(), (0.45 * x + 0.2 * y).sin() * 0.5)
+        })
+        .collect();
+    let weight = vec![1.0; l * l];
+    let xis = vec![xi_s; l * l];
+    let mut solver = FrictionSolver::new(l);
+    let pb = FrictionProblem { weight: &weight, force: &force, xi_s: &xis, xi_c, tolerance: 1e-12, max_iterations: 50 };
+    let st = solver.solve(&pb).unwrap();
+    assert!(st.iterations <= 2, "{st:?}");
+    // Exact: Û(k) = F̂(k) / λ(k).
+    let mut planner = FftPlanner::<f64>::new();
+    let (fwd, inv) = (planner.plan_fft_forward(l), planner.plan_fft_inverse(l));
+    let mut u = force.clone();
+    let transform = |u: &mut Vec<C64>, f: &std::sync::Arc<dyn rustfft::Fft<f64>>| {
+        for row in u.chunks_exact_mut(l) {
+            f.process(row);
+        }
+        let mut col = vec![C64::new(0.0, 0.0); l];
+        for x in 0..l {
+            for y in 0..l {
+                col[y] = u[y * l + x];
+            }
+            f.process(&mut col);
+            for y in 0..l {
+                u[y * l + x] = col[y];
+            }
+        }
+    };
+    transform(&mut u, &fwd);
+    for ky in 0..l {
+        for kx in 0..l {
+            u[ky * l + kx] /= symbol(l, xi_s, xi_c, kx, ky) * (l * l) as f64;
+        }
+    }
+    transform(&mut u, &inv);
+    let scale = u.iter().map(|z| z.norm()).fold(0.0, f64::max);
+    let err = u.iter().zip(&solver.velocity).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+    assert!(err < 1e-9 * scale, "max error {err} of {scale}");
+}
+
+/// With ξ_cell = 0 there is no coupling: every cell moves with v_i = f_i / ξ_s(x), including
+/// where the substrate map makes ξ_s vary.
+#[test]
+fn without_cell_friction_velocity_is_force_over_substrate_friction() {
+    let (w, h) = (30, 30);
+    let cells = vec![(Patch { x0: 3, y0: 4, w, h }, ellipse(w, h, 10.0, 6.0, 0.4))];
+    let p = Params { xi_cell: 0.0, xi_substrate: 0.2, zeta: 0.4, ..small(1, 48) };
+    let mut m = with_cells(p, cells, 0);
+    let map: Vec<f64> = (0..48 * 48).map(|i| if i % 48 < 20 { 0.5 } else { 3.0 }).collect();
+    m.set_substrate(&map).unwrap();
+    m.evaluate_now().unwrap();
+    let c = &m.cells()[0];
+    let ((fx, fy), (vx, vy)) = (c.force(), c.velocity());
+    let mut checked = 0;
+    for b in 0..h {
+        for a in 0..w {
+            let x = 3 + a;
+            let xi = 0.2 * if x < 20 { 0.5 } else { 3.0 };
+            assert!((vx.at(a, b) - fx.at(a, b) / xi).abs() < 1e-14);
+            assert!((vy.at(a, b) - fy.at(a, b) / xi).abs() < 1e-14);
+            checked += (fx.at(a, b).abs() > 1e-6) as usize;
+        }
+    }
+    assert!(checked > 100);
+}
+
+/// Bad parameters are refused before anything runs, naming the parameter.
+#[test]
+fn bad_parameters_name_themselves() {
+    for (p, name) in [
+        (Params { xi_substrate: -1.0, ..Params::default() }, "xi_substrate"),
+        (Params { n_cells: 400, ..Params::default() }, "n_cells"),
+        (Params { q_magnitude: 0.0, ..Params::default() }, "q_magnitude"),
+        (Params { box_size: 8, ..Params::default() }, "box_size"),
+    ] {
+        let e = Monolayer::new(p, 1).unwrap_err().to_string();
+        assert!(e.contains(&format!("`{name}`")), "{e}");
+    }
+}
