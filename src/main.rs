@@ -26,6 +26,20 @@ enum Command {
     Bench(BenchArgs),
     /// Print the default parameters as a TOML config file.
     Params,
+    /// Step from the random disks and print the state's fingerprint as JSON (to compare the
+    /// WebAssembly core with this one, bit for bit).
+    Fingerprint(FingerprintArgs),
+}
+
+#[derive(Args)]
+struct FingerprintArgs {
+    #[command(flatten)]
+    params: ParamArgs,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Steps from the start of the protocol (relaxation included) before the fingerprint.
+    #[arg(long)]
+    total_steps: u64,
 }
 
 #[derive(Args)]
@@ -118,6 +132,7 @@ fn main() -> ExitCode {
         Command::Run(a) => with_threads(a.threads, || run(&a)),
         Command::Bench(a) => with_threads(Some(a.threads), || bench(&a)),
         Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| e.to_string()),
+        Command::Fingerprint(a) => fingerprint(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -241,6 +256,14 @@ fn protocol(m: &mut Monolayer, dir: &Path, record: &mut RunRecord, quiet: bool) 
 
 fn failure_message(e: &SimError, last_good: &Path) -> String {
     format!("{e}\n  the last good state is in {} (the last periodic one in checkpoint.npz)", last_good.display())
+}
+
+fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
+    let params = a.params.params()?;
+    let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
+    m.advance(a.total_steps).map_err(|e| e.to_string())?;
+    println!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint());
+    Ok(())
 }
 
 fn bench(a: &BenchArgs) -> Result<(), String> {

@@ -273,6 +273,31 @@ impl Monolayer {
         }
     }
 
+    /// A 64-bit FNV-1a hash of the step and of every bit of every φ_i with its patch: two
+    /// simulations agree bit for bit exactly when their fingerprints do (up to hash collisions).
+    /// Used to compare the WebAssembly core with the native one.
+    pub fn fingerprint(&self) -> u64 {
+        const PRIME: u64 = 0x0000_0100_0000_01b3;
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |v: u64| {
+            for byte in v.to_le_bytes() {
+                h ^= byte as u64;
+                h = h.wrapping_mul(PRIME);
+            }
+        };
+        eat(self.step);
+        for c in &self.cells {
+            let p = c.patch;
+            for v in [p.x0, p.y0, p.w, p.h] {
+                eat(v as u64);
+            }
+            for v in &c.phi {
+                eat(v.to_bits());
+            }
+        }
+        h
+    }
+
     /// Σ_i φ_i on the lattice.
     pub fn phi_sum(&mut self) -> &[f64] {
         let l = self.params.box_size;
