@@ -34,6 +34,13 @@ const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 /// ω < 1 keeps the combined preconditioner positive definite; 2/3 damps the highest modes best.
 const JACOBI_WEIGHT: f64 = 2.0 / 3.0;
 
+/// Which evaluation of a Heun step a solve belongs to: it picks the initial guess.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HeunStage {
+    Predictor,
+    Corrector,
+}
+
 /// What a solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SolveStats {
@@ -93,6 +100,12 @@ pub struct FrictionSolver {
     row_sums: Vec<f64>,
     /// u = V/n: the solution, and the warm start of the next solve.
     pub mean_velocity: Vec<C64>,
+    /// u(corrector) − u(predictor) of the last Heun step: added to the predictor's solution it
+    /// starts the corrector's solve one step's drift closer.
+    pub corrector_shift: Vec<C64>,
+    predictor_solution: Vec<C64>,
+    /// Copies of the guesses while an out-of-step evaluation runs (see [`Self::hold_guesses`]).
+    held: [Vec<C64>; 3],
     /// V(x) = Σ_j w_j v_j = n u.
     pub velocity: Vec<C64>,
     /// S(x) = Σ_{N8} V.
@@ -120,6 +133,9 @@ impl FrictionSolver {
             t: vec![ZERO; n],
             row_sums: vec![0.0; l],
             mean_velocity: vec![ZERO; n],
+            corrector_shift: vec![ZERO; n],
+            predictor_solution: vec![ZERO; n],
+            held: [vec![ZERO; n], vec![ZERO; n], vec![ZERO; n]],
             velocity: vec![ZERO; n],
             velocity_nb: vec![ZERO; n],
         }
@@ -128,12 +144,33 @@ impl FrictionSolver {
     /// Forgets the warm start.
     pub fn reset(&mut self) {
         self.mean_velocity.fill(ZERO);
+        self.corrector_shift.fill(ZERO);
+    }
+
+    /// Keeps the initial guesses of the next solves aside, so that an evaluation outside the
+    /// stepping (a frame, a live view) does not change the trajectory.
+    pub fn hold_guesses(&mut self) {
+        self.held[0].copy_from_slice(&self.mean_velocity);
+        self.held[1].copy_from_slice(&self.corrector_shift);
+        self.held[2].copy_from_slice(&self.predictor_solution);
+    }
+
+    /// Puts back what [`Self::hold_guesses`] kept.
+    pub fn release_guesses(&mut self) {
+        self.mean_velocity.copy_from_slice(&self.held[0]);
+        self.corrector_shift.copy_from_slice(&self.held[1]);
+        self.predictor_solution.copy_from_slice(&self.held[2]);
     }
 
     /// Solves for u, then V = n u and S = Σ_{N8} V; `self.mean_velocity` on entry is the
     /// initial guess.
-    pub fn solve(&mut self, pb: &FrictionProblem) -> Result<SolveStats, SolveError> {
+    pub fn solve(&mut self, pb: &FrictionProblem, stage: HeunStage) -> Result<SolveStats, SolveError> {
         let l = self.l;
+        if stage == HeunStage::Corrector {
+            for (u, d) in self.mean_velocity.iter_mut().zip(&self.corrector_shift) {
+                *u += d;
+            }
+        }
         neighbour_sum8(pb.weight, &mut self.weight_nb, l);
         let xi_s_mean = pb.xi_s.iter().sum::<f64>() / (l * l) as f64;
         let d0 = xi_s_mean + 8.0 * pb.xi_c;
@@ -156,6 +193,16 @@ impl FrictionSolver {
             }
         }
         let stats = self.pcg(pb);
+        match stage {
+            HeunStage::Predictor => self.predictor_solution.copy_from_slice(&self.mean_velocity),
+            HeunStage::Corrector => {
+                for ((d, u), p) in
+                    self.corrector_shift.iter_mut().zip(&self.mean_velocity).zip(&self.predictor_solution)
+                {
+                    *d = u - p;
+                }
+            }
+        }
         for ((v, u), n) in self.velocity.iter_mut().zip(&self.mean_velocity).zip(&self.weight) {
             *v = u * *n;
         }
@@ -353,11 +400,11 @@ mod tests {
         let mut s = FrictionSolver::new(l);
         let pb =
             FrictionProblem { weight: &n, force: &f, xi_s: &xi_s, xi_c: 1.0, tolerance: 1e-10, max_iterations: 500 };
-        let st = s.solve(&pb).unwrap();
+        let st = s.solve(&pb, HeunStage::Predictor).unwrap();
         assert!(st.residual <= 1e-10);
         assert!(s.relative_residual(1.0) <= 1e-9);
         // The warm start makes the same solve free.
-        let st2 = s.solve(&pb).unwrap();
+        let st2 = s.solve(&pb, HeunStage::Predictor).unwrap();
         assert!(st2.iterations <= 1, "{st2:?}");
         // Sites with no cell carry no velocity.
         assert_eq!(s.velocity[12 * l + 10], ZERO);

@@ -114,3 +114,16 @@ fn same_seed_same_bits() {
     assert!(run(5) == run(5));
     assert!(run(5) != run(6));
 }
+
+/// Writing a frame (an evaluation outside the stepping) does not change the trajectory: runs
+/// with different frame intervals stay bit-identical.
+#[test]
+fn evaluating_for_a_frame_does_not_change_the_trajectory() {
+    let mut plain = active_copy(0.01);
+    let mut observed = plain.clone();
+    plain.advance(40).unwrap();
+    observed.advance(20).unwrap();
+    observed.evaluate_now().unwrap();
+    observed.advance(20).unwrap();
+    assert!(phi_bits(&plain) == phi_bits(&observed), "an evaluation for a frame changed the run");
+}

@@ -4,7 +4,7 @@
 mod common;
 
 use common::{ellipse, with_cells};
-use monolayer::friction::{FrictionProblem, FrictionSolver};
+use monolayer::friction::{FrictionProblem, FrictionSolver, HeunStage};
 use monolayer::lattice::Patch;
 use monolayer::params::PassiveForce;
 use monolayer::{Monolayer, Params};
@@ -153,7 +153,7 @@ fn friction_solve_is_exact_for_a_full_uniform_tissue() {
     let xis = vec![xi_s; l * l];
     let mut solver = FrictionSolver::new(l);
     let pb = FrictionProblem { weight: &weight, force: &force, xi_s: &xis, xi_c, tolerance: 1e-12, max_iterations: 50 };
-    let st = solver.solve(&pb).unwrap();
+    let st = solver.solve(&pb, HeunStage::Predictor).unwrap();
     assert!(st.iterations <= 2, "{st:?}");
     // Exact: Û(k) = F̂(k) / λ(k).
     let mut planner = FftPlanner::<f64>::new();

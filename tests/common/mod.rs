@@ -35,7 +35,8 @@ pub fn with_cells(params: Params, cells: Vec<(Patch, Vec<f64>)>, step: u64) -> M
             (p, padded)
         })
         .collect();
-    let state = State { step, cells, warm_start: vec![C64::new(0.0, 0.0); l * l], substrate: vec![1.0; l * l] };
+    let zero = vec![C64::new(0.0, 0.0); l * l];
+    let state = State { step, cells, warm_start: zero.clone(), corrector_shift: zero, substrate: vec![1.0; l * l] };
     Monolayer::from_state(params, 1, state).expect("valid hand-made state")
 }
 
