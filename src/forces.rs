@@ -7,9 +7,8 @@
 //! With ζ > 0 (extensile) and Q̂ along the long axis, the active force at a tip points outwards:
 //! at the right tip of a cell elongated along x, ∂_xφ < 0 and f^a_x = −ζ Q̂_xx ∂_xφ > 0.
 
-use crate::lattice::Patch;
+use crate::lattice::{row_mut, row_neighbourhood, Patch};
 use crate::params::PassiveForce;
-use crate::shape::gradient;
 
 /// f_i = f^p_i + f^a_i at every site of the patch. μ is read with zero outside the patch (its
 /// halo), where φ_i is below the presence threshold by the patch margin.
@@ -24,19 +23,21 @@ pub fn force_density(
     fx: &mut [f64],
     fy: &mut [f64],
 ) {
-    let s = patch.stride();
     let (qxx, qxy) = (q_hat[0], q_hat[1]);
     for b in 0..patch.h {
-        let i0 = patch.idx(0, b);
-        for i in i0..i0 + patch.w {
-            let (mx, my) = gradient(mu, i, s);
-            let (px, py) = gradient(phi, i, s);
+        let p = row_neighbourhood(phi, patch, b);
+        let m = row_neighbourhood(mu, patch, b);
+        let ox = row_mut(fx, patch, b);
+        let oy = row_mut(fy, patch, b);
+        for k in 0..patch.w {
+            let (mx, my) = m.gradient(k);
+            let (px, py) = p.gradient(k);
             let w = match passive {
                 PassiveForce::GradMu => 1.0,
-                PassiveForce::PhiGradMu => phi[i],
+                PassiveForce::PhiGradMu => p.c[k],
             };
-            fx[i] = -w * mx - zeta * (qxx * px + qxy * py);
-            fy[i] = -w * my - zeta * (qxy * px - qxx * py);
+            ox[k] = -w * mx - zeta * (qxx * px + qxy * py);
+            oy[k] = -w * my - zeta * (qxy * px - qxx * py);
         }
     }
 }

@@ -6,7 +6,7 @@
 //!
 //! with A_i = ∫ φ_i², the area term read as squared, and c = `repulsion_factor` (4 as printed).
 
-use crate::lattice::Patch;
+use crate::lattice::{Neighbourhood, Patch};
 use crate::params::{Laplacian, Params};
 
 /// The coefficients of μ_i, derived once from the parameters.
@@ -41,30 +41,32 @@ impl FreeEnergy {
     /// lattice index of padded site i, all cells included (this cell's own φ_i² is taken out
     /// here); `area` is A_i.
     pub fn chemical_potential(&self, patch: Patch, phi: &[f64], area: f64, sum_phi2: &[f64], l: usize, mu: &mut [f64]) {
-        let s = patch.stride();
         let area_term = self.area * (1.0 - area / self.target_area);
+        let (bulk, gradient, repulsion, kind) = (self.bulk, self.gradient, self.repulsion, self.laplacian);
         for run in patch.runs(l) {
-            let g = &sum_phi2[run.global..][..run.len];
-            for (k, &sp2) in g.iter().enumerate() {
-                let i = run.padded + k;
-                let c = phi[i];
-                let lap = laplacian(self.laplacian, phi, i, s);
-                mu[i] = self.bulk * c * (1.0 - c) * (1.0 - 2.0 * c) - self.gradient * lap - area_term * c
-                    + self.repulsion * c * (sp2 - c * c);
+            let len = run.len;
+            let f = Neighbourhood::new(phi, patch, run.b, run.a0, len);
+            let g = &sum_phi2[run.global..][..len];
+            let out = &mut mu[run.padded..][..len];
+            for k in 0..len {
+                let c = f.c[k];
+                let lap = laplacian(kind, &f, k);
+                out[k] = bulk * c * (1.0 - c) * (1.0 - 2.0 * c) - gradient * lap - area_term * c
+                    + repulsion * c * (g[k] - c * c);
             }
         }
     }
 }
 
-/// The discrete Laplacian at padded index i of a patch with row stride s.
+/// The discrete Laplacian at site k of a run.
 #[inline(always)]
-pub fn laplacian(kind: Laplacian, f: &[f64], i: usize, s: usize) -> f64 {
-    let nn = f[i - 1] + f[i + 1] + f[i - s] + f[i + s];
+pub fn laplacian(kind: Laplacian, f: &Neighbourhood, k: usize) -> f64 {
+    let nn = f.xm[k] + f.xp[k] + f.ym[k] + f.yp[k];
     match kind {
-        Laplacian::FivePoint => nn - 4.0 * f[i],
+        Laplacian::FivePoint => nn - 4.0 * f.c[k],
         Laplacian::NinePoint => {
-            let diag = f[i - s - 1] + f[i - s + 1] + f[i + s - 1] + f[i + s + 1];
-            (4.0 * nn + diag - 20.0 * f[i]) / 6.0
+            let diag = f.xm_ym[k] + f.xp_ym[k] + f.xm_yp[k] + f.xp_yp[k];
+            (4.0 * nn + diag - 20.0 * f.c[k]) / 6.0
         }
     }
 }

@@ -87,6 +87,60 @@ impl Patch {
     }
 }
 
+/// A run of `len` sites of a padded patch field and their eight neighbours, each an exact-length
+/// slice: loops over them carry no bounds checks and vectorise. `ym` is the row at y − 1.
+pub struct Neighbourhood<'a> {
+    pub c: &'a [f64],
+    pub xm: &'a [f64],
+    pub xp: &'a [f64],
+    pub ym: &'a [f64],
+    pub yp: &'a [f64],
+    pub xm_ym: &'a [f64],
+    pub xp_ym: &'a [f64],
+    pub xm_yp: &'a [f64],
+    pub xp_yp: &'a [f64],
+}
+
+impl<'a> Neighbourhood<'a> {
+    /// Sites (a0 .. a0 + len, b) of the patch, in the padded storage `f`.
+    #[inline]
+    pub fn new(f: &'a [f64], patch: Patch, b: usize, a0: usize, len: usize) -> Self {
+        let s = patch.stride();
+        // Patch row b is padded row b + 1; patch column a is padded column a + 1.
+        let at = |row: usize, col: usize| &f[row * s + a0 + col..][..len];
+        Neighbourhood {
+            c: at(b + 1, 1),
+            xm: at(b + 1, 0),
+            xp: at(b + 1, 2),
+            ym: at(b, 1),
+            yp: at(b + 2, 1),
+            xm_ym: at(b, 0),
+            xp_ym: at(b, 2),
+            xm_yp: at(b + 2, 0),
+            xp_yp: at(b + 2, 2),
+        }
+    }
+
+    /// Central-difference gradient at site k of the run.
+    #[inline(always)]
+    pub fn gradient(&self, k: usize) -> (f64, f64) {
+        (0.5 * (self.xp[k] - self.xm[k]), 0.5 * (self.yp[k] - self.ym[k]))
+    }
+}
+
+/// A whole patch row (the `w` interior sites of row b) as a [`Neighbourhood`].
+#[inline]
+pub fn row_neighbourhood(f: &[f64], patch: Patch, b: usize) -> Neighbourhood<'_> {
+    Neighbourhood::new(f, patch, b, 0, patch.w)
+}
+
+/// The interior sites of patch row b in the padded storage `f`, mutably.
+#[inline]
+pub fn row_mut(f: &mut [f64], patch: Patch, b: usize) -> &mut [f64] {
+    let i = patch.idx(0, b);
+    &mut f[i..i + patch.w]
+}
+
 /// Periodic wrap of a signed coordinate.
 #[inline]
 pub fn wrap(x: i64, l: usize) -> usize {

@@ -7,9 +7,8 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::lattice::Patch;
+use crate::lattice::{Neighbourhood, Patch};
 use crate::params::{Advection, FrictionWeights};
-use crate::shape::gradient;
 
 /// The weight w_j(x) with which cell j counts in the friction sum of Eq. 2 (model-notes §4).
 #[inline(always)]
@@ -49,29 +48,28 @@ pub struct MotionFields<'a> {
 
 /// v_i and ∂_t φ_i at every site of the patch.
 pub fn velocity_and_rate(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j0: f64, advection: Advection) {
-    let s = patch.stride();
     for run in patch.runs(l) {
-        let den = &drag.denominator[run.global..][..run.len];
-        let pull = &drag.pull[run.global..][..run.len];
-        for (k, (&d, &p)) in den.iter().zip(pull).enumerate() {
-            let i = run.padded + k;
-            let vx = (c.fx[i] + p.re) / d;
-            let vy = (c.fy[i] + p.im) / d;
-            c.vx[i] = vx;
-            c.vy[i] = vy;
-            let adv = match advection {
-                Advection::Central => {
-                    let (gx, gy) = gradient(c.phi, i, s);
-                    vx * gx + vy * gy
-                }
-                Advection::Upwind => {
-                    let f = c.phi;
-                    let gx = if vx > 0.0 { f[i] - f[i - 1] } else { f[i + 1] - f[i] };
-                    let gy = if vy > 0.0 { f[i] - f[i - s] } else { f[i + s] - f[i] };
-                    vx * gx + vy * gy
-                }
+        let len = run.len;
+        let f = Neighbourhood::new(c.phi, patch, run.b, run.a0, len);
+        let den = &drag.denominator[run.global..][..len];
+        let pull = &drag.pull[run.global..][..len];
+        let (mu, fx, fy) = (&c.mu[run.padded..][..len], &c.fx[run.padded..][..len], &c.fy[run.padded..][..len]);
+        let vx_out = &mut c.vx[run.padded..][..len];
+        let vy_out = &mut c.vy[run.padded..][..len];
+        let rate = &mut c.rate[run.padded..][..len];
+        for k in 0..len {
+            let vx = (fx[k] + pull[k].re) / den[k];
+            let vy = (fy[k] + pull[k].im) / den[k];
+            vx_out[k] = vx;
+            vy_out[k] = vy;
+            let (gx, gy) = match advection {
+                Advection::Central => f.gradient(k),
+                Advection::Upwind => (
+                    if vx > 0.0 { f.c[k] - f.xm[k] } else { f.xp[k] - f.c[k] },
+                    if vy > 0.0 { f.c[k] - f.ym[k] } else { f.yp[k] - f.c[k] },
+                ),
             };
-            c.rate[i] = -adv - j0 * c.mu[i];
+            rate[k] = -(vx * gx + vy * gy) - j0 * mu[k];
         }
     }
 }

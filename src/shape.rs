@@ -9,22 +9,21 @@
 //! "normalised by 0.5|Q|" read literally) and ε = `q_epsilon`, below which a nearly round cell
 //! fades to no direction instead of flipping between arbitrary ones.
 
-use crate::lattice::Patch;
+use crate::lattice::{row_neighbourhood, Patch};
 
-/// Central-difference gradient of a padded patch field at padded index i.
+/// Central-difference gradient of a padded field (row stride s) at padded index i.
 #[inline(always)]
 pub fn gradient(f: &[f64], i: usize, s: usize) -> (f64, f64) {
     (0.5 * (f[i + 1] - f[i - 1]), 0.5 * (f[i + s] - f[i - s]))
 }
 
-/// (Q_xx, Q_xy) of Eq. 5 over the patch.
+/// (Q_xx, Q_xy) of Eq. 5 over the patch (central differences).
 pub fn shape_tensor(patch: Patch, phi: &[f64]) -> [f64; 2] {
-    let s = patch.stride();
     let (mut qxx, mut qxy) = (0.0, 0.0);
     for b in 0..patch.h {
-        let i0 = patch.idx(0, b);
-        for i in i0..i0 + patch.w {
-            let (gx, gy) = gradient(phi, i, s);
+        let f = row_neighbourhood(phi, patch, b);
+        for k in 0..patch.w {
+            let (gx, gy) = f.gradient(k);
             qxx -= 0.5 * (gx * gx - gy * gy);
             qxy -= gx * gy;
         }
