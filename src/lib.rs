@@ -14,6 +14,7 @@
 //! [`params`] → [`init`] → [`free_energy`] → [`shape`] → [`forces`] → [`friction`] → [`motion`],
 //! driven by [`monolayer`]; [`lattice`] and [`cell`] hold the geometry, [`counters`] the timings.
 
+pub mod analysis;
 pub mod cell;
 pub mod counters;
 pub mod error;
@@ -31,6 +32,12 @@ pub mod shape;
 
 #[cfg(feature = "cli")]
 pub mod io;
+#[cfg(feature = "cli")]
+pub mod runner;
+#[cfg(feature = "cli")]
+pub mod sweep;
+
+/// The browser demo's binding and wgpu drawing (see `www/`).
 
 pub use error::SimError;
 pub use monolayer::{Monolayer, Phase, State};

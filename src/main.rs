@@ -1,15 +1,20 @@
 //! `monolayer`: run the paper's protocol at full size, continue a run, measure speed.
 
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use monolayer::io::{frame_path, load_params, read_checkpoint, write_checkpoint, write_frame, RunRecord};
-use monolayer::{Monolayer, Params, Phase, SimError};
+use monolayer::analysis::offline::analyze_run;
+use monolayer::analysis::plots::Background;
+use monolayer::analysis::Analysis;
+use monolayer::io::{frame_path, load_params, write_frame, RunRecord};
+use monolayer::runner::{Event, RunDir};
+use monolayer::sweep::{run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
+use monolayer::{Monolayer, Params, Phase};
 
 #[derive(Parser)]
 #[command(version, about = "Active-nematic multi-phase-field monolayers that tear open (Pinto, Rozman & Yeomans)")]
@@ -29,6 +34,36 @@ enum Command {
     /// Step from the random disks and print the state's fingerprint as JSON (to compare the
     /// WebAssembly core with this one, bit for bit).
     Fingerprint(FingerprintArgs),
+    /// Run a grid of parameters (χ, ζ, γ, any parameter, seeds), one simulation per core,
+    /// resumable; summary.csv and the regime map.
+    Sweep(SweepArgs),
+    /// Measure a run's frames: holes, defects, spiral cores, strain rate, correlations; tables
+    /// and plots to DIR/analysis. With --bench: time the measurements at full size.
+    Analyze(AnalyzeArgs),
+}
+
+#[derive(Args)]
+struct AnalyzeArgs {
+    /// The run's output directory (as given to `run --out`).
+    #[arg(required_unless_present = "bench")]
+    dir: Option<PathBuf>,
+    /// Where to write the tables and plots (default: DIR/analysis).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Step of the frame drawn in the snapshot (default: the first hole's nucleation, else the
+    /// last frame).
+    #[arg(long, value_name = "STEP")]
+    snapshot: Option<u64>,
+    /// Field coloured under the snapshot: strain-rate, active-force-divergence or speed.
+    #[arg(long, default_value = "strain-rate")]
+    field: Background,
+    /// Instead of a run: time the live measurements of one full-size frame, and `analyze` over
+    /// --bench-frames full-size frames written to a temporary directory.
+    #[arg(long, conflicts_with_all = ["dir", "out", "snapshot", "field"])]
+    bench: bool,
+    /// Frames analysed by --bench.
+    #[arg(long, default_value_t = 100, requires = "bench")]
+    bench_frames: u64,
 }
 
 #[derive(Args)]
@@ -109,6 +144,42 @@ struct RunArgs {
     /// No progress bar (for batch jobs); a line per frame instead.
     #[arg(long)]
     quiet: bool,
+    /// Analyse every frame as it is written (tables and plots in OUT/analysis, as `analyze`).
+    #[arg(long)]
+    analyze: bool,
+}
+
+#[derive(Args)]
+struct SweepArgs {
+    /// Sweep file (TOML: `seeds`, `frame_interval`, `[base]` parameters, `[grid]` lists); see
+    /// README "Sweeps". Without it, the grid comes from --grid.
+    file: Option<PathBuf>,
+    /// Output directory: one run per grid point and seed in OUT/runs/, summary.csv,
+    /// regimes.csv and regime_map.png/svg in OUT.
+    #[arg(long, default_value = "runs/sweep")]
+    out: PathBuf,
+    /// A grid axis: --grid chi=0.1,0.01,0.001 --grid zeta=0.3,0.5 (any parameter by name).
+    #[arg(long = "grid", value_name = "KEY=V1,V2,..")]
+    grid: Vec<String>,
+    /// A parameter for every run: --set active_steps=20000.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Seeds (each grid point runs once per seed): --seeds 1,2,3.
+    #[arg(long, value_delimiter = ',')]
+    seeds: Option<Vec<u64>>,
+    /// Steps between frames.
+    #[arg(long)]
+    frame_interval: Option<u64>,
+    /// Simulations at a time, one per core (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Run only every N-th job starting at K (K/N); under a Slurm job array it defaults to
+    /// $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<Shard>,
+    /// No progress bar; a line per finished run.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -133,6 +204,8 @@ fn main() -> ExitCode {
         Command::Bench(a) => with_threads(Some(a.threads), || bench(&a)),
         Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| e.to_string()),
         Command::Fingerprint(a) => fingerprint(&a),
+        Command::Sweep(a) => sweep(&a),
+        Command::Analyze(a) => with_threads(Some(1), || analyze(&a)),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -156,41 +229,44 @@ fn with_threads(threads: Option<usize>, f: impl FnOnce() -> Result<(), String> +
 }
 
 fn run(a: &RunArgs) -> Result<(), String> {
-    let (dir, mut record, mut m) = match &a.resume {
+    let mut run = match &a.resume {
         Some(dir) => {
-            let record = RunRecord::load(dir)?;
-            let ck = dir.join("checkpoint.npz");
-            let state = read_checkpoint(&ck, record.params.box_size)?;
-            let m = Monolayer::from_state(record.params.clone(), record.seed, state).map_err(|e| e.to_string())?;
-            eprintln!("resuming {} at step {}", dir.display(), m.step_count());
-            (dir.clone(), record, m)
+            let run = RunDir::resume(dir)?;
+            eprintln!("resuming {} at step {}", dir.display(), run.monolayer.step_count());
+            run
         }
-        None => {
-            let params = a.params.params()?;
-            if a.frame_interval == 0 {
-                return Err("--frame-interval 0: must be ≥ 1".into());
-            }
-            if RunRecord::path(&a.out).exists() {
-                return Err(format!(
-                    "{} already holds a run: continue it with --resume {0}, or choose another --out",
-                    a.out.display()
-                ));
-            }
-            fs::create_dir_all(a.out.join("frames")).map_err(|e| format!("{}: {e}", a.out.display()))?;
-            let record = RunRecord::new(params.clone(), a.seed, a.frame_interval);
-            record.save(&a.out)?;
-            let m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
-            (a.out.clone(), record, m)
+        None => RunDir::create(&a.out, a.params.params()?, a.seed, a.frame_interval)?,
+    };
+    let total = run.monolayer.params().total_steps();
+    let bar = progress_bar(total, run.monolayer.step_count(), a.quiet);
+    let (start, start_step) = (Instant::now(), run.monolayer.step_count());
+    let outcome = run.execute(a.analyze, &mut |m, event| match event {
+        Event::Step => {
+            bar.set_message(match m.phase() {
+                Phase::Relaxation => "relaxing",
+                Phase::Active => "active",
+            });
+            bar.inc(1);
         }
-    };
-    fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let outcome = protocol(&mut m, &dir, &mut record, a.quiet);
-    record.status = match &outcome {
-        Ok(()) => "finished".into(),
-        Err(e) => format!("failed: {e}"),
-    };
-    record.save(&dir)?;
-    outcome.map(|()| eprintln!("done: {} steps in {}", m.step_count(), dir.display()))
+        Event::Frame if a.quiet => {
+            let s = m.step_count();
+            let rate = (s - start_step) as f64 / start.elapsed().as_secs_f64();
+            eprintln!("step {s}/{total}: frame written ({rate:.0} steps/s)");
+        }
+        Event::Frame => {}
+        Event::AnalysisFailed(e) => bar.println(format!("warning: analysis of step {}: {e}", m.step_count())),
+    });
+    match outcome {
+        Ok(()) => {
+            bar.finish();
+            eprintln!("done: {} steps in {}", run.monolayer.step_count(), run.dir.display());
+            Ok(())
+        }
+        Err(e) => {
+            bar.abandon();
+            Err(e)
+        }
+    }
 }
 
 fn progress_bar(total: u64, done: u64, quiet: bool) -> ProgressBar {
@@ -208,54 +284,71 @@ fn progress_bar(total: u64, done: u64, quiet: bool) -> ProgressBar {
     bar
 }
 
-/// Steps to the end of the protocol, writing a frame and a checkpoint every frame interval of
-/// the active phase (and a checkpoint when relaxation ends).
-fn protocol(m: &mut Monolayer, dir: &Path, record: &mut RunRecord, quiet: bool) -> Result<(), String> {
-    let p = m.params().clone();
-    let total = p.total_steps();
-    let bar = progress_bar(total, m.step_count(), quiet);
-    let checkpoint = dir.join("checkpoint.npz");
-    let save = |m: &mut Monolayer, record: &mut RunRecord, frame: bool| -> Result<(), String> {
-        if frame {
-            m.evaluate_now().map_err(|e| e.to_string())?;
-            write_frame(m, &frame_path(dir, m.step_count()))?;
-            record.last_frame_step = Some(m.step_count());
-        }
-        write_checkpoint(m, &checkpoint)?;
-        record.save(dir)
+fn sweep(a: &SweepArgs) -> Result<(), String> {
+    let mut spec = match &a.file {
+        Some(f) => SweepSpec::from_file(f)?,
+        None => SweepSpec { seeds: vec![1], frame_interval: 1000, ..SweepSpec::default() },
     };
-    let start = Instant::now();
-    let start_step = m.step_count();
-    while m.step_count() < total {
-        let phase = m.phase();
-        bar.set_message(match phase {
-            Phase::Relaxation => "relaxing",
-            Phase::Active => "active",
-        });
-        if let Err(e) = m.step() {
-            bar.abandon();
-            let last_good = dir.join("last_good_state.npz");
-            write_checkpoint(m, &last_good)?;
-            return Err(failure_message(&e, &last_good));
-        }
-        bar.inc(1);
-        let s = m.step_count();
-        let relaxed = s == p.relax_steps;
-        let frame = s >= p.relax_steps && (s - p.relax_steps) % record.frame_interval == 0;
-        if frame || relaxed {
-            save(m, record, frame)?;
-            if quiet && frame {
-                let rate = (s - start_step) as f64 / start.elapsed().as_secs_f64();
-                eprintln!("step {s}/{total}: frame written ({rate:.0} steps/s)");
-            }
-        }
+    for s in &a.set {
+        let (k, v) = s.split_once('=').ok_or_else(|| format!("--set {s}: expected key=value"))?;
+        let value = format!("x = {}", v.trim())
+            .parse::<toml::Table>()
+            .map(|t| t["x"].clone())
+            .unwrap_or_else(|_| toml::Value::String(v.trim().to_string()));
+        spec.base.insert(k.trim().to_string(), value);
     }
+    for g in &a.grid {
+        spec.add_grid(g)?;
+    }
+    if let Some(seeds) = &a.seeds {
+        spec.seeds = seeds.clone();
+    }
+    if let Some(fi) = a.frame_interval {
+        spec.frame_interval = fi;
+    }
+    let jobs = spec.jobs()?;
+    let shard = a.shard.or(slurm_shard()?);
+    let workers = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    let mine = jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).count();
+    let todo = steps_to_run(&jobs, &a.out, shard);
+    eprintln!(
+        "sweep: {} runs ({} in this shard), {} steps to run, {} at a time, into {}",
+        jobs.len(),
+        mine,
+        todo,
+        workers,
+        a.out.display()
+    );
+    let bar = progress_bar(todo, 0, a.quiet);
+    bar.set_message(format!("runs 0/{mine}"));
+    let start = Instant::now();
+    let reported = std::sync::atomic::AtomicUsize::new(0);
+    let summaries = run_sweep(&jobs, spec.frame_interval, &a.out, workers, shard, &|steps, done, total| {
+        bar.set_position(steps);
+        bar.set_message(format!("runs {done}/{total}"));
+        if a.quiet && reported.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done {
+            eprintln!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64());
+        }
+    })?;
     bar.finish();
+    for path in write_tables(&a.out, &summaries)? {
+        println!("{}", path.display());
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
+    eprintln!(
+        "sweep done in {wall:.0} s; runs took {run_time:.0} s together ({:.2} runs' worth of time per second of wall time)",
+        run_time / wall.max(1e-9)
+    );
     Ok(())
 }
 
-fn failure_message(e: &SimError, last_good: &Path) -> String {
-    format!("{e}\n  the last good state is in {} (the last periodic one in checkpoint.npz)", last_good.display())
+/// The shard of a Slurm job array, when run as one.
+fn slurm_shard() -> Result<Option<Shard>, String> {
+    match (std::env::var("SLURM_ARRAY_TASK_ID"), std::env::var("SLURM_ARRAY_TASK_COUNT")) {
+        (Ok(id), Ok(count)) => format!("{id}/{count}").parse().map(Some),
+        _ => Ok(None),
+    }
 }
 
 fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
@@ -301,4 +394,56 @@ fn bench(a: &BenchArgs) -> Result<(), String> {
         );
     }
     Ok(())
+}
+
+/// `analyze DIR`, or with --bench the timings of the measurements at full size.
+fn analyze(a: &AnalyzeArgs) -> Result<(), String> {
+    if a.bench {
+        return bench_analysis(a.bench_frames);
+    }
+    let dir = a.dir.as_deref().expect("clap requires DIR without --bench");
+    let written = analyze_run(dir, a.out.as_deref(), a.snapshot, a.field)?;
+    for path in written {
+        println!("{}", path.display());
+    }
+    Ok(())
+}
+
+/// Times [`Analysis::measure`] on a full-size active state, and `analyze` over `frames` frames
+/// of it written to a temporary run directory (removed afterwards).
+fn bench_analysis(frames: u64) -> Result<(), String> {
+    let p = Params { relax_steps: 3000, zeta: 0.5, ..Params::default() };
+    let mut m = Monolayer::new(p.clone(), 1).map_err(|e| e.to_string())?;
+    m.advance(p.relax_steps + 20).map_err(|e| e.to_string())?;
+    m.evaluate_now().map_err(|e| e.to_string())?;
+    let mut analysis = Analysis::new(m.params());
+    analysis.measure(&m);
+    let reps = 200;
+    let t = Instant::now();
+    for _ in 0..reps {
+        analysis.measure(&m);
+    }
+    let ms = 1e3 * t.elapsed().as_secs_f64() / reps as f64;
+    println!("measurements of one full-size frame (N = {}, L = {}): {ms:.2} ms", p.n_cells, p.box_size);
+    let dir = std::env::temp_dir().join(format!("monolayer-analysis-bench-{}", std::process::id()));
+    let result = (|| {
+        fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
+        RunRecord::new(m.params().clone(), 1, 10).save(&dir)?;
+        for _ in 0..frames {
+            m.advance(10).map_err(|e| e.to_string())?;
+            m.evaluate_now().map_err(|e| e.to_string())?;
+            let path = frame_path(&dir, m.step_count());
+            write_frame(&mut m, &path)?;
+        }
+        let t = Instant::now();
+        let written = analyze_run(&dir, None, None, Background::StrainRate)?;
+        println!(
+            "analyze over {frames} full-size frames: {:.2} s ({} files written)",
+            t.elapsed().as_secs_f64(),
+            written.len()
+        );
+        Ok(())
+    })();
+    let _ = fs::remove_dir_all(&dir);
+    result
 }

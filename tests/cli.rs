@@ -103,3 +103,46 @@ fn instability_stops_with_step_cell_and_last_good_state() {
     let record = std::fs::read_to_string(out.join("run.json")).unwrap();
     assert!(record.contains("failed: unstable"), "{record}");
 }
+
+/// `monolayer sweep` from the command line: a small grid, its tables and plot; a bad grid value
+/// refused before anything is written.
+#[test]
+fn sweep_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sweep");
+    let o = monolayer(&[
+        "sweep",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+        "--grid",
+        "zeta=0.2,0.4",
+        "--seeds",
+        "1,2",
+        "--set",
+        "box_size=48",
+        "--set",
+        "n_cells=6",
+        "--set",
+        "relax_steps=100",
+        "--set",
+        "active_steps=100",
+        "--frame-interval",
+        "50",
+        "--jobs",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    assert_eq!(summary.lines().count(), 5, "{summary}");
+    assert!(summary.lines().nth(1).unwrap().starts_with("zeta0.2_seed1,0.2,1,"), "{summary}");
+    let regimes = std::fs::read_to_string(out.join("regimes.csv")).unwrap();
+    assert_eq!(regimes.lines().count(), 3, "{regimes}");
+    assert!(stderr(&o).contains("runs took"), "{}", stderr(&o));
+
+    let bad = dir.path().join("bad");
+    let o = monolayer(&["sweep", "--out", bad.to_str().unwrap(), "--grid", "zeta=0.3,99"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("zeta = 99") && stderr(&o).contains("[−10, 10]"), "{}", stderr(&o));
+    assert!(!bad.exists());
+}

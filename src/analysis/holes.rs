@@ -1,0 +1,282 @@
+//! Holes in the monolayer (paper Sec. A and Fig. 3, model-notes §6).
+//!
+//! A site is void where Σ_i φ_i < 0.01. Void sites that touch (4-connected, across the periodic
+//! edges) form a region. A hole nucleates when a region exceeds πR²/4 sites (a quarter of a cell)
+//! and is then followed from frame to frame until no void site is left of it: a hole that shrinks
+//! below πR²/4 is still open (the threshold decides birth, not death), so that a hole hovering
+//! near the threshold is not counted as many.
+//!
+//! Frame to frame, a region continues the holes whose previous regions it overlaps (shares a
+//! site with), or failing that the hole whose last centroid lies within a cell radius. A hole
+//! whose region breaks in two keeps its identity in the larger part; a part that is itself above
+//! the nucleation threshold becomes a new hole (`split_from`). Holes whose regions join continue
+//! as the oldest of them; the others close (`merged_into`).
+
+/// A site is void below this Σφ (paper Sec. A).
+pub const VOID_THRESHOLD: f64 = 0.01;
+/// A site is covered at or above this Σφ (the packing fraction counts these).
+pub const COVERED_THRESHOLD: f64 = 0.5;
+const NONE: u32 = u32::MAX;
+
+/// One connected void region.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VoidRegion {
+    /// Number of void sites (area in lattice units).
+    pub area: usize,
+    /// Centroid on the periodic box (the region unwrapped about its first site, then wrapped).
+    pub x: f64,
+    pub y: f64,
+}
+
+/// The void regions of one frame: a label per site (or none) and the regions, with reusable
+/// buffers.
+#[derive(Clone, Debug, Default)]
+pub struct VoidRegions {
+    pub l: usize,
+    /// Region index per site, `u32::MAX` where covered.
+    pub labels: Vec<u32>,
+    pub regions: Vec<VoidRegion>,
+    /// Fraction of sites with Σφ ≥ ½.
+    pub packing_fraction: f64,
+    /// Fraction of void sites.
+    pub void_fraction: f64,
+    stack: Vec<(i64, i64)>,
+}
+
+impl VoidRegions {
+    /// Labels the void regions of Σφ on the L×L lattice.
+    pub fn find(&mut self, phi_sum: &[f64], l: usize) {
+        self.l = l;
+        self.labels.clear();
+        self.labels.resize(l * l, NONE);
+        self.regions.clear();
+        let li = l as i64;
+        let void = |i: usize| phi_sum[i] < VOID_THRESHOLD;
+        for start in 0..l * l {
+            if !void(start) || self.labels[start] != NONE {
+                continue;
+            }
+            let label = self.regions.len() as u32;
+            self.labels[start] = label;
+            self.stack.clear();
+            self.stack.push(((start % l) as i64, (start / l) as i64));
+            let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+            while let Some((x, y)) = self.stack.pop() {
+                n += 1;
+                sx += x as f64;
+                sy += y as f64;
+                for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+                    let (nx, ny) = (x + dx, y + dy);
+                    let j = (ny.rem_euclid(li) * li + nx.rem_euclid(li)) as usize;
+                    if void(j) && self.labels[j] == NONE {
+                        self.labels[j] = label;
+                        self.stack.push((nx, ny));
+                    }
+                }
+            }
+            let wrapf = |v: f64| v.rem_euclid(l as f64);
+            self.regions.push(VoidRegion { area: n, x: wrapf(sx / n as f64), y: wrapf(sy / n as f64) });
+        }
+        let n = (l * l) as f64;
+        self.packing_fraction = phi_sum.iter().filter(|&&s| s >= COVERED_THRESHOLD).count() as f64 / n;
+        self.void_fraction = self.regions.iter().map(|r| r.area).sum::<usize>() as f64 / n;
+    }
+
+    /// Regions larger than `threshold` sites: holes by the nucleation criterion alone.
+    pub fn count_above(&self, threshold: f64) -> usize {
+        self.regions.iter().filter(|r| r.area as f64 > threshold).count()
+    }
+}
+
+/// The nucleation threshold πR²/4 (in sites) for cells of radius R.
+pub fn nucleation_area(radius: f64) -> f64 {
+    std::f64::consts::PI * radius * radius / 4.0
+}
+
+/// One hole from nucleation to closure.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hole {
+    pub id: usize,
+    /// Time of the first frame in which it was seen open.
+    pub nucleated: f64,
+    /// Time of the first frame in which it was gone (None while open).
+    pub closed: Option<f64>,
+    /// (time, area in sites, centroid x, centroid y) for every frame it was open.
+    pub history: Vec<(f64, usize, f64, f64)>,
+    /// The hole it broke off from, if it did.
+    pub split_from: Option<usize>,
+    /// The hole it joined when it closed by merging, if it did.
+    pub merged_into: Option<usize>,
+}
+
+impl Hole {
+    /// closed − nucleated, or None while open.
+    pub fn lifetime(&self) -> Option<f64> {
+        self.closed.map(|c| c - self.nucleated)
+    }
+
+    pub fn max_area(&self) -> usize {
+        self.history.iter().map(|h| h.1).max().unwrap_or(0)
+    }
+
+    /// Why it closed: "closed", "merged", or "open".
+    pub fn fate(&self) -> &'static str {
+        match (self.closed, self.merged_into) {
+            (None, _) => "open",
+            (Some(_), Some(_)) => "merged",
+            (Some(_), None) => "closed",
+        }
+    }
+}
+
+/// Follows holes from frame to frame.
+#[derive(Clone, Debug)]
+pub struct HoleTracker {
+    /// Sites, in area, above which a new region is a hole.
+    pub nucleation_area: f64,
+    /// Centroids closer than this (periodic) match when regions do not overlap.
+    pub match_distance: f64,
+    /// Every hole ever seen, in order of nucleation.
+    pub holes: Vec<Hole>,
+    /// The previous frame's labels and the hole (index into `holes`) of each previous region.
+    prev_labels: Vec<u32>,
+    prev_hole: Vec<Option<usize>>,
+    l: usize,
+    pairs: Vec<(u32, u32)>,
+}
+
+impl HoleTracker {
+    /// A tracker for cells of radius R: nucleation above πR²/4, matching within R.
+    pub fn new(radius: f64) -> Self {
+        HoleTracker {
+            nucleation_area: nucleation_area(radius),
+            match_distance: radius,
+            holes: Vec::new(),
+            prev_labels: Vec::new(),
+            prev_hole: Vec::new(),
+            l: 0,
+            pairs: Vec::new(),
+        }
+    }
+
+    /// The holes open now.
+    pub fn open(&self) -> impl Iterator<Item = &Hole> {
+        self.holes.iter().filter(|h| h.closed.is_none())
+    }
+
+    /// The regions (indices into the last frame's [`VoidRegions::regions`]) that nucleated a hole
+    /// in the last update: new holes, not fragments split off an open one.
+    pub fn nucleated_regions(&self) -> impl Iterator<Item = usize> + '_ {
+        self.prev_hole.iter().enumerate().filter_map(move |(r, h)| {
+            let h = &self.holes[(*h)?];
+            (h.history.len() == 1 && h.split_from.is_none() && h.closed.is_none()).then_some(r)
+        })
+    }
+
+    /// The holes (indices into `holes`) that nucleated in the last update, as
+    /// [`Self::nucleated_regions`].
+    pub fn nucleated_holes(&self) -> impl Iterator<Item = usize> + '_ {
+        self.prev_hole.iter().flatten().copied().filter(move |&h| {
+            let h = &self.holes[h];
+            h.history.len() == 1 && h.split_from.is_none() && h.closed.is_none()
+        })
+    }
+
+    /// Takes the void regions of the next frame, at time `time`.
+    pub fn update(&mut self, voids: &VoidRegions, time: f64) {
+        let l = voids.l;
+        if self.l != l {
+            assert!(self.prev_labels.is_empty(), "the lattice size changed between frames");
+            self.l = l;
+        }
+        let nr = voids.regions.len();
+        // Overlaps between this frame's regions and the previous frame's regions that were holes.
+        self.pairs.clear();
+        if !self.prev_labels.is_empty() {
+            for (cur, prev) in voids.labels.iter().zip(&self.prev_labels) {
+                if *cur != NONE && *prev != NONE && self.prev_hole[*prev as usize].is_some() {
+                    self.pairs.push((*cur, *prev));
+                }
+            }
+        }
+        self.pairs.sort_unstable();
+        self.pairs.dedup();
+        // Holes claimed by each region (by overlap).
+        let mut claims: Vec<Vec<usize>> = vec![Vec::new(); nr];
+        for &(cur, prev) in &self.pairs {
+            if let Some(h) = self.prev_hole[prev as usize] {
+                if !claims[cur as usize].contains(&h) {
+                    claims[cur as usize].push(h);
+                }
+            }
+        }
+        // Open holes that no region overlaps: match by centroid distance to an unclaimed region.
+        let open: Vec<usize> = (0..self.holes.len()).filter(|&h| self.holes[h].closed.is_none()).collect();
+        for &h in &open {
+            if claims.iter().any(|c| c.contains(&h)) {
+                continue;
+            }
+            let &(_, _, hx, hy) = self.holes[h].history.last().expect("an open hole has a history");
+            let best = (0..nr)
+                .filter(|&r| claims[r].is_empty())
+                .map(|r| (periodic_distance(hx, hy, voids.regions[r].x, voids.regions[r].y, l), r))
+                .filter(|&(d, _)| d <= self.match_distance)
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            if let Some((_, r)) = best {
+                claims[r].push(h);
+            }
+        }
+        // Each hole continues in the largest region that claims it.
+        let mut region_hole: Vec<Option<usize>> = vec![None; nr];
+        let mut continued = vec![false; self.holes.len()];
+        let mut order: Vec<usize> = (0..nr).collect();
+        order.sort_by(|&a, &b| voids.regions[b].area.cmp(&voids.regions[a].area).then(a.cmp(&b)));
+        for &r in &order {
+            let region = voids.regions[r];
+            // Merge: the oldest of the holes not yet continued keeps going; the others close.
+            let mut live: Vec<usize> = claims[r].iter().copied().filter(|&h| !continued[h]).collect();
+            live.sort_unstable();
+            if let Some(&keep) = live.first() {
+                continued[keep] = true;
+                region_hole[r] = Some(keep);
+                self.holes[keep].history.push((time, region.area, region.x, region.y));
+                for &other in &live[1..] {
+                    continued[other] = true;
+                    self.holes[other].closed = Some(time);
+                    self.holes[other].merged_into = Some(self.holes[keep].id);
+                }
+            } else if region.area as f64 > self.nucleation_area {
+                // Nucleation, or a large fragment of a hole that split.
+                let split_from = claims[r].first().map(|&h| self.holes[h].id);
+                let id = self.holes.len();
+                self.holes.push(Hole {
+                    id,
+                    nucleated: time,
+                    closed: None,
+                    history: vec![(time, region.area, region.x, region.y)],
+                    split_from,
+                    merged_into: None,
+                });
+                continued.push(true);
+                region_hole[r] = Some(id);
+            }
+        }
+        for &h in &open {
+            if !continued[h] {
+                self.holes[h].closed = Some(time);
+            }
+        }
+        self.prev_labels.clone_from(&voids.labels);
+        self.prev_hole = region_hole;
+    }
+}
+
+/// Distance between two points on the periodic L×L box.
+pub fn periodic_distance(x0: f64, y0: f64, x1: f64, y1: f64, l: usize) -> f64 {
+    let lf = l as f64;
+    let d = |a: f64, b: f64| {
+        let d = (a - b).rem_euclid(lf);
+        d.min(lf - d)
+    };
+    d(x0, x1).hypot(d(y0, y1))
+}

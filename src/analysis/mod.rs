@@ -1,0 +1,203 @@
+//! The paper's measurements of the monolayer (Sec. A–D, model-notes §6), apart from the dynamics:
+//! the same code measures the running simulation (live, in the browser) and a run's frames
+//! (offline, `monolayer analyze`).
+//!
+//! - [`fields`]: the coarse-grained fields A(x) = Σ_i a_i φ_i (velocity, active force, nematic),
+//!   their periodic sliding-window mean, the strain rate ε̇ = ∇·v/2, ∇·f^a;
+//! - [`defects`]: ±½ defects of the smoothed nematic field, +½ orientation (Vromans & Giomi);
+//! - [`spirals`]: spiral cores, +1 points of the smoothed velocity with ∇·v > 0;
+//! - [`holes`]: void regions, the packing fraction, and holes followed from frame to frame;
+//! - [`correlations`]: C_v(r), C_Q(r) of the unsmoothed fields by FFT, correlation lengths;
+//! - [`nucleation`]: P(hole | ε̇), the probability that a site opens into a new hole;
+//! - [`precursors`]: spiral cores, +½ defects and strain near a hole in the frames before it opens;
+//! - [`winding`]: plaquette winding numbers (the paper's 8-neighbour test, with the sites that
+//!   flag one defect merged) and sub-site core positions, shared by defects and spirals.
+//!
+//! [`Analysis`] owns every buffer: after the first call, measuring a frame allocates nothing.
+//! Native only: `frames` (reading a run), `offline` (tables of a run), `plots`.
+
+pub mod correlations;
+pub mod defects;
+pub mod fields;
+pub mod holes;
+pub mod nucleation;
+pub mod precursors;
+pub mod spirals;
+pub mod winding;
+
+#[cfg(feature = "cli")]
+pub mod frames;
+#[cfg(feature = "cli")]
+pub mod offline;
+#[cfg(feature = "cli")]
+pub mod plots;
+
+use num_complex::Complex64 as C64;
+
+use crate::lattice::Patch;
+use crate::monolayer::Monolayer;
+use crate::params::Params;
+use correlations::{correlation_length, Correlator};
+use defects::{Defect, DefectFinder};
+use fields::{divergence, strain_rate, CoarseFields};
+use holes::{nucleation_area, VoidRegions};
+use spirals::{PlusOne, SpiralFinder};
+
+/// The scalar measurements of one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameSummary {
+    /// Fraction of sites with Σφ ≥ ½.
+    pub packing_fraction: f64,
+    /// Fraction of void sites (Σφ < 0.01).
+    pub void_fraction: f64,
+    /// Connected void regions of any size.
+    pub void_regions: usize,
+    /// Void regions larger than πR²/4: holes by the nucleation criterion.
+    pub holes: usize,
+    /// Area of the largest void region, in sites.
+    pub largest_void: usize,
+    pub plus_half_defects: usize,
+    pub minus_half_defects: usize,
+    pub spiral_cores: usize,
+    /// max over sites of ε̇ = ∇·v/2 of the smoothed velocity.
+    pub max_strain_rate: f64,
+    /// First crossings of 1/e by C_v and C_Q (None: not within L/2).
+    pub velocity_correlation_length: Option<f64>,
+    pub nematic_correlation_length: Option<f64>,
+}
+
+/// Every measurement of one frame, with the buffers it needs (allocated once per lattice size).
+#[derive(Debug)]
+pub struct Analysis {
+    pub l: usize,
+    /// Cell radius R.
+    pub radius: f64,
+    /// Half-width of the smoothing window, R rounded: the window is 2R + 1 sites a side.
+    pub half_window: usize,
+    /// ζ of the active force (the run's, also while relaxing).
+    pub zeta: f64,
+    /// The unsmoothed fields of Eq. S4 (Σφ included).
+    pub raw: CoarseFields,
+    /// The same after the sliding-window mean (Σφ copied unsmoothed).
+    pub smooth: CoarseFields,
+    /// ε̇ = ∇·v/2 of the smoothed velocity.
+    pub strain_rate: Vec<f64>,
+    /// ∇·f^a of the smoothed active force.
+    pub active_force_divergence: Vec<f64>,
+    /// ±½ defects of the smoothed nematic field.
+    pub defects: Vec<Defect>,
+    /// +1 points of the smoothed velocity; the spiral cores are those with ∇·v > 0.
+    pub plus_ones: Vec<PlusOne>,
+    /// Void regions and packing fraction of Σφ.
+    pub voids: VoidRegions,
+    /// C_v(r), C_Q(r) for r = 0..=L/2 (unsmoothed fields).
+    pub velocity_correlation: Vec<f64>,
+    pub nematic_correlation: Vec<f64>,
+    /// The typical |∇·v| scale below which a +1 point counts as divergence-free.
+    divergence_scale: f64,
+    defect_finder: DefectFinder,
+    spiral_finder: SpiralFinder,
+    correlator: Correlator,
+    row: Vec<f64>,
+    tmp: Vec<f64>,
+}
+
+impl Analysis {
+    /// Buffers for the lattice and cells of these parameters.
+    pub fn new(params: &Params) -> Self {
+        let l = params.box_size;
+        let half_window = params.radius.round() as usize;
+        assert!(2 * half_window < l, "the 2R×2R window must fit the box");
+        Analysis {
+            l,
+            radius: params.radius,
+            half_window,
+            zeta: params.zeta,
+            raw: CoarseFields::new(l),
+            smooth: CoarseFields::new(l),
+            strain_rate: vec![0.0; l * l],
+            active_force_divergence: vec![0.0; l * l],
+            defects: Vec::new(),
+            plus_ones: Vec::new(),
+            voids: VoidRegions::default(),
+            velocity_correlation: Vec::new(),
+            nematic_correlation: Vec::new(),
+            divergence_scale: 0.0,
+            defect_finder: DefectFinder::default(),
+            spiral_finder: SpiralFinder::default(),
+            correlator: Correlator::new(l),
+            row: Vec::new(),
+            tmp: Vec::new(),
+        }
+    }
+
+    /// Measures the current state of a simulation (velocities of its last evaluation). The
+    /// active force is the run's ζ times −Q̂_i·∇φ_i, also while relaxing (where the dynamics
+    /// has it off), so that it shows where activity would pull.
+    pub fn measure(&mut self, m: &Monolayer) {
+        assert_eq!(m.params().box_size, self.l, "analysis built for another lattice size");
+        self.zeta = m.params().zeta;
+        self.raw.clear();
+        for c in m.cells() {
+            let (vx, vy) = c.velocity();
+            self.raw.add_cell(c.patch(), c.phi().data, c.q_hat(), self.zeta, Some((vx.data, vy.data)));
+        }
+        self.derive();
+    }
+
+    /// Measures cells given as (patch, φ on the padded patch, Q̂) with the coarse-grained
+    /// velocity Σ_i φ_i v_i as a lattice array: what a frame file holds.
+    pub fn measure_cells<'a>(&mut self, cells: impl Iterator<Item = (Patch, &'a [f64], [f64; 2])>, velocity: &[C64]) {
+        assert_eq!(velocity.len(), self.l * self.l, "velocity field of another lattice size");
+        self.raw.clear();
+        for (patch, phi, q_hat) in cells {
+            self.raw.add_cell(patch, phi, q_hat, self.zeta, None);
+        }
+        self.raw.set_velocity(velocity);
+        self.derive();
+    }
+
+    /// Everything that follows from the raw fields.
+    fn derive(&mut self) {
+        let l = self.l;
+        self.smooth.smooth_from(&self.raw, self.half_window, &mut self.row, &mut self.tmp);
+        let s = &self.smooth;
+        strain_rate(&s.vx, &s.vy, &mut self.strain_rate, l);
+        divergence(&s.fx, &s.fy, &mut self.active_force_divergence, l, 1.0);
+        self.defect_finder.find(&s.qxx, &s.qxy, l, &mut self.defects);
+        self.spiral_finder.find(&s.vx, &s.vy, &self.strain_rate, l, &mut self.plus_ones);
+        // ε̇ of the +1 points is compared with the field's own typical |ε̇|.
+        self.divergence_scale = self.strain_rate.iter().map(|e| e.abs()).sum::<f64>() / (l * l) as f64;
+        for p in &mut self.plus_ones {
+            // `find` averaged ε̇ = ∇·v/2; report ∇·v.
+            p.divergence *= 2.0;
+        }
+        self.voids.find(&self.raw.phi_sum, l);
+        self.correlator.correlate(&self.raw.vx, &self.raw.vy, &mut self.velocity_correlation);
+        self.correlator.correlate(&self.raw.qxx, &self.raw.qxy, &mut self.nematic_correlation);
+    }
+
+    /// The spiral cores: +1 points of the smoothed velocity with ∇·v > 0.
+    pub fn spiral_cores(&self) -> impl Iterator<Item = &PlusOne> {
+        let scale = 2.0 * self.divergence_scale;
+        self.plus_ones.iter().filter(move |p| p.is_spiral_core(scale))
+    }
+
+    /// The scalar measurements of the last frame measured.
+    pub fn summary(&self) -> FrameSummary {
+        let v = &self.voids;
+        FrameSummary {
+            packing_fraction: v.packing_fraction,
+            void_fraction: v.void_fraction,
+            void_regions: v.regions.len(),
+            holes: v.count_above(nucleation_area(self.radius)),
+            largest_void: v.regions.iter().map(|r| r.area).max().unwrap_or(0),
+            plus_half_defects: self.defects.iter().filter(|d| d.twice_charge > 0).count(),
+            minus_half_defects: self.defects.iter().filter(|d| d.twice_charge < 0).count(),
+            spiral_cores: self.spiral_cores().count(),
+            max_strain_rate: self.strain_rate.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            velocity_correlation_length: correlation_length(&self.velocity_correlation),
+            nematic_correlation_length: correlation_length(&self.nematic_correlation),
+        }
+    }
+}

@@ -1,0 +1,349 @@
+//! The analysis of a whole run: every frame measured in order, holes followed across frames,
+//! and the tables and plots written to `DIR/analysis/` (README "Analysis").
+//!
+//! Nothing is written until every frame has been read and measured, so a run that cannot be
+//! analysed (missing, foreign, another format version, a damaged frame) leaves no output.
+
+use std::fmt::Write as _;
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use super::correlations::correlation_length;
+use super::frames::{read_frame, Frame, RunFrames};
+use super::holes::HoleTracker;
+use super::nucleation::HoleProbability;
+use super::plots::{self, Background};
+use super::precursors::Precursors;
+use super::{Analysis, FrameSummary};
+use crate::io::{frame_path, write_atomic};
+use crate::monolayer::Monolayer;
+use crate::params::Params;
+
+/// What a frame contributes to the tables.
+#[derive(Clone, Debug)]
+pub struct FrameRecord {
+    pub step: u64,
+    pub time: f64,
+    pub summary: FrameSummary,
+    /// Holes open after this frame (tracked, so including those shrunk below πR²/4).
+    pub open_holes: usize,
+    pub velocity_correlation: Vec<f64>,
+    pub nematic_correlation: Vec<f64>,
+    /// (kind, x, y, orientation or ∇·v) of every defect and spiral core.
+    pub points: Vec<(&'static str, f64, f64, f64)>,
+}
+
+/// The measurements of a run so far.
+#[derive(Debug)]
+pub struct RunAnalysis {
+    pub analysis: Analysis,
+    pub tracker: HoleTracker,
+    pub frames: Vec<FrameRecord>,
+    pub hole_probability: HoleProbability,
+    pub precursors: Precursors,
+}
+
+impl RunAnalysis {
+    pub fn new(params: &Params) -> Self {
+        RunAnalysis {
+            analysis: Analysis::new(params),
+            tracker: HoleTracker::new(params.radius),
+            frames: Vec::new(),
+            hole_probability: HoleProbability::default(),
+            precursors: Precursors::default(),
+        }
+    }
+
+    /// Measures the next frame from a file.
+    pub fn push_frame(&mut self, frame: &Frame) {
+        self.analysis.measure_cells(frame.cell_views(), &frame.velocity);
+        self.record(frame.step, frame.time);
+    }
+
+    /// Measures the next frame from the running simulation (after `evaluate_now`).
+    pub fn push_monolayer(&mut self, m: &Monolayer) {
+        self.analysis.measure(m);
+        self.record(m.step_count(), m.step_count() as f64 * m.params().dt);
+    }
+
+    fn record(&mut self, step: u64, time: f64) {
+        let a = &self.analysis;
+        self.tracker.update(&a.voids, time);
+        self.hole_probability.push(&a.strain_rate, &a.voids, &self.tracker, a.radius);
+        self.precursors.push(a, &self.tracker);
+        let mut points: Vec<(&'static str, f64, f64, f64)> = a
+            .defects
+            .iter()
+            .map(|d| (if d.twice_charge > 0 { "plus_half" } else { "minus_half" }, d.x, d.y, d.orientation))
+            .collect();
+        points.extend(a.spiral_cores().map(|p| ("spiral_core", p.x, p.y, p.divergence)));
+        self.frames.push(FrameRecord {
+            step,
+            time,
+            summary: a.summary(),
+            open_holes: self.tracker.open().count(),
+            velocity_correlation: a.velocity_correlation.clone(),
+            nematic_correlation: a.nematic_correlation.clone(),
+            points,
+        });
+    }
+
+    /// The step of the frame drawn in the snapshot: the first hole's nucleation if any, else
+    /// the last frame.
+    pub fn snapshot_step(&self) -> Option<u64> {
+        let nucleation = self.tracker.holes.first().map(|h| h.nucleated);
+        nucleation
+            .and_then(|t| self.frames.iter().find(|f| f.time == t).map(|f| f.step))
+            .or_else(|| self.frames.last().map(|f| f.step))
+    }
+
+    /// The tables, as (file name, CSV text).
+    pub fn tables(&self) -> Vec<(&'static str, String)> {
+        let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
+        // Times are step × Δt: print 31, not 31.000000000000004.
+        let time = |t: f64| (t * 1e9).round() / 1e9;
+        let mut frames = String::from(
+            "step,time,packing_fraction,void_fraction,void_regions,holes_open,largest_void_area,plus_half_defects,\
+             minus_half_defects,spiral_cores,max_strain_rate,velocity_correlation_length,nematic_correlation_length\n",
+        );
+        for f in &self.frames {
+            let s = &f.summary;
+            let _ = writeln!(
+                frames,
+                "{},{},{:.6},{:.6},{},{},{},{},{},{},{:.6e},{},{}",
+                f.step,
+                time(f.time),
+                s.packing_fraction,
+                s.void_fraction,
+                s.void_regions,
+                f.open_holes,
+                s.largest_void,
+                s.plus_half_defects,
+                s.minus_half_defects,
+                s.spiral_cores,
+                s.max_strain_rate,
+                opt(s.velocity_correlation_length),
+                opt(s.nematic_correlation_length)
+            );
+        }
+        let mut holes = String::from(
+            "id,nucleation_time,closing_time,lifetime,fate,frames_open,max_area,nucleation_area,\
+             nucleation_x,nucleation_y,split_from,merged_into\n",
+        );
+        let mut areas = String::from("id,time,area,centroid_x,centroid_y\n");
+        for h in &self.tracker.holes {
+            let (t0, a0, x0, y0) = h.history[0];
+            let id = |v: Option<usize>| v.map(|x| x.to_string()).unwrap_or_default();
+            let _ = writeln!(
+                holes,
+                "{},{},{},{},{},{},{},{},{:.3},{:.3},{},{}",
+                h.id,
+                time(t0),
+                h.closed.map(|c| time(c).to_string()).unwrap_or_default(),
+                h.lifetime().map(|v| time(v).to_string()).unwrap_or_default(),
+                h.fate(),
+                h.history.len(),
+                h.max_area(),
+                a0,
+                x0,
+                y0,
+                id(h.split_from),
+                id(h.merged_into)
+            );
+            for &(t, a, x, y) in &h.history {
+                let _ = writeln!(areas, "{},{},{},{:.3},{:.3}", h.id, time(t), a, x, y);
+            }
+        }
+        let mut corr = String::from("step,r,velocity_correlation,nematic_correlation\n");
+        for f in &self.frames {
+            for (r, (cv, cq)) in f.velocity_correlation.iter().zip(&f.nematic_correlation).enumerate() {
+                let _ = writeln!(corr, "{},{r},{cv:.6},{cq:.6}", f.step);
+            }
+        }
+        let mut points = String::from("step,kind,x,y,orientation_or_divergence\n");
+        for f in &self.frames {
+            for &(kind, x, y, v) in &f.points {
+                let _ = writeln!(points, "{},{kind},{x:.3},{y:.3},{v:.6}", f.step);
+            }
+        }
+        let mut probability =
+            String::from("strain_rate_bin_low,strain_rate_bin_high,sites,sites_opening_into_a_new_hole,probability\n");
+        for (lo, n, h, p) in self.hole_probability.table() {
+            let hi = lo + super::nucleation::STRAIN_RATE_BIN;
+            let _ = writeln!(probability, "{lo:.6},{hi:.6},{n},{h},{p:.6e}");
+        }
+        let mut precursors = String::from(
+            "hole,frames_before,spiral_core_distance_over_r,plus_half_distance_over_r,\
+             second_plus_half_distance_over_r,max_strain_rate_within_r_half_over_max\n",
+        );
+        for p in &self.precursors.rows {
+            let _ = writeln!(
+                precursors,
+                "{},{},{},{},{},{:.6}",
+                p.hole,
+                p.frames_before,
+                opt(p.spiral_core),
+                opt(p.plus_half[0]),
+                opt(p.plus_half[1]),
+                p.strain_rate
+            );
+        }
+        vec![
+            ("frames.csv", frames),
+            ("hole_precursors.csv", precursors),
+            ("hole_probability.csv", probability),
+            ("holes.csv", holes),
+            ("hole_areas.csv", areas),
+            ("correlations.csv", corr),
+            ("defects_and_spirals.csv", points),
+        ]
+    }
+
+    /// C_v(r) and C_Q(r) averaged over the frames measured.
+    pub fn mean_correlations(&self) -> (Vec<f64>, Vec<f64>) {
+        let n = self.frames.len().max(1) as f64;
+        let bins = self.frames.first().map(|f| f.velocity_correlation.len()).unwrap_or(0);
+        let mut cv = vec![0.0; bins];
+        let mut cq = vec![0.0; bins];
+        for f in &self.frames {
+            for r in 0..bins {
+                cv[r] += f.velocity_correlation[r] / n;
+                cq[r] += f.nematic_correlation[r] / n;
+            }
+        }
+        (cv, cq)
+    }
+
+    /// Writes the tables and plots into `out` (created), each file atomically. `snapshot` is the
+    /// frame to draw over `field`, measured afresh.
+    pub fn write(
+        &self,
+        out: &Path,
+        snapshot: Option<&Frame>,
+        field: Background,
+        params: &Params,
+    ) -> Result<Vec<PathBuf>, String> {
+        fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+        let mut written = Vec::new();
+        for (name, text) in self.tables() {
+            let path = out.join(name);
+            write_atomic(&path, |w| w.write_all(text.as_bytes()).map_err(|e| format!("{}: {e}", path.display())))?;
+            written.push(path);
+        }
+        written.extend(plots::hole_areas(&out.join("hole_area"), &self.tracker.holes)?);
+        let (cv, cq) = self.mean_correlations();
+        let lengths = (correlation_length(&cv), correlation_length(&cq));
+        written.extend(plots::correlations(&out.join("correlations"), &cv, &cq, lengths, self.frames.len())?);
+        if let Some(frame) = snapshot {
+            let mut a = Analysis::new(params);
+            a.measure_cells(frame.cell_views(), &frame.velocity);
+            let base = out.join(snapshot_name(frame.step));
+            written.extend(plots::snapshot(&base, frame, &a, field)?);
+        }
+        Ok(written)
+    }
+}
+
+/// `monolayer analyze DIR`: every complete frame of the run in `dir`, written to `out`
+/// (default `DIR/analysis`), the snapshot (of `snapshot_step`, or chosen) drawn over `field`.
+/// Returns the files written. Reads and measures everything before writing anything.
+pub fn analyze_run(
+    dir: &Path,
+    out: Option<&Path>,
+    snapshot_step: Option<u64>,
+    field: Background,
+) -> Result<Vec<PathBuf>, String> {
+    let run = RunFrames::open(dir)?;
+    let params = &run.record.params;
+    let mut ra = RunAnalysis::new(params);
+    let kept = measure_frames(&mut ra, &run.frames, params.box_size, snapshot_step)?;
+    let chosen = match snapshot_step {
+        Some(s) => {
+            kept.ok_or_else(|| format!("--snapshot {s}: no frame of that step in {}", dir.join("frames").display()))?
+        }
+        None => snapshot_frame(&ra, dir, params.box_size)?.expect("at least one frame"),
+    };
+    let out = out.map(Path::to_path_buf).unwrap_or_else(|| dir.join("analysis"));
+    ra.write(&out, Some(&chosen), field, params)
+}
+
+/// Measures the frame files in order; returns the frame of `keep` if it was among them.
+fn measure_frames(
+    ra: &mut RunAnalysis,
+    frames: &[(u64, PathBuf)],
+    l: usize,
+    keep: Option<u64>,
+) -> Result<Option<Frame>, String> {
+    let mut kept = None;
+    for (step, path) in frames {
+        let frame = read_frame(path, l)?;
+        if frame.step != *step {
+            return Err(format!("{}: holds step {}, its name says {step}", path.display(), frame.step));
+        }
+        ra.push_frame(&frame);
+        if Some(*step) == keep {
+            kept = Some(frame);
+        }
+    }
+    Ok(kept)
+}
+
+/// The frame [`RunAnalysis::snapshot_step`] chooses, read from the run's directory.
+fn snapshot_frame(ra: &RunAnalysis, dir: &Path, l: usize) -> Result<Option<Frame>, String> {
+    ra.snapshot_step().map(|s| read_frame(&frame_path(dir, s), l)).transpose()
+}
+
+/// `run --analyze`: the analysis kept up to date as frames are written.
+#[derive(Debug)]
+pub struct LiveRun {
+    ra: RunAnalysis,
+    dir: PathBuf,
+    params: Params,
+    /// The step of the snapshot this run wrote last (replaced when the chosen frame changes).
+    snapshot: Option<u64>,
+}
+
+impl LiveRun {
+    /// Starts on the run in `dir`, measuring the frames it already has (a resumed run).
+    pub fn start(dir: &Path, params: &Params) -> Result<Self, String> {
+        let mut ra = RunAnalysis::new(params);
+        let frames = match RunFrames::open(dir) {
+            Ok(run) => run.frames,
+            Err(_) if !dir.join("frames").read_dir().is_ok_and(|mut d| d.next().is_some()) => Vec::new(),
+            Err(e) => return Err(e),
+        };
+        measure_frames(&mut ra, &frames, params.box_size, None)?;
+        // A resumed `run --analyze` wrote the snapshot of this step last.
+        let snapshot = ra.snapshot_step();
+        Ok(LiveRun { ra, dir: dir.to_path_buf(), params: params.clone(), snapshot })
+    }
+
+    /// Measures the state whose frame was just written and rewrites `DIR/analysis`.
+    pub fn frame(&mut self, m: &Monolayer) -> Result<(), String> {
+        self.ra.push_monolayer(m);
+        let snapshot = snapshot_frame(&self.ra, &self.dir, self.params.box_size)?;
+        let out = self.dir.join("analysis");
+        self.ra.write(&out, snapshot.as_ref(), Background::StrainRate, &self.params)?;
+        let now = snapshot.map(|f| f.step);
+        if let Some(old) = self.snapshot.filter(|&old| Some(old) != now) {
+            // The snapshot follows the last frame until a hole nucleates: drop the one it replaces.
+            for ext in ["png", "svg"] {
+                let path = out.join(format!("{}.{ext}", snapshot_name(old)));
+                match fs::remove_file(&path) {
+                    Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                        return Err(format!("{}: {e}", path.display()));
+                    }
+                    _ => {}
+                }
+            }
+        }
+        self.snapshot = now;
+        Ok(())
+    }
+}
+
+/// File name (without extension) of the snapshot of a step.
+fn snapshot_name(step: u64) -> String {
+    format!("snapshot_{step:07}")
+}

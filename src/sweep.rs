@@ -1,0 +1,674 @@
+//! Parameter sweeps (`monolayer sweep`): a grid of runs, one simulation per core, each in its own
+//! directory and analysed; resumable; a summary with one row per run and the regime map of the
+//! paper's Fig. 3d.
+//!
+//! A sweep file:
+//! ```toml
+//! seeds = [1, 2, 3]          # every grid point runs once per seed
+//! frame_interval = 1000      # optional (default 1000)
+//! [base]                     # any parameter (names of `monolayer params`); defaults fill the rest
+//! active_steps = 100000
+//! [grid]                     # lists: their Cartesian product is run; `chi` sets ξ_s = χ ξ_cell
+//! chi = [0.1, 0.01, 0.001]
+//! zeta = [0.3, 0.4, 0.5]
+//! ```
+
+use std::fmt::Write as _;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+use serde::Deserialize;
+
+use crate::analysis::frames::{read_frame, RunFrames};
+use crate::analysis::offline::RunAnalysis;
+use crate::io::{write_atomic, RunRecord};
+use crate::params::Params;
+use crate::runner::{Event, RunDir};
+
+/// µm/h per lattice site per time unit (paper: Δx ≈ 1 µm, one time unit ≈ 5 s).
+pub const MICRONS_PER_HOUR: f64 = 3600.0 / 5.0;
+
+/// A sweep as written in its file (or assembled from the command line).
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepSpec {
+    #[serde(default)]
+    pub base: toml::Table,
+    #[serde(default)]
+    pub grid: toml::Table,
+    #[serde(default = "default_seeds")]
+    pub seeds: Vec<u64>,
+    #[serde(default = "default_frame_interval")]
+    pub frame_interval: u64,
+}
+
+fn default_seeds() -> Vec<u64> {
+    vec![1]
+}
+
+fn default_frame_interval() -> u64 {
+    1000
+}
+
+/// One run of the sweep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Job {
+    /// Directory name under `OUT/runs/`, e.g. `chi0.01_zeta0.3_seed1`.
+    pub name: String,
+    /// The grid values of this run, in grid order, as text.
+    pub values: Vec<(String, String)>,
+    pub params: Params,
+    pub seed: u64,
+}
+
+fn value_text(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+impl SweepSpec {
+    pub fn from_file(path: &Path) -> Result<Self, String> {
+        let text = fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        toml::from_str(&text).map_err(|e: toml::de::Error| format!("{}: {}", path.display(), e.message()))
+    }
+
+    /// `KEY=V1,V2,…` from the command line into the grid (values in TOML syntax; bare words
+    /// are strings).
+    pub fn add_grid(&mut self, arg: &str) -> Result<(), String> {
+        let (k, vs) = arg.split_once('=').ok_or_else(|| format!("--grid {arg}: expected KEY=V1,V2,…"))?;
+        let values = vs
+            .split(',')
+            .map(|v| {
+                let v = v.trim();
+                format!("x = {v}")
+                    .parse::<toml::Table>()
+                    .map(|t| t["x"].clone())
+                    .or_else(|_| Ok::<_, String>(toml::Value::String(v.to_string())))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        self.grid.insert(k.trim().to_string(), toml::Value::Array(values));
+        Ok(())
+    }
+
+    /// Every run of the sweep, each one's parameters validated: a bad sweep fails here, before
+    /// anything runs, naming the run and the parameter.
+    pub fn jobs(&self) -> Result<Vec<Job>, String> {
+        if self.seeds.is_empty() {
+            return Err("sweep: `seeds` is empty".into());
+        }
+        if self.frame_interval == 0 {
+            return Err("sweep: `frame_interval` must be ≥ 1".into());
+        }
+        let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
+        for (k, v) in &self.grid {
+            let values = match v {
+                toml::Value::Array(a) if !a.is_empty() => a.clone(),
+                toml::Value::Array(_) => return Err(format!("sweep: grid `{k}` is an empty list")),
+                other => vec![other.clone()],
+            };
+            axes.push((k.clone(), values));
+        }
+        let mut points: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
+        for (k, values) in &axes {
+            points = points
+                .into_iter()
+                .flat_map(|p| {
+                    values.iter().map(move |v| {
+                        let mut q = p.clone();
+                        q.push((k.clone(), v.clone()));
+                        q
+                    })
+                })
+                .collect();
+        }
+        let mut jobs = Vec::new();
+        for point in &points {
+            let mut table = self.base.clone();
+            let mut chi = table.remove("chi");
+            for (k, v) in point {
+                if k == "chi" {
+                    chi = Some(v.clone());
+                } else {
+                    table.insert(k.clone(), v.clone());
+                }
+            }
+            let label: Vec<(String, String)> = point.iter().map(|(k, v)| (k.clone(), value_text(v))).collect();
+            let describe = || {
+                let s: Vec<String> = label.iter().map(|(k, v)| format!("{k} = {v}")).collect();
+                if s.is_empty() {
+                    "the base run".to_string()
+                } else {
+                    s.join(", ")
+                }
+            };
+            let mut params: Params =
+                table.try_into().map_err(|e: toml::de::Error| format!("sweep, run {}: {}", describe(), e.message()))?;
+            if let Some(c) = chi {
+                let c = c
+                    .as_float()
+                    .or_else(|| c.as_integer().map(|i| i as f64))
+                    .ok_or_else(|| format!("sweep, run {}: `chi` = {c} must be a number", describe()))?;
+                params.set_chi(c);
+            }
+            params.validate().map_err(|e| format!("sweep, run {}: {e}", describe()))?;
+            for &seed in &self.seeds {
+                let mut name: String = label.iter().map(|(k, v)| format!("{k}{v}_")).collect();
+                name = name.replace(['/', ' ', '"'], "");
+                name.push_str(&format!("seed{seed}"));
+                jobs.push(Job { name, values: label.clone(), params: params.clone(), seed });
+            }
+        }
+        Ok(jobs)
+    }
+}
+
+/// A shard of a sweep: run `index` of every `count` jobs (a Slurm job array sets
+/// `--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("--shard {s}: expected K/N with 0 ≤ K < N");
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (index, count) = (k.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
+        if count == 0 || index >= count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+/// One row of the summary: what a run did.
+#[derive(Clone, Debug, Default)]
+pub struct RunSummary {
+    pub name: String,
+    pub values: Vec<(String, String)>,
+    pub seed: u64,
+    /// "finished", "failed: …", or "running" (a shard that did not get to it).
+    pub status: String,
+    pub steps: u64,
+    /// Time units of the active phase the frames cover (first to last frame).
+    pub active_time: f64,
+    pub holes_nucleated: usize,
+    pub max_hole_area: usize,
+    pub time_with_hole_open: f64,
+    /// (duration, closed): closed holes' lifetimes, and for open ones the time they were seen.
+    pub lifetimes: Vec<(f64, bool)>,
+    pub mean_speed: f64,
+    pub velocity_correlation_length: Option<f64>,
+    pub nematic_correlation_length: Option<f64>,
+    /// Minimum packing fraction over the frames with no hole open.
+    pub min_packing_without_hole: Option<f64>,
+    /// Wall time of the run in this invocation of the sweep (0 when it was done already).
+    pub run_seconds: f64,
+}
+
+impl RunSummary {
+    pub fn blew_up(&self) -> bool {
+        self.status.starts_with("failed")
+    }
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    (n > 0).then(|| s / n as f64)
+}
+
+/// Measures the frames of the run in `dir`.
+pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
+    let record = RunRecord::load(dir)?;
+    let mut s = RunSummary {
+        name: job.name.clone(),
+        values: job.values.clone(),
+        seed: job.seed,
+        status: record.status.clone(),
+        ..RunSummary::default()
+    };
+    let Ok(run) = RunFrames::open(dir) else { return Ok(s) };
+    let p = &record.params;
+    let mut ra = RunAnalysis::new(p);
+    let mut speeds = Vec::new();
+    for (_, path) in &run.frames {
+        let frame = read_frame(path, p.box_size)?;
+        ra.push_frame(&frame);
+        // Σ_x |Σ_i φ_i v_i| / Σ_x Σ_i φ_i: the mean speed of the tissue, weighted by φ.
+        let mass: f64 = frame.cells.iter().flat_map(|(_, phi)| phi.iter()).sum();
+        let flux: f64 = frame.velocity.iter().map(|v| v.norm()).sum();
+        speeds.push(flux / mass.max(1e-300));
+        s.steps = frame.step;
+    }
+    let first = ra.frames.first().map(|f| f.time).unwrap_or(0.0);
+    let last = ra.frames.last().map(|f| f.time).unwrap_or(0.0);
+    s.active_time = last - first;
+    s.holes_nucleated = ra.tracker.holes.len();
+    s.max_hole_area = ra.tracker.holes.iter().map(|h| h.max_area()).max().unwrap_or(0);
+    // The frames sample the active phase evenly: the share of them with a hole open is the share
+    // of its time.
+    let with_hole = ra.frames.iter().filter(|f| f.open_holes > 0).count() as f64;
+    s.time_with_hole_open = s.active_time * with_hole / ra.frames.len().max(1) as f64;
+    s.lifetimes = ra
+        .tracker
+        .holes
+        .iter()
+        .map(|h| match h.lifetime() {
+            Some(t) => (t, true),
+            None => (last - h.nucleated, false),
+        })
+        .collect();
+    s.mean_speed = mean(speeds.into_iter()).unwrap_or(0.0);
+    s.velocity_correlation_length = mean(ra.frames.iter().filter_map(|f| f.summary.velocity_correlation_length));
+    s.nematic_correlation_length = mean(ra.frames.iter().filter_map(|f| f.summary.nematic_correlation_length));
+    s.min_packing_without_hole = ra
+        .frames
+        .iter()
+        .filter(|f| f.open_holes == 0)
+        .map(|f| f.summary.packing_fraction)
+        .fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.min(x))));
+    Ok(s)
+}
+
+/// How one run directory stands before the sweep touches it.
+enum Start {
+    Done,
+    Resume,
+    Fresh,
+}
+
+/// The run's record if `dir` holds one, checked against the job: a sweep never continues a run
+/// made with other parameters.
+fn existing_record(job: &Job, dir: &Path) -> Result<Option<RunRecord>, String> {
+    if !RunRecord::path(dir).exists() {
+        return Ok(None);
+    }
+    let record = RunRecord::load(dir)?;
+    if record.params != job.params || record.seed != job.seed {
+        return Err(format!(
+            "{} was run with other parameters or seed than this sweep gives it: use another --out",
+            dir.display()
+        ));
+    }
+    Ok(Some(record))
+}
+
+fn start_of(job: &Job, dir: &Path) -> Result<Start, String> {
+    let Some(record) = existing_record(job, dir)? else { return Ok(Start::Fresh) };
+    if record.status == "finished" || record.status.starts_with("failed") {
+        Ok(Start::Done)
+    } else if dir.join("checkpoint.npz").exists() {
+        Ok(Start::Resume)
+    } else {
+        // Killed before its first checkpoint: nothing to keep.
+        fs::remove_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        Ok(Start::Fresh)
+    }
+}
+
+/// Runs (or resumes, or skips when done) one job in `OUT/runs/NAME`, single-threaded.
+fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() + Sync)) -> Result<(), String> {
+    let mut run = match start_of(job, dir)? {
+        Start::Done => return Ok(()),
+        Start::Resume => RunDir::resume(dir)?,
+        Start::Fresh => RunDir::create(dir, job.params.clone(), job.seed, frame_interval)?,
+    };
+    // A failed simulation is a result of the sweep (it blew up), recorded in its run.json.
+    let _ = run.execute(false, &mut |_, e| {
+        if *e == Event::Step {
+            on_step()
+        }
+    });
+    Ok(())
+}
+
+/// Steps still to run for `job` in `dir` (0 when done).
+fn remaining_steps(job: &Job, dir: &Path) -> u64 {
+    match RunRecord::load(dir) {
+        Ok(r) if r.status == "finished" || r.status.starts_with("failed") => 0,
+        Ok(r) => job.params.total_steps().saturating_sub(r.last_frame_step.unwrap_or(0)),
+        Err(_) => job.params.total_steps(),
+    }
+}
+
+/// Runs every job of `shard` (all by default) on `workers` threads, one simulation each, then
+/// summarises every job of the sweep that has output. `progress(steps_done, runs_done)`.
+pub fn run_sweep(
+    jobs: &[Job],
+    frame_interval: u64,
+    out: &Path,
+    workers: usize,
+    shard: Option<Shard>,
+    progress: &(dyn Fn(u64, usize, usize) + Sync),
+) -> Result<Vec<RunSummary>, String> {
+    let runs_dir = out.join("runs");
+    fs::create_dir_all(&runs_dir).map_err(|e| format!("{}: {e}", runs_dir.display()))?;
+    // Check every existing directory against its job before any work starts.
+    for job in jobs {
+        existing_record(job, &runs_dir.join(&job.name))?;
+    }
+    let mine: Vec<&Job> =
+        jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).map(|(_, j)| j).collect();
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let steps = AtomicUsize::new(0);
+    let errors = Mutex::new(Vec::new());
+    let seconds = Mutex::new(std::collections::HashMap::new());
+    let total = mine.len();
+    std::thread::scope(|scope| {
+        for _ in 0..workers.max(1).min(total.max(1)) {
+            scope.spawn(|| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a one-thread pool");
+                loop {
+                    let i = next.fetch_add(1, Ordering::SeqCst);
+                    let Some(job) = mine.get(i) else { break };
+                    let dir = runs_dir.join(&job.name);
+                    let on_step = || {
+                        let s = steps.fetch_add(1, Ordering::Relaxed) as u64 + 1;
+                        if s % 100 == 0 {
+                            progress(s, done.load(Ordering::Relaxed), total);
+                        }
+                    };
+                    let t = std::time::Instant::now();
+                    if let Err(e) = pool.install(|| execute_job(job, &dir, frame_interval, &on_step)) {
+                        errors.lock().expect("no panics hold it").push(format!("{}: {e}", job.name));
+                    }
+                    seconds.lock().expect("no panics hold it").insert(job.name.clone(), t.elapsed().as_secs_f64());
+                    let d = done.fetch_add(1, Ordering::SeqCst) + 1;
+                    progress(steps.load(Ordering::Relaxed) as u64, d, total);
+                }
+            });
+        }
+    });
+    let errors = errors.into_inner().expect("no panics hold it");
+    if !errors.is_empty() {
+        return Err(errors.join("\n"));
+    }
+    let seconds = seconds.into_inner().expect("no panics hold it");
+    let mut summaries = Vec::new();
+    for job in jobs {
+        let dir = runs_dir.join(&job.name);
+        if RunRecord::path(&dir).exists() {
+            let mut s = summarize(job, &dir)?;
+            s.run_seconds = seconds.get(&job.name).copied().unwrap_or(0.0);
+            summaries.push(s);
+        }
+    }
+    Ok(summaries)
+}
+
+/// Total steps the sweep still has to run (for the progress bar).
+pub fn steps_to_run(jobs: &[Job], out: &Path, shard: Option<Shard>) -> u64 {
+    jobs.iter()
+        .enumerate()
+        .filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index))
+        .map(|(_, j)| remaining_steps(j, &out.join("runs").join(&j.name)))
+        .sum()
+}
+
+/// The paper's three regimes (Fig. 3d).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Regime {
+    NoHoles,
+    OnlyShortLived,
+    ShortAndLongLived,
+}
+
+impl Regime {
+    pub fn name(self) -> &'static str {
+        match self {
+            Regime::NoHoles => "no_holes",
+            Regime::OnlyShortLived => "only_short_lived",
+            Regime::ShortAndLongLived => "short_and_long_lived",
+        }
+    }
+}
+
+/// Fits an exponential survival S(τ) = exp(−τ/τ_h) to hole lifetimes, holes still open at the end
+/// counting as censored: the maximum-likelihood τ_h = (Σ durations) / (number closed), infinite
+/// when none closed.
+pub fn fitted_lifetime(lifetimes: &[(f64, bool)]) -> Option<f64> {
+    if lifetimes.is_empty() {
+        return None;
+    }
+    let total: f64 = lifetimes.iter().map(|l| l.0).sum();
+    let closed = lifetimes.iter().filter(|l| l.1).count();
+    Some(if closed == 0 { f64::INFINITY } else { total / closed as f64 })
+}
+
+/// The paper's criterion: no holes; else long-lived when the fitted lifetime exceeds half the
+/// run's active time.
+pub fn classify(lifetimes: &[(f64, bool)], active_time: f64) -> Regime {
+    match fitted_lifetime(lifetimes) {
+        None => Regime::NoHoles,
+        Some(t) if t > 0.5 * active_time => Regime::ShortAndLongLived,
+        Some(_) => Regime::OnlyShortLived,
+    }
+}
+
+/// A grid point (all seeds pooled) and its regime.
+#[derive(Clone, Debug)]
+pub struct RegimePoint {
+    pub values: Vec<(String, String)>,
+    pub runs: usize,
+    pub blew_up: usize,
+    pub holes: usize,
+    pub fitted_lifetime: Option<f64>,
+    pub active_time: f64,
+    pub regime: Regime,
+}
+
+/// Pools the seeds of every grid point.
+pub fn regime_map(summaries: &[RunSummary]) -> Vec<RegimePoint> {
+    let mut points: Vec<RegimePoint> = Vec::new();
+    let mut pooled: Vec<Vec<(f64, bool)>> = Vec::new();
+    for s in summaries {
+        let k = match points.iter().position(|p| p.values == s.values) {
+            Some(k) => k,
+            None => {
+                points.push(RegimePoint {
+                    values: s.values.clone(),
+                    runs: 0,
+                    blew_up: 0,
+                    holes: 0,
+                    fitted_lifetime: None,
+                    active_time: 0.0,
+                    regime: Regime::NoHoles,
+                });
+                pooled.push(Vec::new());
+                points.len() - 1
+            }
+        };
+        let p = &mut points[k];
+        p.runs += 1;
+        p.blew_up += s.blew_up() as usize;
+        p.holes += s.holes_nucleated;
+        p.active_time = p.active_time.max(s.active_time);
+        pooled[k].extend(&s.lifetimes);
+    }
+    for (p, l) in points.iter_mut().zip(&pooled) {
+        p.fitted_lifetime = fitted_lifetime(l);
+        p.regime = classify(l, p.active_time);
+    }
+    points
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map(|x| format!("{x:.6}")).unwrap_or_default()
+}
+
+/// `summary.csv` (one row per run) and `regimes.csv` (one row per grid point).
+pub fn tables(summaries: &[RunSummary]) -> (String, String) {
+    let keys: Vec<String> =
+        summaries.first().map(|s| s.values.iter().map(|v| v.0.clone()).collect()).unwrap_or_default();
+    let mut runs = String::from("run,");
+    for k in &keys {
+        runs += &format!("{k},");
+    }
+    runs += "seed,status,blew_up,steps,active_time,holes_nucleated,max_hole_area,time_with_hole_open,\
+             hole_lifetimes,mean_speed,mean_speed_um_per_h,velocity_correlation_length,\
+             nematic_correlation_length,min_packing_fraction_without_hole\n";
+    for s in summaries {
+        let lifetimes: Vec<String> =
+            s.lifetimes.iter().map(|(t, closed)| format!("{t:.1}{}", if *closed { "" } else { "+" })).collect();
+        let status = s.status.lines().next().unwrap_or("").replace(',', ";");
+        let _ = write!(runs, "{},", s.name);
+        for (_, v) in &s.values {
+            let _ = write!(runs, "{v},");
+        }
+        let _ = writeln!(
+            runs,
+            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{:.6},{:.3},{},{},{}",
+            s.seed,
+            status,
+            s.blew_up(),
+            s.steps,
+            s.active_time,
+            s.holes_nucleated,
+            s.max_hole_area,
+            s.time_with_hole_open,
+            lifetimes.join(";"),
+            s.mean_speed,
+            s.mean_speed * MICRONS_PER_HOUR,
+            opt(s.velocity_correlation_length),
+            opt(s.nematic_correlation_length),
+            opt(s.min_packing_without_hole)
+        );
+    }
+    let mut regimes = String::new();
+    for k in &keys {
+        regimes += &format!("{k},");
+    }
+    regimes += "runs,blew_up,holes,fitted_lifetime,active_time,regime\n";
+    for p in regime_map(summaries) {
+        for (_, v) in &p.values {
+            let _ = write!(regimes, "{v},");
+        }
+        let _ = writeln!(
+            regimes,
+            "{},{},{},{},{:.1},{}",
+            p.runs,
+            p.blew_up,
+            p.holes,
+            p.fitted_lifetime.map(|t| if t.is_finite() { format!("{t:.1}") } else { "inf".into() }).unwrap_or_default(),
+            p.active_time,
+            p.regime.name()
+        );
+    }
+    (runs, regimes)
+}
+
+/// Writes `OUT/summary.csv`, `OUT/regimes.csv` (and the regime map plot where the grid has χ
+/// and ζ); returns the files written.
+pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, String> {
+    let (runs, regimes) = tables(summaries);
+    let mut written = Vec::new();
+    for (name, text) in [("summary.csv", runs), ("regimes.csv", regimes)] {
+        let path = out.join(name);
+        write_atomic(&path, |w| {
+            use std::io::Write;
+            w.write_all(text.as_bytes()).map_err(|e| format!("{}: {e}", path.display()))
+        })?;
+        written.push(path);
+    }
+    written.extend(plot_regime_map(&out.join("regime_map"), &regime_map(summaries))?);
+    Ok(written)
+}
+
+/// The regime map like the paper's Fig. 3d, χ (log scale) against ζ: red circles no holes, blue
+/// squares only short-lived, green triangles short- and long-lived; a cross where a run blew up.
+/// Drawn only when the grid varies both `chi` and `zeta`.
+fn plot_regime_map(base: &Path, points: &[RegimePoint]) -> Result<Vec<PathBuf>, String> {
+    use crate::analysis::plots::{both_of, plot_err, Draw, FONT};
+    use plotters::coord::Shift;
+    use plotters::prelude::*;
+
+    let get = |p: &RegimePoint, k: &str| p.values.iter().find(|v| v.0 == k).and_then(|v| v.1.parse::<f64>().ok());
+    let xy: Vec<(f64, f64, Regime, bool)> =
+        points.iter().filter_map(|p| Some((get(p, "chi")?, get(p, "zeta")?, p.regime, p.blew_up > 0))).collect();
+    if xy.len() < 2 || xy.iter().any(|p| p.0 <= 0.0) {
+        return Ok(Vec::new());
+    }
+    struct Map(Vec<(f64, f64, Regime, bool)>);
+    impl Draw for Map {
+        fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+            root.fill(&WHITE).map_err(plot_err)?;
+            let f = |g: fn(f64, f64) -> f64, i: fn(&(f64, f64, Regime, bool)) -> f64, init| {
+                self.0.iter().map(i).fold(init, g)
+            };
+            let (x0, x1) = (f(f64::min, |p| p.0, f64::MAX) / 2.0, f(f64::max, |p| p.0, 0.0) * 2.0);
+            let (y0, y1) = (f(f64::min, |p| p.1, f64::MAX), f(f64::max, |p| p.1, f64::MIN));
+            let pad = ((y1 - y0) * 0.15).max(0.05);
+            let mut chart = ChartBuilder::on(root)
+                .caption("Regime map", (FONT, 22))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(50)
+                .build_cartesian_2d((x0..x1).log_scale(), (y0 - pad)..(y1 + pad))
+                .map_err(plot_err)?;
+            chart.configure_mesh().x_desc("χ = ξ_s / ξ_cell").y_desc("ζ").draw().map_err(plot_err)?;
+            let red = RGBColor(214, 39, 40);
+            let blue = RGBColor(31, 119, 180);
+            let green = RGBColor(44, 160, 44);
+            for &(x, y, regime, blew_up) in &self.0 {
+                match regime {
+                    Regime::NoHoles => chart.draw_series(std::iter::once(Circle::new((x, y), 7, red.filled()))),
+                    Regime::OnlyShortLived => chart.draw_series(std::iter::once(
+                        EmptyElement::at((x, y)) + Rectangle::new([(-7, -7), (7, 7)], blue.filled()),
+                    )),
+                    Regime::ShortAndLongLived => chart.draw_series(std::iter::once(
+                        EmptyElement::at((x, y)) + Polygon::new(vec![(0, -8), (-8, 7), (8, 7)], green.filled()),
+                    )),
+                }
+                .map_err(plot_err)?;
+                if blew_up {
+                    let cross = EmptyElement::at((x, y)) + Cross::new((0, 0), 10, BLACK.stroke_width(2));
+                    chart.draw_series(std::iter::once(cross)).map_err(plot_err)?;
+                }
+            }
+            Ok(())
+        }
+    }
+    both_of(base, (640, 480), &Map(xy))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_expands_validates_and_names() {
+        let mut spec: SweepSpec =
+            toml::from_str("seeds = [1, 2]\n[base]\nactive_steps = 10\n[grid]\nchi = [0.1, 0.01]\n").unwrap();
+        spec.add_grid("zeta=0.3,0.5").unwrap();
+        let jobs = spec.jobs().unwrap();
+        assert_eq!(jobs.len(), 8);
+        assert_eq!(jobs[0].name, "chi0.1_zeta0.3_seed1");
+        assert!((jobs[0].params.xi_substrate - 0.1).abs() < 1e-15);
+        assert_eq!(jobs[0].params.active_steps, 10);
+        let bad: SweepSpec = toml::from_str("[grid]\nzeta = [0.3, 40.0]\n").unwrap();
+        let e = bad.jobs().unwrap_err();
+        assert!(e.contains("zeta = 40") && e.contains("`zeta`"), "{e}");
+        let typo: SweepSpec = toml::from_str("[grid]\nzetta = [0.3]\n").unwrap();
+        assert!(typo.jobs().unwrap_err().contains("zetta"));
+        assert!(toml::from_str::<SweepSpec>("sedes = [1]\n").is_err());
+        assert_eq!("2/4".parse::<Shard>().unwrap(), Shard { index: 2, count: 4 });
+        assert!("4/4".parse::<Shard>().is_err());
+    }
+
+    #[test]
+    fn regimes_follow_the_papers_criterion() {
+        assert_eq!(classify(&[], 100.0), Regime::NoHoles);
+        // Three holes closing after 5, 10, 15 of a run of 100: short-lived (τ = 10).
+        assert_eq!(classify(&[(5.0, true), (10.0, true), (15.0, true)], 100.0), Regime::OnlyShortLived);
+        // One closed after 10 and one open for 90: τ = 100 > 50.
+        assert_eq!(classify(&[(10.0, true), (90.0, false)], 100.0), Regime::ShortAndLongLived);
+        assert_eq!(fitted_lifetime(&[(30.0, false)]), Some(f64::INFINITY));
+    }
+}

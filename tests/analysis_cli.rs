@@ -1,0 +1,205 @@
+//! `monolayer analyze` and `run --analyze` as a user drives them: the tables and plots of a run,
+//! and the refusals (with nothing written) of what is not a complete run of this program.
+
+use std::fs;
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn monolayer(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A small, quick run: 18 cells on a 60×60 box, frames every 10 steps from step 300 (the end of
+/// relaxation); with 30 active steps, 4 frames.
+fn small_run(out: &Path, steps: &str, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "run",
+        "--quiet",
+        "--set",
+        "box_size=60",
+        "--set",
+        "n_cells=18",
+        "--relax-steps",
+        "300",
+        "--steps",
+        steps,
+        "--frame-interval",
+        "10",
+        "--threads",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    monolayer(&args)
+}
+
+fn lines(path: &Path) -> Vec<String> {
+    fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).lines().map(String::from).collect()
+}
+
+/// The tables have a row per frame (and per hole), the plots are real PNG and SVG files, and
+/// `run --analyze` writes the same tables as `analyze` afterwards.
+#[test]
+fn analyze_writes_tables_and_plots_like_run_analyze() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let o = small_run(&run, "30", &["--analyze"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let live = run.join("analysis");
+    let live_frames = lines(&live.join("frames.csv"));
+    let live_snapshots = fs::read_dir(&live).unwrap().filter(|e| {
+        let name = e.as_ref().unwrap().file_name();
+        name.to_string_lossy().starts_with("snapshot_")
+    });
+    assert_eq!(live_snapshots.count(), 2, "one snapshot (PNG and SVG) replaced frame by frame");
+
+    let out = dir.path().join("offline");
+    let o = monolayer(&["analyze", run.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let frames = lines(&out.join("frames.csv"));
+    assert_eq!(frames.len(), 1 + 4, "header and four frames: {frames:?}");
+    assert!(frames[0].starts_with("step,time,packing_fraction"));
+    assert!(frames[1].starts_with("300,30,") && frames[4].starts_with("330,33,"), "{frames:?}");
+    assert_eq!(frames, live_frames, "run --analyze and analyze agree");
+    for row in &frames[1..] {
+        let packing: f64 = row.split(',').nth(2).unwrap().parse().unwrap();
+        assert!(packing > 0.0 && packing <= 1.0, "{row}");
+    }
+    let holes = lines(&out.join("holes.csv"));
+    assert!(holes[0].starts_with("id,nucleation_time,closing_time,lifetime,fate"));
+    assert!(lines(&out.join("hole_precursors.csv"))[0].starts_with("hole,frames_before,spiral_core_distance"));
+    let probability = lines(&out.join("hole_probability.csv"));
+    assert!(probability[0].starts_with("strain_rate_bin_low,") && probability.len() > 1, "{probability:?}");
+    assert_eq!(lines(&out.join("correlations.csv")).len(), 1 + 4 * 31, "r = 0..=30 for each frame");
+    // One snapshot: the first hole's nucleation frame, or the last frame.
+    let snapshots: Vec<String> = fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("snapshot_") && n.ends_with(".png"))
+        .collect();
+    assert_eq!(snapshots.len(), 1, "{snapshots:?}");
+    let snapshot = snapshots[0].trim_end_matches(".png").to_string();
+    for name in ["hole_area", "correlations", snapshot.as_str()] {
+        let png = fs::read(out.join(format!("{name}.png"))).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "{name}.png");
+        let svg = fs::read_to_string(out.join(format!("{name}.svg"))).unwrap();
+        assert!(svg.contains("<svg") && svg.trim_end().ends_with("</svg>"), "{name}.svg");
+    }
+    // The snapshot of another frame on request; a step without a frame is refused.
+    let o = monolayer(&[
+        "analyze",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--snapshot",
+        "320",
+        "--field",
+        "active-force-divergence",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let svg = fs::read_to_string(out.join("snapshot_0000320.svg")).unwrap();
+    assert!(svg.contains("step 320") && svg.contains("∇·f^a"), "the chosen frame over the chosen field");
+    let o = monolayer(&["analyze", run.to_str().unwrap(), "--out", out.to_str().unwrap(), "--snapshot", "325"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--snapshot 325"), "{}", stderr(&o));
+
+    // A run stopped after two frames and resumed with --analyze picks up the frames it has.
+    let resumed = dir.path().join("resumed");
+    let o = small_run(&resumed, "10", &["--analyze"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let record = resumed.join("run.json");
+    let text = fs::read_to_string(&record).unwrap();
+    fs::write(&record, text.replace("\"active_steps\": 10", "\"active_steps\": 30")).unwrap();
+    let o = monolayer(&["run", "--quiet", "--analyze", "--resume", resumed.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(lines(&resumed.join("analysis").join("frames.csv")), live_frames, "resumed and straight runs agree");
+    let snapshots = fs::read_dir(resumed.join("analysis")).unwrap().filter(|e| {
+        let name = e.as_ref().unwrap().file_name();
+        name.to_string_lossy().starts_with("snapshot_")
+    });
+    assert_eq!(snapshots.count(), 2, "the snapshot of the first session was replaced");
+
+    // A run in progress: a frame being written is a hidden temporary file, not read.
+    fs::write(run.join("frames").join(".frame_0000340.npz.tmp"), b"half a frame").unwrap();
+    let o = monolayer(&["analyze", run.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(lines(&out.join("frames.csv")).len(), 5);
+}
+
+/// Every way a directory can fail to be an analysable run is named, and nothing is written.
+#[test]
+fn analyze_refuses_what_is_not_a_complete_run_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let o = small_run(&run, "30", &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let record = fs::read_to_string(run.join("run.json")).unwrap();
+
+    let check = |target: &Path, expect: &str| {
+        let out = dir.path().join("out");
+        let o = monolayer(&["analyze", target.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(expect), "expected “{expect}” in: {}", stderr(&o));
+        assert!(!out.exists(), "nothing may be written when analyze fails");
+    };
+    check(&dir.path().join("missing"), "no such directory");
+
+    let empty = dir.path().join("empty");
+    fs::create_dir(&empty).unwrap();
+    check(&empty, "is this a run directory?");
+
+    let foreign = dir.path().join("foreign");
+    fs::create_dir(&foreign).unwrap();
+    fs::write(foreign.join("run.json"), "{\"name\": \"something else\"}").unwrap();
+    check(&foreign, "not a record of this program");
+
+    let future = dir.path().join("future");
+    fs::create_dir_all(future.join("frames")).unwrap();
+    fs::write(future.join("run.json"), record.replace("\"format_version\": 1", "\"format_version\": 99")).unwrap();
+    check(&future, "format_version Some(99)");
+
+    let unstarted = dir.path().join("unstarted");
+    fs::create_dir_all(unstarted.join("frames")).unwrap();
+    fs::write(unstarted.join("run.json"), &record).unwrap();
+    check(&unstarted, "no frames yet");
+
+    // A damaged frame among good ones: named, and nothing written for the good ones either.
+    let damaged = dir.path().join("damaged");
+    fs::create_dir_all(damaged.join("frames")).unwrap();
+    fs::write(damaged.join("run.json"), &record).unwrap();
+    for step in [310, 320] {
+        let name = format!("frame_{step:07}.npz");
+        fs::copy(run.join("frames").join(&name), damaged.join("frames").join(&name)).unwrap();
+    }
+    fs::write(damaged.join("frames").join("frame_0000330.npz"), b"not an npz").unwrap();
+    check(&damaged, "frame_0000330.npz");
+
+    // A frame of another lattice size (another run's frame copied in).
+    let other = dir.path().join("other");
+    let o = monolayer(&[
+        "run",
+        "--quiet",
+        "--set",
+        "box_size=50",
+        "--set",
+        "n_cells=12",
+        "--relax-steps",
+        "50",
+        "--steps",
+        "10",
+        "--frame-interval",
+        "10",
+        "--threads",
+        "1",
+        "--out",
+        other.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    fs::copy(other.join("frames").join("frame_0000060.npz"), damaged.join("frames").join("frame_0000330.npz")).unwrap();
+    check(&damaged, "array `velocity` is (50, 50, 2), the run's lattice is 60×60×2");
+}
