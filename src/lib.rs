@@ -37,8 +37,6 @@ pub mod runner;
 #[cfg(feature = "cli")]
 pub mod sweep;
 
-/// The browser demo's binding and wgpu drawing (see `www/`).
-
 pub use error::SimError;
 pub use monolayer::{Monolayer, Phase, State};
 pub use params::Params;
