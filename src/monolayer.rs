@@ -133,7 +133,7 @@ impl Monolayer {
     /// The protocol's start: random disks of radius R/2, seeded.
     pub fn new(params: Params, seed: u64) -> Result<Self, SimError> {
         params.validate()?;
-        let cells = random_disks(&params, seed);
+        let cells = random_disks(&params, seed)?;
         Ok(Self::with_cells(params, seed, cells, 0))
     }
 

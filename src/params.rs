@@ -124,6 +124,9 @@ pub struct Params {
     pub active_steps: u64,
     /// Radius of the initial disks, as a fraction of R.
     pub initial_radius_fraction: f64,
+    /// Smallest distance between the edges of two initial disks, in sites (see
+    /// [`crate::init::random_disks`] for why they start apart).
+    pub initial_gap: f64,
 }
 
 impl Default for Params {
@@ -159,6 +162,7 @@ impl Default for Params {
             xi_relax: 1.0,
             active_steps: 100_000,
             initial_radius_fraction: 0.5,
+            initial_gap: 2.0,
         }
     }
 }
@@ -308,6 +312,27 @@ impl Params {
             self.initial_radius_fraction,
             "must be in (0, 1]",
         )?;
+        check(
+            self.initial_gap.is_finite() && self.initial_gap >= 0.0,
+            "initial_gap",
+            self.initial_gap,
+            "must be a finite number ≥ 0",
+        )?;
+        // Random sequential placement of exclusion disks jams near 55 % of the plane: ask for at
+        // most half.
+        let exclusion = self.initial_radius_fraction * self.radius + 0.5 * self.initial_gap;
+        let fill = self.n_cells as f64 * core::f64::consts::PI * exclusion * exclusion
+            / (self.box_size * self.box_size) as f64;
+        check(
+            fill <= 0.5,
+            "n_cells",
+            self.n_cells,
+            format!(
+                "{:.0} % of the box would be needed to place the initial disks apart (at most 50 %): lower \
+                 n_cells, initial_radius_fraction or initial_gap",
+                fill * 100.0
+            ),
+        )?;
         Ok(())
     }
 }
@@ -341,6 +366,10 @@ mod tests {
 
         let p = Params { relax_patch_size: 10, ..Params::default() };
         assert_eq!(p.validate().unwrap_err().name, "relax_patch_size");
+
+        let p = Params { initial_gap: 6.0, ..Params::default() };
+        let e = p.validate().unwrap_err();
+        assert!(e.name == "n_cells" && e.to_string().contains("apart"), "{e}");
 
         let p = Params { gamma: 20.0, ..Params::default() };
         let e = p.validate().unwrap_err();
