@@ -19,3 +19,15 @@ cargo build --target wasm32-unknown-unknown --lib --no-default-features --releas
 
 step "tests (release: the integration tests run the paper's full size)"
 cargo test --release
+
+step "browser demo (headless Chromium: WebGPU on SwiftShader, then the WebGL2 fallback)"
+# Debian's chromium and the npm packages of tests/browser; .ci/run installs both. No browser
+# is ever downloaded (playwright-core drives /usr/bin/chromium).
+if [ ! -x /usr/bin/chromium ]; then
+  echo "error: /usr/bin/chromium is missing: apt-get install -y chromium (.ci/run does)" >&2
+  exit 1
+fi
+bash scripts/serve.sh --build-only
+(cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
+cargo build --release --bin monolayer
+node tests/browser/run.mjs

@@ -37,6 +37,10 @@ pub mod runner;
 #[cfg(feature = "cli")]
 pub mod sweep;
 
+/// The browser demo's binding and wgpu drawing (see `www/`).
+#[cfg(target_arch = "wasm32")]
+pub mod web;
+
 pub use error::SimError;
 pub use monolayer::{Monolayer, Phase, State};
 pub use params::Params;

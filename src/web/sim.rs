@@ -1,0 +1,237 @@
+//! `WebSim`: the object the page drives. It owns a [`Monolayer`] and forwards to it; the only
+//! state of its own is what the page adds (the painted substrate map, each cell's colour key,
+//! the measurements of the last frame).
+
+use wasm_bindgen::prelude::*;
+
+use super::measure::{tissue_stats, TissueStats};
+use super::view::{FieldKind, ViewData};
+use crate::analysis::holes::VoidRegions;
+use crate::{Monolayer, Params};
+
+fn js_err(e: impl std::fmt::Display) -> JsError {
+    JsError::new(&e.to_string())
+}
+
+#[wasm_bindgen]
+pub struct WebSim {
+    pub(crate) m: Monolayer,
+    /// Colour key of each cell (cell index + 1 at the start; unchanged when a cell is removed).
+    pub(crate) keys: Vec<u32>,
+    /// Per-site multiplier of ξ_s painted by the brushes (1 = untouched).
+    substrate: Vec<f64>,
+    pub(crate) view: ViewData,
+    stats: TissueStats,
+    /// Step at which `stats` was measured (u64::MAX: never).
+    stats_step: u64,
+    regions: VoidRegions,
+}
+
+#[wasm_bindgen]
+impl WebSim {
+    /// A new tissue from random disks: the protocol's relaxation (ζ = 0, no cell friction)
+    /// for `relax_steps`, then activity ζ at friction ratio χ = ξ_s/ξ_cell and surface tension γ.
+    /// Every other parameter keeps the native default.
+    #[wasm_bindgen(constructor)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        box_size: usize,
+        n_cells: usize,
+        relax_steps: u32,
+        zeta: f64,
+        chi: f64,
+        gamma: f64,
+        seed: u32,
+    ) -> Result<WebSim, JsError> {
+        let mut p = Params { box_size, n_cells, relax_steps: relax_steps as u64, zeta, gamma, ..Params::default() };
+        p.set_chi(chi);
+        let m = Monolayer::new(p, seed as u64).map_err(js_err)?;
+        let l = box_size;
+        Ok(WebSim {
+            keys: (1..=n_cells as u32).collect(),
+            substrate: vec![1.0; l * l],
+            view: ViewData::default(),
+            stats: TissueStats::default(),
+            stats_step: u64::MAX,
+            regions: VoidRegions::default(),
+            m,
+        })
+    }
+
+    /// Runs `n` steps. On an error (instability, failed solve) the state before the failing
+    /// step is kept and the error's message is thrown to the page.
+    pub fn step(&mut self, n: u32) -> Result<(), JsError> {
+        self.m.advance(n as u64).map_err(js_err)
+    }
+
+    fn update(&mut self, f: impl FnOnce(&mut Params)) -> Result<(), JsError> {
+        let mut p = self.m.params().clone();
+        f(&mut p);
+        self.m.set_params(p).map_err(js_err)
+    }
+
+    /// Activity ζ (takes effect after relaxation).
+    pub fn set_zeta(&mut self, zeta: f64) -> Result<(), JsError> {
+        self.update(|p| p.zeta = zeta)
+    }
+
+    /// Friction ratio χ = ξ_s/ξ_cell (sets ξ_s, keeps ξ_cell).
+    pub fn set_chi(&mut self, chi: f64) -> Result<(), JsError> {
+        self.update(|p| p.set_chi(chi))
+    }
+
+    /// Surface tension γ.
+    pub fn set_gamma(&mut self, gamma: f64) -> Result<(), JsError> {
+        self.update(|p| p.gamma = gamma)
+    }
+
+    pub fn zeta(&self) -> f64 {
+        self.m.params().zeta
+    }
+
+    pub fn chi(&self) -> f64 {
+        self.m.params().chi()
+    }
+
+    pub fn gamma(&self) -> f64 {
+        self.m.params().gamma
+    }
+
+    pub fn box_size(&self) -> usize {
+        self.m.params().box_size
+    }
+
+    pub fn n_cells(&self) -> usize {
+        self.m.cells().len()
+    }
+
+    pub fn relax_steps(&self) -> f64 {
+        self.m.params().relax_steps as f64
+    }
+
+    /// Steps since the random disks, relaxation included (f64: exact far beyond any session).
+    pub fn step_count(&self) -> f64 {
+        self.m.step_count() as f64
+    }
+
+    /// Whether activity is on (relaxation is over).
+    pub fn active(&self) -> bool {
+        self.m.phase() == crate::Phase::Active
+    }
+
+    /// Time since activity started, in simulation units (steps × Δt; 0 while relaxing).
+    pub fn active_time(&self) -> f64 {
+        self.m.step_count().saturating_sub(self.m.params().relax_steps) as f64 * self.m.params().dt
+    }
+
+    /// The core's bit-exact hash of the state, as 16 hex digits (as `monolayer fingerprint`).
+    pub fn fingerprint(&self) -> String {
+        format!("{:016x}", self.m.fingerprint())
+    }
+
+    fn measure(&mut self) -> TissueStats {
+        if self.stats_step != self.m.step_count() {
+            let (l, radius) = (self.m.params().box_size, self.m.params().radius);
+            let phi_sum = self.m.phi_sum();
+            self.stats = tissue_stats(phi_sum, l, radius, &mut self.regions);
+            self.stats_step = self.m.step_count();
+        }
+        self.stats
+    }
+
+    /// Holes: connected void regions (Σφ < 0.01) larger than πR²/4.
+    pub fn holes(&mut self) -> u32 {
+        self.measure().holes
+    }
+
+    /// All void sites (µm² at Δx ≈ 1 µm), in holes or smaller gaps.
+    pub fn hole_area(&mut self) -> u32 {
+        self.measure().void_area
+    }
+
+    /// ±½ defects of the smoothed nematic field as last drawn (director and signed fields),
+    /// flattened as [x, y, twice the charge, orientation] per defect.
+    pub fn defects(&self) -> Vec<f64> {
+        self.view.defects.iter().flat_map(|d| [d.x, d.y, d.twice_charge as f64, d.orientation]).collect()
+    }
+
+    /// Fraction of the box covered by cells (Σφ ≥ ½).
+    pub fn packing_fraction(&mut self) -> f64 {
+        self.measure().packing
+    }
+
+    /// Multiplies ξ_s by `multiplier` on a disc of `radius` sites around lattice point (x, y)
+    /// (periodic): < 1 is a soft (low-friction) substrate, > 1 a stiff one, 1 erases.
+    pub fn paint_substrate(&mut self, x: f64, y: f64, radius: f64, multiplier: f64) -> Result<(), JsError> {
+        if !(multiplier.is_finite() && multiplier > 0.0 && radius.is_finite() && radius > 0.0) {
+            return Err(JsError::new("brush: multiplier and radius must be finite and > 0"));
+        }
+        let l = self.m.params().box_size as i64;
+        let r = radius.ceil() as i64;
+        let (cx, cy) = (x.floor() as i64, y.floor() as i64);
+        for dy in -r..=r {
+            for dx in -r..=r {
+                if ((dx * dx + dy * dy) as f64) <= radius * radius {
+                    let (gx, gy) = ((cx + dx).rem_euclid(l), (cy + dy).rem_euclid(l));
+                    self.substrate[(gy * l + gx) as usize] = multiplier;
+                }
+            }
+        }
+        self.m.set_substrate(&self.substrate).map_err(js_err)
+    }
+
+    /// Resets the substrate to uniform friction.
+    pub fn clear_substrate(&mut self) -> Result<(), JsError> {
+        self.substrate.fill(1.0);
+        self.m.set_substrate(&self.substrate).map_err(js_err)
+    }
+
+    /// ξ_s multiplier at a site (1 where nothing was painted).
+    pub fn substrate_at(&self, x: f64, y: f64) -> f64 {
+        let l = self.m.params().box_size as i64;
+        let (gx, gy) = ((x.floor() as i64).rem_euclid(l), (y.floor() as i64).rem_euclid(l));
+        self.substrate[(gy * l + gx) as usize]
+    }
+
+    /// Index of the cell with the largest φ at a lattice point, or −1 where φ < ½ for all.
+    pub fn cell_at(&self, x: f64, y: f64) -> i32 {
+        let l = self.m.params().box_size;
+        let (gx, gy) =
+            ((x.floor() as i64).rem_euclid(l as i64) as usize, (y.floor() as i64).rem_euclid(l as i64) as usize);
+        let mut best = (-1, 0.5);
+        for (i, c) in self.m.cells().iter().enumerate() {
+            let p = c.patch();
+            let (a, b) = ((gx + l - p.x0) % l, (gy + l - p.y0) % l);
+            if a < p.w && b < p.h {
+                let v = c.phi().at(a, b);
+                if v > best.1 {
+                    best = (i as i32, v);
+                }
+            }
+        }
+        best.0
+    }
+
+    /// Laser ablation: removes the cell under lattice point (x, y) and continues from the same
+    /// state without it (the core's checkpoint path, with n_cells − 1). Returns whether a cell
+    /// was there.
+    pub fn remove_cell_at(&mut self, x: f64, y: f64) -> Result<bool, JsError> {
+        let i = self.cell_at(x, y);
+        if i < 0 || self.m.cells().len() <= 1 {
+            return Ok(false);
+        }
+        let i = i as usize;
+        let mut state = self.m.state();
+        state.cells.remove(i);
+        let params = Params { n_cells: self.m.params().n_cells - 1, ..self.m.params().clone() };
+        self.m = Monolayer::from_state(params, self.m.seed(), state).map_err(js_err)?;
+        self.keys.remove(i);
+        self.stats_step = u64::MAX;
+        Ok(true)
+    }
+
+    /// Rebuilds the drawing data for a field ("tissue", "phi", "speed", "director").
+    pub(crate) fn build_view(&mut self, kind: FieldKind, dpr: f32) {
+        self.view.build(&mut self.m, &self.keys, kind, dpr);
+    }
+}

@@ -1,0 +1,453 @@
+// Browser tests of the demo (www/), in Debian's headless Chromium driven by playwright-core:
+// once with real WebGPU on SwiftShader and once without WebGPU (wgpu's WebGL2 fallback).
+// Needs www/pkg (scripts/serve.sh --build-only) and the native binary (for the fingerprint).
+//
+//   node tests/browser/run.mjs [--mode webgpu|webgl2] [--skip-hole]
+//
+// Screenshots and measurements go to test-output/browser/. Exits non-zero on any failure.
+
+import { chromium } from 'playwright-core';
+import { createServer } from 'node:http';
+import { readFile, mkdir, writeFile, mkdtemp, rm } from 'node:fs/promises';
+import { execFileSync } from 'node:child_process';
+import { tmpdir } from 'node:os';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+const ROOT = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
+const WWW = path.join(ROOT, 'www');
+const OUT = path.join(ROOT, 'test-output', 'browser');
+const NATIVE = process.env.MONOLAYER_BIN
+  ?? path.join(process.env.CARGO_TARGET_DIR ?? path.join(ROOT, 'target'), 'release', 'monolayer');
+const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
+
+const COMMON_FLAGS = [
+  '--no-sandbox', '--disable-background-networking', '--disable-component-update', '--disable-sync',
+  '--no-first-run', '--disable-quic', '--window-size=1280,900',
+];
+// All three GPU flags are needed for a WebGPU canvas on SwiftShader (see the browser recipe).
+const MODES = {
+  webgpu: {
+    backend: 'WebGPU',
+    flags: ['--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
+      '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+  },
+  webgl2: { backend: 'WebGL2', flags: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'] },
+};
+
+const args = process.argv.slice(2);
+const onlyMode = args.includes('--mode') ? args[args.indexOf('--mode') + 1] : null;
+const skipHole = args.includes('--skip-hole');
+
+// --- a static server for www/ ---------------------------------------------------------------------
+const TYPES = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.wasm': 'application/wasm', '.png': 'image/png' };
+function serve() {
+  const server = createServer(async (req, res) => {
+    const url = new URL(req.url, 'http://x');
+    const rel = decodeURIComponent(url.pathname === '/' ? '/index.html' : url.pathname);
+    const file = path.join(WWW, path.normalize(rel));
+    if (!file.startsWith(WWW)) return res.writeHead(403).end();
+    try {
+      const body = await readFile(file);
+      res.writeHead(200, { 'content-type': TYPES[path.extname(file)] ?? 'application/octet-stream' });
+      res.end(body);
+    } catch {
+      res.writeHead(404).end();
+    }
+  });
+  return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
+}
+
+// --- tiny test harness ----------------------------------------------------------------------------
+const results = [];
+let failures = 0;
+async function test(name, fn) {
+  const t0 = Date.now();
+  try {
+    await fn();
+    results.push({ name, ok: true, ms: Date.now() - t0 });
+    console.log(`  ok   ${name} (${Date.now() - t0} ms)`);
+  } catch (e) {
+    failures++;
+    results.push({ name, ok: false, error: String(e.stack ?? e) });
+    console.log(`  FAIL ${name}\n       ${String(e.message ?? e).split('\n').join('\n       ')}`);
+  }
+}
+function assert(cond, msg) {
+  if (!cond) throw new Error(msg);
+}
+
+// --- helpers on a page ----------------------------------------------------------------------------
+async function open(context, base, query, errors) {
+  const page = await context.newPage();
+  page.on('console', (m) => {
+    if (m.type() === 'error') errors.push(`console: ${m.text()}`);
+  });
+  page.on('pageerror', (e) => errors.push(`pageerror: ${e.message}`));
+  await page.goto(base + query);
+  await page.waitForFunction(() => window.demo && (window.demo.ready || window.demo.error), null, { timeout: 60000 });
+  const err = await page.evaluate(() => window.demo.error);
+  assert(!err, `page error: ${err}`);
+  return page;
+}
+const stats = (page) => page.evaluate(() => window.demo.stats);
+async function waitStats(page) {
+  await page.waitForFunction(() => window.demo.stats !== undefined, null, { timeout: 20000 });
+  return stats(page);
+}
+
+// The canvas as the compositor shows it, decoded in the page: distinct colours and a hash.
+async function canvasShot(page, file) {
+  const png = await page.locator('#view').screenshot({ path: file });
+  return page.evaluate(async (b64) => {
+    const img = new Image();
+    img.src = `data:image/png;base64,${b64}`;
+    await img.decode();
+    const c = new OffscreenCanvas(img.width, img.height);
+    const g = c.getContext('2d');
+    g.drawImage(img, 0, 0);
+    const d = g.getImageData(0, 0, img.width, img.height).data;
+    const colours = new Set();
+    let hash = 0;
+    for (let i = 0; i < d.length; i += 4 * 7) {
+      colours.add((d[i] << 16) | (d[i + 1] << 8) | d[i + 2]);
+      hash = (hash * 31 + d[i] + d[i + 1] * 3 + d[i + 2] * 7) >>> 0;
+    }
+    return { colours: colours.size, hash };
+  }, png.toString('base64'));
+}
+
+function nativeFingerprint(size, p, seed, totalSteps) {
+  const out = execFileSync(NATIVE, [
+    'fingerprint', '--set', `box_size=${size.box}`, '--set', `n_cells=${size.cells}`,
+    '--relax-steps', String(size.relaxSteps), '--zeta', String(p.zeta), '--chi', String(p.chi),
+    '--set', `gamma=${p.gamma}`, '--seed', String(seed), '--total-steps', String(totalSteps),
+  ], { encoding: 'utf8', env: { ...process.env, RAYON_NUM_THREADS: '1' } });
+  return JSON.parse(out);
+}
+
+// Native ms per active step at the page's size, one thread: (T(relax + n) − T(relax)) / n, each
+// T the fastest of three runs (the machine is shared: the minimum is the least disturbed).
+function nativeMsPerStep(size, p, n) {
+  const time = (steps) => {
+    let best = Infinity;
+    for (let i = 0; i < 3; i++) {
+      const t0 = process.hrtime.bigint();
+      nativeFingerprint(size, p, 1, steps);
+      best = Math.min(best, Number(process.hrtime.bigint() - t0) / 1e6);
+    }
+    return best;
+  };
+  return (time(size.relaxSteps + n) - time(size.relaxSteps)) / n;
+}
+
+// --- the tests, once per mode -----------------------------------------------------------------------
+async function runMode(modeName, base, metrics) {
+  const mode = MODES[modeName];
+  console.log(`\n== ${modeName}: Chromium ${mode.flags.join(' ')}`);
+  const profile = await mkdtemp(path.join(tmpdir(), 'monolayer-chromium-'));
+  const context = await chromium.launchPersistentContext(profile, {
+    executablePath: CHROMIUM,
+    headless: true,
+    args: [...COMMON_FLAGS, ...mode.flags],
+    viewport: { width: 1280, height: 900 },
+  });
+  const errors = [];
+  const m = (metrics[modeName] = {});
+  const shot = (name) => path.join(OUT, `${modeName}-${name}.png`);
+  try {
+    let page;
+    await test(`${modeName}: page loads on ${mode.backend} with no console error`, async () => {
+      page = await open(context, base, '/?seed=1', errors);
+      const backend = await page.evaluate(() => window.demo.backend);
+      assert(backend.startsWith(mode.backend), `backend ${backend}, expected ${mode.backend}`);
+      m.backend = backend;
+      await waitStats(page);
+      assert(errors.length === 0, errors.join('\n'));
+    });
+    if (!page) return;
+
+    await test(`${modeName}: the simulation advances`, async () => {
+      const a = (await stats(page)).step;
+      await page.waitForTimeout(1500);
+      const b = (await stats(page)).step;
+      assert(b > a, `step ${a} → ${b}`);
+    });
+
+    await test(`${modeName}: the canvas is drawn and changes between two screenshots`, async () => {
+      const a = await canvasShot(page, shot('1'));
+      await page.waitForTimeout(1500);
+      const b = await canvasShot(page, shot('2'));
+      assert(a.colours > 20, `only ${a.colours} colours: blank canvas?`);
+      assert(a.hash !== b.hash, 'the canvas did not change');
+      m.colours = a.colours;
+    });
+
+    await test(`${modeName}: each field draws with its colour bar`, async () => {
+      const fields = [['2', 'phi'], ['3', 'speed'], ['4', 'director'], ['5', 'strain'], ['6', 'activediv'], ['1', 'tissue']];
+      for (const [key, f] of fields) {
+        await page.keyboard.press(key);
+        await page.waitForTimeout(300);
+        const s = await canvasShot(page, shot(`field-${f}`));
+        assert(s.colours > 20, `${f}: only ${s.colours} colours`);
+        const bar = await page.locator('#colorbar-labels').isVisible();
+        assert(bar === (f !== 'tissue'), `${f}: colour bar labels visible = ${bar}`);
+        assert(new URL(page.url()).searchParams.get('field') === (f === 'tissue' ? null : f), `${f}: URL ${page.url()}`);
+        if (f === 'strain') {
+          // The ±½ defects of the smoothed nematic field come with it (analysis::defects).
+          const d = await page.evaluate(() => window.demo.sim.defects());
+          assert(d.length % 4 === 0, 'defects: 4 numbers each');
+          m.defectsSeen = d.length / 4;
+        }
+      }
+    });
+
+    await test(`${modeName}: pause stops time, Space resumes it, Step steps once`, async () => {
+      await page.click('#play');
+      await page.waitForTimeout(200);
+      const a = (await stats(page)).step;
+      await page.waitForTimeout(800);
+      const b = (await stats(page)).step;
+      assert(a === b, `paused, yet step ${a} → ${b}`);
+      assert(page.url().includes('paused'), `URL does not record the pause: ${page.url()}`);
+      const spf = await page.evaluate(() => window.demo.stats && Number(document.getElementById('spf-out').textContent));
+      await page.click('#step');
+      await page.waitForTimeout(200);
+      const c = (await stats(page)).step;
+      assert(c === b + spf, `Step: ${b} → ${c}, expected +${spf}`);
+      await page.locator('body').press(' ');
+      await page.waitForTimeout(800);
+      assert((await stats(page)).step > c, 'Space did not resume');
+    });
+
+    await test(`${modeName}: a preset sets its values`, async () => {
+      await page.selectOption('#preset', 'no-holes');
+      await page.waitForTimeout(200);
+      const s = await stats(page);
+      const p = await page.evaluate(() => import('./js/state.js').then((m) => m.PRESETS['no-holes']));
+      assert(s.zeta === p.zeta && Math.abs(s.chi - p.chi) < 1e-12 && s.gamma === p.gamma,
+        `core has ζ=${s.zeta} χ=${s.chi} γ=${s.gamma}, preset ${JSON.stringify(p)}`);
+      assert((await page.textContent('#chi-out')) === String(p.chi), 'χ readout');
+      assert(new URL(page.url()).searchParams.get('preset') === 'no-holes', `URL ${page.url()}`);
+    });
+
+    await test(`${modeName}: a slider acts on the core and the URL round-trips the state`, async () => {
+      await page.locator('#zeta').fill('420'); // slider position 420/1000 of [0, 1]
+      await page.locator('#gamma').focus();
+      await page.keyboard.press('ArrowRight');
+      await page.fill('#seed', '12345');
+      await page.locator('#seed').dispatchEvent('change');
+      await page.evaluate(() => document.activeElement.blur()); // keys typed in a field are text
+      await page.keyboard.press('3');
+      await page.waitForTimeout(200);
+      const s = await stats(page);
+      assert(s.zeta === 0.42, `ζ in the core: ${s.zeta}`);
+      const url = page.url();
+      const q = new URL(url).searchParams;
+      assert(q.get('zeta') === '0.42' && q.get('seed') === '12345' && q.get('field') === 'speed' && !q.has('preset'),
+        `URL ${url}`);
+      const again = await open(context, base, new URL(url).search, errors);
+      const s2 = await waitStats(again);
+      assert(s2.zeta === s.zeta && s2.chi === s.chi && s2.gamma === s.gamma, `reopened: ${JSON.stringify(s2)} vs ${JSON.stringify(s)}`);
+      assert(await again.isChecked('input[name=field][value=speed]'), 'field not restored');
+      assert((await again.inputValue('#seed')) === '12345', 'seed not restored');
+      await again.close();
+    });
+
+    await test(`${modeName}: brushes paint the substrate and remove a cell`, async () => {
+      const p = await open(context, base, '/?paused&seed=1', errors);
+      await waitStats(p);
+      // Relax the tissue so that there is a cell under the pointer.
+      await p.evaluate(() => window.demo.sim.step(300));
+      // The lattice's centre on the page, from the layout the renderer drew.
+      const { cx, cy } = await p.evaluate(() => {
+        const c = document.getElementById('view');
+        const r = c.getBoundingClientRect();
+        const [x0, y0, side] = window.demo.renderer.layout();
+        const s = c.width / r.width;
+        return { cx: r.left + (x0 + side / 2) / s, cy: r.top + (y0 + side / 2) / s };
+      });
+      const l = await p.evaluate(() => window.demo.sim.box_size());
+      await p.check('input[name=tool][value=soft]');
+      await p.mouse.click(cx, cy);
+      const soft = await p.evaluate((l) => window.demo.sim.substrate_at(l / 2, l / 2), l);
+      assert(Math.abs(soft - 0.1) < 1e-12, `soft brush: ξs multiplier ${soft} at the centre`);
+      await p.check('input[name=tool][value=stiff]');
+      await p.mouse.click(cx, cy);
+      const stiff = await p.evaluate((l) => window.demo.sim.substrate_at(l / 2, l / 2), l);
+      assert(Math.abs(stiff - 10) < 1e-12, `stiff brush: ${stiff}`);
+      await canvasShot(p, shot('brush'));
+      const before = await p.evaluate(() => window.demo.sim.n_cells());
+      const target = await p.evaluate((l) => window.demo.sim.cell_at(l / 2, l / 2), l);
+      assert(target >= 0, 'no cell under the centre after relaxation');
+      await p.check('input[name=tool][value=ablate]');
+      await p.mouse.click(cx, cy);
+      const after = await p.evaluate(() => window.demo.sim.n_cells());
+      assert(after === before - 1, `cells ${before} → ${after}`);
+      await p.evaluate(() => window.demo.sim.step(20)); // the tissue continues without it
+      await p.close();
+    });
+
+    await test(`${modeName}: the screenshot button saves the drawn frame; ?embed hides the chrome`, async () => {
+      const p = await open(context, base, '/?embed&seed=1', errors);
+      await waitStats(p);
+      assert(!(await p.locator('header').isVisible()), 'header visible in embed mode');
+      assert(!(await p.locator('#zeta').isVisible()), 'sliders visible in embed mode');
+      assert(await p.locator('#view').isVisible(), 'no canvas in embed mode');
+      await p.click('#shot');
+      await p.waitForFunction(() => window.demo.lastScreenshot, null, { timeout: 10000 });
+      const url = await p.evaluate(() => window.demo.lastScreenshot);
+      assert(url.startsWith('data:image/png;base64,'), 'not a PNG');
+      const png = Buffer.from(url.slice(url.indexOf(',') + 1), 'base64');
+      await writeFile(shot('screenshot-button'), png);
+      const colours = await p.evaluate(async (u) => {
+        const img = new Image();
+        img.src = u;
+        await img.decode();
+        const c = new OffscreenCanvas(img.width, img.height);
+        const g = c.getContext('2d');
+        g.drawImage(img, 0, 0);
+        const d = g.getImageData(0, 0, img.width, img.height).data;
+        const set = new Set();
+        for (let i = 0; i < d.length; i += 4 * 7) set.add((d[i] << 16) | (d[i + 1] << 8) | d[i + 2]);
+        return set.size;
+      }, url);
+      assert(colours > 20, `screenshot has ${colours} colours: blank?`);
+      await p.close();
+    });
+
+    await test(`${modeName}: bad URL parameters are clamped with a visible notice`, async () => {
+      const p = await open(context, base, '/?chi=5&zeta=abc&seed=-3&preset=nope&field=wrong', errors);
+      const s = await waitStats(p);
+      assert(await p.locator('#notice').isVisible(), 'no notice');
+      const text = await p.textContent('#notice');
+      for (const bit of ['chi=5', 'zeta=abc', 'seed=-3', 'preset=nope', 'field=wrong']) {
+        assert(text.includes(bit), `notice does not mention ${bit}: ${text}`);
+      }
+      const zetaDefault = await p.evaluate(() => import('./js/state.js').then((m) => m.PARAMS.zeta.def));
+      assert(s.chi === 1 && s.zeta === zetaDefault, `clamped values in the core: χ=${s.chi} ζ=${s.zeta}`);
+      const seed = await p.inputValue('#seed');
+      assert(seed === '0', `seed ${seed}`);
+      await p.close();
+    });
+
+    await test(`${modeName}: the wasm core's fingerprint equals the native one`, async () => {
+      const p = await open(context, base, '/?paused&seed=7', errors);
+      await waitStats(p);
+      const size = await p.evaluate(() => window.demo.size);
+      const active = 150;
+      const wasm = await p.evaluate((n) => {
+        const sim = window.demo.sim;
+        sim.step(n);
+        return { step: sim.step_count(), fingerprint: sim.fingerprint(), zeta: sim.zeta(), chi: sim.chi(), gamma: sim.gamma() };
+      }, size.relaxSteps + active);
+      const native = nativeFingerprint(size, wasm, 7, wasm.step);
+      assert(native.step === wasm.step, `steps ${native.step} vs ${wasm.step}`);
+      assert(native.fingerprint === wasm.fingerprint, `wasm ${wasm.fingerprint} vs native ${native.fingerprint} at step ${wasm.step}`);
+      m.fingerprint = wasm;
+      await p.close();
+    });
+
+    await test(`${modeName}: speed of the wasm core vs native, and drawing fps`, async () => {
+      const p = await open(context, base, '/?paused&seed=1', errors);
+      await waitStats(p);
+      const size = await p.evaluate(() => window.demo.size);
+      const n = 300;
+      // The fastest of three batches of n / 3 active steps, as for the native side.
+      const wasmMs = await p.evaluate(([relax, n]) => {
+        const sim = window.demo.sim;
+        sim.step(relax);
+        let best = Infinity;
+        for (let i = 0; i < 3; i++) {
+          const t0 = performance.now();
+          sim.step(n / 3);
+          best = Math.min(best, (performance.now() - t0) / (n / 3));
+        }
+        return best;
+      }, [size.relaxSteps, n]);
+      const params = await stats(p);
+      const nativeMs = nativeMsPerStep(size, params, n);
+      m.wasmMsPerStep = wasmMs;
+      m.nativeMsPerStep = nativeMs;
+      m.speedRatio = nativeMs / wasmMs;
+      // fps while playing (the adaptive steps per frame at work).
+      // fps while playing, once the frame budget and the resolution have settled.
+      await p.click('#play');
+      await p.waitForTimeout(6000);
+      const s = await stats(p);
+      m.fps = s.fps;
+      m.stepsPerSecondPlaying = s.sps;
+      m.renderScale = s.renderScale;
+      console.log(`       wasm ${wasmMs.toFixed(2)} ms/step, native ${nativeMs.toFixed(2)} ms/step (ratio ${m.speedRatio.toFixed(2)}); playing: ${s.fps.toFixed(0)} fps at ${Math.round(100 * s.renderScale)} % resolution, ${s.sps.toFixed(0)} steps/s`);
+      assert(m.speedRatio >= 0.5, `wasm is ${m.speedRatio.toFixed(2)}× native`);
+      await p.close();
+    });
+
+    if (!skipHole) {
+      await test(`${modeName}: the default preset opens its first hole within 60 s`, async () => {
+        const p = await open(context, base, '/', errors);
+        await p.waitForFunction(() => window.demo.firstHole !== null, null, { timeout: 90000, polling: 500 });
+        const hole = await p.evaluate(() => window.demo.firstHole);
+        m.firstHole = hole;
+        await p.waitForTimeout(1500);
+        await canvasShot(p, shot('first-hole'));
+        console.log(`       first hole after ${hole.seconds.toFixed(1)} s (step ${hole.step})`);
+        assert(hole.seconds <= 60, `first hole after ${hole.seconds.toFixed(1)} s`);
+        await p.close();
+      });
+    }
+
+    await test(`${modeName}: no console error during the whole run`, async () => {
+      assert(errors.length === 0, errors.join('\n'));
+    });
+  } finally {
+    await context.close();
+    await rm(profile, { recursive: true, force: true });
+  }
+}
+
+async function runNoGpu(base) {
+  console.log('\n== no GPU: Chromium --disable-3d-apis (neither WebGPU nor WebGL2)');
+  const profile = await mkdtemp(path.join(tmpdir(), 'monolayer-chromium-'));
+  const context = await chromium.launchPersistentContext(profile, {
+    executablePath: CHROMIUM, headless: true, args: [...COMMON_FLAGS, '--disable-3d-apis'],
+  });
+  try {
+    await test('no GPU: the canvas says why instead of staying blank', async () => {
+      const page = await context.newPage();
+      await page.goto(base + '/');
+      await page.waitForFunction(() => window.demo && (window.demo.ready || window.demo.error), null, { timeout: 30000 });
+      const err = await page.evaluate(() => window.demo.error);
+      assert(err && /WebGPU|WebGL2/.test(err), `no error shown: ${err}`);
+      assert(await page.locator('#message').isVisible(), 'message hidden');
+      const text = await page.textContent('#message');
+      assert(text.includes('WebGPU or WebGL2'), `message: ${text}`);
+      await page.screenshot({ path: path.join(OUT, 'no-gpu.png') });
+    });
+  } finally {
+    await context.close();
+    await rm(profile, { recursive: true, force: true });
+  }
+}
+
+async function main() {
+  await mkdir(OUT, { recursive: true });
+  const server = await serve();
+  const base = `http://127.0.0.1:${server.address().port}`;
+  const metrics = {};
+  const t0 = Date.now();
+  try {
+    for (const mode of Object.keys(MODES)) {
+      if (!onlyMode || onlyMode === mode) await runMode(mode, base, metrics);
+    }
+    if (!onlyMode || onlyMode === 'nogpu') await runNoGpu(base);
+  } finally {
+    server.close();
+  }
+  metrics.seconds = (Date.now() - t0) / 1000;
+  await writeFile(path.join(OUT, 'results.json'), JSON.stringify({ results, metrics }, null, 2));
+  console.log(`\n${results.length - failures} passed, ${failures} failed in ${metrics.seconds.toFixed(0)} s; details in test-output/browser/`);
+  process.exit(failures ? 1 : 0);
+}
+
+main();

@@ -1,0 +1,117 @@
+// The page's state: parameters with their allowed ranges, the presets, and the URL that carries
+// them. A bad URL value never breaks the page: it is clamped (or replaced by the default) and
+// the page says so.
+
+// Size of the browser's tissue, chosen from measurements (README, "Browser demo"): big enough
+// for a hole to be a hole (several cells around it), small enough that the default preset opens
+// its first hole within a minute.
+export const SIZE = { box: 80, cells: 33, relaxSteps: 1500 };
+
+// Each parameter: label, range, default, and whether its slider is logarithmic.
+export const PARAMS = {
+  zeta: { label: 'Activity ζ', min: 0, max: 1, def: 0.4, step: 0.01 },
+  chi: { label: 'Friction ratio χ = ξs/ξcell', min: 0.001, max: 1, def: 0.01, log: true },
+  gamma: { label: 'Surface tension γ', min: 0.02, max: 0.2, def: 0.06, step: 0.005 },
+  spf: { label: 'Steps per frame (max)', min: 1, max: 50, def: 20, step: 1, integer: true },
+  seed: { label: 'Seed', min: 0, max: 4294967295, def: 1, step: 1, integer: true },
+};
+
+export const FIELDS = {
+  tissue: 'Cells (outline at φ = ½, elongation axis)',
+  phi: 'Σφ (void where < 0.01)',
+  speed: 'Speed |Σφv| with velocity arrows',
+  director: 'Nematic order |Σφ Q̂| with director and ±½ defects',
+  strain: 'Strain rate ε̇ = ∇·v/2 with ±½ defects',
+  activediv: 'Active-force divergence ∇·fᵃ with ±½ defects',
+};
+
+// The paper's three regimes at this size, from native runs of the same core (seed 1, 1,500
+// relaxation steps; README, "Browser demo"). At ζ = 0.4 only the friction ratio changes:
+//   χ = 0.1:  no void site in 3,000 active steps;
+//   χ = 0.03: a hole opens after ≈ 800 active steps, grows to ≈ 80 µm² and closes ≈ 1,300 later;
+//   χ = 0.01: a hole opens after ≈ 700 active steps and keeps growing (≈ 780 µm² at 1,800).
+export const PRESETS = {
+  'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 0.4, chi: 0.1, gamma: 0.06 },
+  'short-lived': { label: 'Short-lived holes (χ = 0.03)', zeta: 0.4, chi: 0.03, gamma: 0.06 },
+  persistent: { label: 'Persistent holes (low friction, χ = 0.01)', zeta: 0.4, chi: 0.01, gamma: 0.06 },
+};
+export const DEFAULT_PRESET = 'persistent';
+
+function clampParam(name, raw, notices) {
+  const p = PARAMS[name];
+  let v = Number(raw);
+  if (raw === null || raw === '' || !Number.isFinite(v)) {
+    notices.push(`${name}=${raw} is not a number: using ${p.def}.`);
+    return p.def;
+  }
+  if (p.integer) v = Math.round(v);
+  if (v < p.min || v > p.max) {
+    const c = Math.min(p.max, Math.max(p.min, v));
+    notices.push(`${name}=${raw} is outside [${p.min}, ${p.max}]: using ${c}.`);
+    return c;
+  }
+  return v;
+}
+
+// Reads the state from a query string. Returns { state, notices }.
+export function parseUrl(search) {
+  const q = new URLSearchParams(search);
+  const notices = [];
+  let preset = q.get('preset');
+  if (preset !== null && !(preset in PRESETS)) {
+    notices.push(`preset=${preset} is unknown: using ${DEFAULT_PRESET}.`);
+    preset = null;
+  }
+  const base = PRESETS[preset ?? DEFAULT_PRESET];
+  const state = {
+    preset: preset ?? (['zeta', 'chi', 'gamma'].some((k) => q.has(k)) ? null : DEFAULT_PRESET),
+    zeta: base.zeta,
+    chi: base.chi,
+    gamma: base.gamma,
+    spf: PARAMS.spf.def,
+    seed: PARAMS.seed.def,
+    field: 'tissue',
+    embed: q.has('embed'),
+    paused: q.has('paused'),
+  };
+  for (const name of Object.keys(PARAMS)) {
+    if (q.has(name)) state[name] = clampParam(name, q.get(name), notices);
+  }
+  const field = q.get('field');
+  if (field !== null) {
+    if (field in FIELDS) state.field = field;
+    else notices.push(`field=${field} is unknown: showing the cells.`);
+  }
+  return { state, notices };
+}
+
+// The query string that reproduces the view (only what differs from the defaults, plus the
+// seed so that a shared link shows the same tissue).
+export function toUrl(state) {
+  const q = new URLSearchParams();
+  if (state.preset) q.set('preset', state.preset);
+  else for (const k of ['zeta', 'chi', 'gamma']) q.set(k, String(state[k]));
+  q.set('seed', String(state.seed));
+  if (state.spf !== PARAMS.spf.def) q.set('spf', String(state.spf));
+  if (state.field !== 'tissue') q.set('field', state.field);
+  if (state.embed) q.set('embed', '');
+  if (state.paused) q.set('paused', '');
+  return '?' + q.toString().replace(/=(&|$)/g, '$1');
+}
+
+// Slider position (0–1000) ↔ value, logarithmic where the parameter spans decades.
+export function toSlider(name, v) {
+  const p = PARAMS[name];
+  const t = p.log ? Math.log(v / p.min) / Math.log(p.max / p.min) : (v - p.min) / (p.max - p.min);
+  return Math.round(1000 * t);
+}
+
+export function fromSlider(name, s) {
+  const p = PARAMS[name];
+  const t = s / 1000;
+  let v = p.log ? p.min * Math.pow(p.max / p.min, t) : p.min + t * (p.max - p.min);
+  if (p.log) v = Number(v.toPrecision(2));
+  else if (p.integer) v = Math.round(v);
+  else v = Math.round(v / p.step) * p.step;
+  return Number(v.toFixed(6));
+}
