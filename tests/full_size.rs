@@ -2,7 +2,8 @@
 
 mod common;
 
-use common::{correlation, correlation_length, phi_bits, relaxed_full_size};
+use common::{phi_bits, relaxed_full_size};
+use monolayer::analysis::correlations::{correlation_length, Correlator};
 use monolayer::io::{read_checkpoint, write_checkpoint};
 use monolayer::{Monolayer, Params};
 
@@ -51,8 +52,10 @@ fn low_friction_runs_and_correlates_velocities_further() {
         m.advance(300).unwrap_or_else(|e| panic!("χ = {chi}: {e}"));
         let v = m.velocity_field().to_vec();
         assert!(v.iter().all(|z| z.re.is_finite() && z.im.is_finite()));
-        let c = correlation(&v, l);
-        lengths.push(correlation_length(&c));
+        let (vx, vy): (Vec<f64>, Vec<f64>) = v.iter().map(|z| (z.re, z.im)).unzip();
+        let mut c = Vec::new();
+        Correlator::new(l).correlate(&vx, &vy, &mut c);
+        lengths.push(correlation_length(&c).unwrap_or_else(|| panic!("χ = {chi}: C_v(r) never drops below 1/e")));
     }
     let r = relaxed.params().radius;
     assert!(lengths[1] > lengths[0], "correlation length χ = 0.001: {} vs χ = 1: {}", lengths[1], lengths[0]);
