@@ -25,11 +25,11 @@ export const FIELDS = {
   activediv: 'Active-force divergence ∇·fᵃ with ±½ defects',
 };
 
-// The paper's three regimes at this size, from native runs of the same core (seed 1, 1,500
-// relaxation steps; README, "Browser demo"). At ζ = 0.4 only the friction ratio changes:
+// The paper's three regimes at this size, from native runs of the same core (`monolayer sweep`,
+// seeds 1 and 2, 1,500 relaxation steps; README, "Browser demo"). At ζ = 0.4 only χ changes:
 //   χ = 0.1:  no void site in 3,000 active steps;
-//   χ = 0.03: a hole opens after ≈ 800 active steps, grows to ≈ 80 µm² and closes ≈ 1,300 later;
-//   χ = 0.01: a hole opens after ≈ 700 active steps and keeps growing (≈ 780 µm² at 1,800).
+//   χ = 0.03: holes open within ~1,000 active steps and close after 2,200–2,500 (over 8,000);
+//   χ = 0.01: holes open within ~1,000 active steps and stay open to the end of 3,000.
 export const PRESETS = {
   'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 0.4, chi: 0.1, gamma: 0.06 },
   'short-lived': { label: 'Short-lived holes (χ = 0.03)', zeta: 0.4, chi: 0.03, gamma: 0.06 },
