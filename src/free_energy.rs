@@ -134,6 +134,28 @@ mod tests {
         }
     }
 
+    /// Both stencils are exact for quadratics: ∇²(x² + 3y² + xy) = 8, and a sign or weight error
+    /// in either shows up here.
+    #[test]
+    fn laplacians_are_exact_for_quadratics() {
+        let patch = Patch { x0: 0, y0: 0, w: 6, h: 5 };
+        let mut f = vec![0.0; patch.padded_len()];
+        for b in 0..patch.h + 2 {
+            for a in 0..patch.w + 2 {
+                let (x, y) = (a as f64, b as f64);
+                f[b * patch.stride() + a] = x * x + 3.0 * y * y + x * y;
+            }
+        }
+        for kind in [Laplacian::FivePoint, Laplacian::NinePoint] {
+            for b in 0..patch.h {
+                let n = crate::lattice::row_neighbourhood(&f, patch, b);
+                for k in 0..patch.w {
+                    assert!((laplacian(kind, &n, k) - 8.0).abs() < 1e-9, "{kind:?} at ({k}, {b})");
+                }
+            }
+        }
+    }
+
     #[test]
     fn repulsion_counts_only_the_other_cells() {
         let p = Params::default();

@@ -212,6 +212,28 @@ fn without_cell_friction_velocity_is_force_over_substrate_friction() {
     assert!(checked > 100);
 }
 
+/// During relaxation (no activity, no cell–cell friction) every cell moves with v_i = f_i / ξ_relax,
+/// whatever ξ_s and ξ_cell are set to for the active phase.
+#[test]
+fn relaxation_velocity_is_force_over_relaxation_friction() {
+    let (w, h) = (30, 30);
+    let cells = vec![(Patch { x0: 3, y0: 4, w, h }, ellipse(w, h, 10.0, 6.0, 0.4))];
+    let p = Params { relax_steps: 100, xi_relax: 2.5, xi_substrate: 0.01, zeta: 0.5, ..small(1, 48) };
+    let mut m = with_cells(p, cells, 0);
+    m.evaluate_now().unwrap();
+    let c = &m.cells()[0];
+    let ((fx, fy), (vx, vy)) = (c.force(), c.velocity());
+    let mut moving = 0;
+    for b in 0..h {
+        for a in 0..w {
+            assert!((vx.at(a, b) - fx.at(a, b) / 2.5).abs() < 1e-14);
+            assert!((vy.at(a, b) - fy.at(a, b) / 2.5).abs() < 1e-14);
+            moving += (vx.at(a, b).abs() > 1e-6) as usize;
+        }
+    }
+    assert!(moving > 50);
+}
+
 /// Bad parameters are refused before anything runs, naming the parameter.
 #[test]
 fn bad_parameters_name_themselves() {
