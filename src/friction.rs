@@ -17,22 +17,21 @@
 //! The screening length √(3ξ_c/ξ_s) is 55 sites at χ = 0.001, as large as the box: a few
 //! relaxation sweeps would quietly add friction and kill the long-range flows that make holes.
 //! C is solved to a stated relative residual ‖F − C u‖/‖F‖ by conjugate gradients, warm-started
-//! from the last solution, preconditioned by M = Σ K⁻¹ Σ: K⁻¹ is exact by FFT, and
-//! Σ = diag(√(D₀/C_xx)), D₀ = ξ̄_s + 8ξ_c, scales it where n differs from 1 (holes, cell edges).
+//! from the last solution, preconditioned by one V-cycle of aggregation multigrid
+//! (`multigrid`), whose coarse levels see n, holes included. (An exact FFT inverse of the
+//! constant-coefficient operator, diagonally scaled, preconditioned well while n ≈ 1, but with
+//! every present cell counted n is 2–3 along cell edges and it took 71 iterations per solve at
+//! χ = 0.001, against 19 for multigrid.)
 //! The two components (x, y) travel together as the real and imaginary parts of one complex
-//! field, so one complex FFT serves both.
+//! field: C is real, so one cycle serves both.
 
 use num_complex::Complex64 as C64;
 
-use crate::fourier::Fft2;
 use crate::lattice::{neighbour_sum8, neighbour_sum8_row};
+use crate::multigrid::Multigrid;
 use crate::par;
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
-
-/// Weight ω of the Jacobi sweeps in the preconditioner: D⁻¹C has its spectrum in (0, 2), and
-/// ω < 1 keeps the combined preconditioner positive definite; 2/3 damps the highest modes best.
-const JACOBI_WEIGHT: f64 = 2.0 / 3.0;
 
 /// Which evaluation of a Heun step a solve belongs to: it picks the initial guess.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -77,10 +76,8 @@ pub struct FrictionProblem<'a> {
 #[derive(Clone, Debug)]
 pub struct FrictionSolver {
     l: usize,
-    fft: Fft2,
-    /// 1 / (L² λ(k)), λ(k) the Fourier symbol of K; rebuilt when ξ̄_s or ξ_c change.
-    inv_symbol: Vec<f64>,
-    symbol_for: (f64, f64),
+    /// The preconditioner, set up for every solve.
+    mg: Multigrid,
     /// N(x) = Σ_{N8} n.
     pub weight_nb: Vec<f64>,
     /// n(x), the weights of the last solve.
@@ -89,14 +86,11 @@ pub struct FrictionSolver {
     diag: Vec<f64>,
     /// Work array for n·p.
     np: Vec<C64>,
-    /// √(D₀/D(x)) of the preconditioner.
-    scale: Vec<f64>,
     rhs: Vec<C64>,
     r: Vec<C64>,
     z: Vec<C64>,
     p: Vec<C64>,
     q: Vec<C64>,
-    t: Vec<C64>,
     row_sums: Vec<f64>,
     /// u = V/n: the solution, and the warm start of the next solve.
     pub mean_velocity: Vec<C64>,
@@ -117,20 +111,16 @@ impl FrictionSolver {
         let n = l * l;
         FrictionSolver {
             l,
-            fft: Fft2::new(l),
-            inv_symbol: vec![0.0; n],
-            symbol_for: (f64::NAN, f64::NAN),
+            mg: Multigrid::new(l),
             weight_nb: vec![0.0; n],
             weight: vec![0.0; n],
             diag: vec![0.0; n],
             np: vec![ZERO; n],
-            scale: vec![0.0; n],
             rhs: vec![ZERO; n],
             r: vec![ZERO; n],
             z: vec![ZERO; n],
             p: vec![ZERO; n],
             q: vec![ZERO; n],
-            t: vec![ZERO; n],
             row_sums: vec![0.0; l],
             mean_velocity: vec![ZERO; n],
             corrector_shift: vec![ZERO; n],
@@ -172,26 +162,22 @@ impl FrictionSolver {
             }
         }
         neighbour_sum8(pb.weight, &mut self.weight_nb, l);
-        let xi_s_mean = pb.xi_s.iter().sum::<f64>() / (l * l) as f64;
-        let d0 = xi_s_mean + 8.0 * pb.xi_c;
-        self.update_symbol(xi_s_mean, pb.xi_c);
 
-        // C's diagonal and the preconditioner's scaling.
+        // C's diagonal; sites with n = 0 are outside the solve.
         self.weight.copy_from_slice(pb.weight);
         for x in 0..l * l {
             let n = pb.weight[x];
             if n > 0.0 {
                 let d = n * (pb.xi_s[x] + pb.xi_c * self.weight_nb[x]);
                 self.diag[x] = d;
-                self.scale[x] = (d0 / d).sqrt();
                 self.rhs[x] = pb.force[x];
             } else {
                 self.diag[x] = 0.0;
-                self.scale[x] = 0.0;
                 self.rhs[x] = ZERO;
                 self.mean_velocity[x] = ZERO;
             }
         }
+        self.mg.setup(&self.weight, &self.diag, pb.xi_c);
         let stats = self.pcg(pb);
         match stage {
             HeunStage::Predictor => self.predictor_solution.copy_from_slice(&self.mean_velocity),
@@ -208,24 +194,6 @@ impl FrictionSolver {
         }
         neighbour_sum8(&self.velocity, &mut self.velocity_nb, l);
         stats
-    }
-
-    fn update_symbol(&mut self, xi_s: f64, xi_c: f64) {
-        if self.symbol_for == (xi_s, xi_c) {
-            return;
-        }
-        let l = self.l;
-        let norm = 1.0 / (l * l) as f64;
-        for ky in 0..l {
-            let cy = self.fft.cos_table(ky);
-            for kx in 0..l {
-                let cx = self.fft.cos_table(kx);
-                // Symbol of (ξ_s + 8ξ_c) − ξ_c A₈: A₈ has symbol 2cos kx + 2cos ky + 4 cos kx cos ky.
-                let lam = xi_s + 8.0 * xi_c - xi_c * (2.0 * cx + 2.0 * cy + 4.0 * cx * cy);
-                self.inv_symbol[ky * l + kx] = norm / lam;
-            }
-        }
-        self.symbol_for = (xi_s, xi_c);
     }
 
     fn pcg(&mut self, pb: &FrictionProblem) -> Result<SolveStats, SolveError> {
@@ -246,7 +214,7 @@ impl FrictionSolver {
         if res <= pb.tolerance {
             return Ok(SolveStats { iterations: 0, residual: res });
         }
-        self.precondition(pb.xi_c);
+        self.precondition();
         self.p.copy_from_slice(&self.z);
         let mut rz = dot(&self.r, &self.z, &mut self.row_sums, self.l);
         for it in 1..=pb.max_iterations {
@@ -264,7 +232,7 @@ impl FrictionSolver {
             if res <= pb.tolerance {
                 return Ok(SolveStats { iterations: it, residual: res });
             }
-            self.precondition(pb.xi_c);
+            self.precondition();
             let rz_new = dot(&self.r, &self.z, &mut self.row_sums, self.l);
             let beta = rz_new / rz;
             rz = rz_new;
@@ -283,36 +251,9 @@ impl FrictionSolver {
         dot(&self.rhs, &self.rhs, &mut self.row_sums, self.l)
     }
 
-    /// z = M r, the symmetric multiplicative combination of a damped Jacobi sweep (the local
-    /// variations of n at cell edges), the FFT solve Σ K⁻¹ Σ (the long wavelengths) and a second
-    /// Jacobi sweep. Symmetric positive definite for a Jacobi weight below 1.
-    fn precondition(&mut self, xi_c: f64) {
-        let l = self.l;
-        // z = ω D⁻¹ r
-        for ((z, r), d) in self.z.iter_mut().zip(&self.r).zip(&self.diag) {
-            *z = if *d > 0.0 { r * (JACOBI_WEIGHT / d) } else { ZERO };
-        }
-        // t = Σ (r − C z), then z += Σ K⁻¹ t
-        apply_c(&self.z, &mut self.np, &mut self.q, &self.diag, &self.weight, xi_c, l);
-        for (((t, r), q), s) in self.t.iter_mut().zip(&self.r).zip(&self.q).zip(&self.scale) {
-            *t = (r - q) * *s;
-        }
-        // The symbol is symmetric in (kx, ky), so the transposed spectrum needs no transpose back.
-        self.fft.forward_transposed(&mut self.t);
-        for (t, g) in self.t.iter_mut().zip(&self.inv_symbol) {
-            *t *= *g;
-        }
-        self.fft.inverse_transposed(&mut self.t);
-        for ((z, t), s) in self.z.iter_mut().zip(&self.t).zip(&self.scale) {
-            *z += t * *s;
-        }
-        // z += ω D⁻¹ (r − C z)
-        apply_c(&self.z, &mut self.np, &mut self.q, &self.diag, &self.weight, xi_c, l);
-        for (((z, r), q), d) in self.z.iter_mut().zip(&self.r).zip(&self.q).zip(&self.diag) {
-            if *d > 0.0 {
-                *z += (r - q) * (JACOBI_WEIGHT / d);
-            }
-        }
+    /// z = M r: one multigrid V-cycle.
+    fn precondition(&mut self) {
+        self.mg.precondition(&self.r, &mut self.z);
     }
 
     /// q = C x for x the solution u or the search direction p.
@@ -413,5 +354,33 @@ mod tests {
             let lhs = s.velocity[x] * (xi_s[x] + s.weight_nb[x]) - s.velocity_nb[x] * n[x];
             assert!((lhs - f[x]).norm() < 1e-7, "site {x}: {lhs} vs {}", f[x]);
         }
+    }
+
+    /// Every present cell counted makes n 2–3 along cell edges. The multigrid preconditioner
+    /// solves such a tissue with a hole at χ = 0.001 from a cold start in few iterations (the
+    /// diagonally scaled FFT preconditioner it replaced needed 71 per warm-started solve at full
+    /// size); the count is deterministic, so this guards the preconditioner's quality.
+    #[test]
+    fn multigrid_converges_quickly_on_edge_networks() {
+        let l = 70;
+        let (_, f) = problem_fields(l, false);
+        let n: Vec<f64> = (0..l * l)
+            .map(|x| {
+                let (i, j) = (x % l, x / l);
+                let d2 = (i as f64 - 30.0).powi(2) + (j as f64 - 20.0).powi(2);
+                if d2 < 60.0 {
+                    0.0
+                } else {
+                    1.0 + (i % 13 < 4) as u8 as f64 + ((i + 2 * j) % 17 < 5) as u8 as f64
+                }
+            })
+            .collect();
+        let f: Vec<C64> = f.iter().zip(&n).map(|(f, n)| f * n).collect();
+        let xi_s = vec![0.001; l * l];
+        let mut s = FrictionSolver::new(l);
+        let pb =
+            FrictionProblem { weight: &n, force: &f, xi_s: &xi_s, xi_c: 1.0, tolerance: 1e-5, max_iterations: 500 };
+        let st = s.solve(&pb, HeunStage::Predictor).unwrap();
+        assert!(st.iterations <= 30, "{st:?}");
     }
 }
