@@ -283,9 +283,9 @@ mod tests {
 
     #[test]
     fn overrides_and_unknown_keys() {
-        let p = load_params(None, &["zeta=0.3".into(), "passive_force=phi_grad_mu".into()]).unwrap();
+        let p = load_params(None, &["zeta=0.3".into(), "passive_force=grad_mu".into()]).unwrap();
         assert_eq!(p.zeta, 0.3);
-        assert_eq!(p.passive_force, crate::params::PassiveForce::PhiGradMu);
+        assert_eq!(p.passive_force, crate::params::PassiveForce::GradMu);
         let e = load_params(None, &["zeta_typo=0.3".into()]).unwrap_err();
         assert!(e.contains("zeta_typo"), "{e}");
         let e = load_params(None, &["zeta".into()]).unwrap_err();

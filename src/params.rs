@@ -12,7 +12,8 @@ use serde::{Deserialize, Serialize};
 pub enum PassiveForce {
     /// f^p_i = −∇μ_i, as printed in the paper.
     GradMu,
-    /// f^p_i = −φ_i ∇μ_i, the usual phase-field form.
+    /// f^p_i = −φ_i ∇μ_i, the usual phase-field form. The calibrated default
+    /// (docs/calibration.md).
     PhiGradMu,
 }
 
@@ -22,7 +23,9 @@ pub enum PassiveForce {
 pub enum FrictionWeights {
     /// Each cell j at x' weighs φ_j(x'), clamped to [0, 1] (model-notes §4).
     Phi,
-    /// Each cell with φ_j(x') > `presence_threshold` weighs 1: a stronger friction.
+    /// Each cell with φ_j(x') > `presence_threshold` weighs 1: "j ∈ x'" read as every cell
+    /// present at x', with the paper's own threshold; a stronger friction at cell edges. The
+    /// calibrated default (docs/calibration.md).
     Presence,
 }
 
@@ -127,6 +130,13 @@ pub struct Params {
     /// Smallest distance between the edges of two initial disks, in sites (see
     /// [`crate::init::random_disks`] for why they start apart).
     pub initial_gap: f64,
+
+    // --- units (reporting only; the dynamics never read them) ---------------------------------
+    /// Seconds per simulation time unit, for speeds in µm/h (Δx ≈ 1 µm). The paper writes
+    /// "Δt ∼ 5 s" beside Δx ∼ 1 µm; model-notes §5 reads it as one time unit ≈ 5 s (the
+    /// default), while the paper's own Δt is the time step of 0.1, which reads as 50 s per time
+    /// unit. docs/calibration.md compares the two.
+    pub time_unit_seconds: f64,
 }
 
 impl Default for Params {
@@ -146,8 +156,8 @@ impl Default for Params {
             q_epsilon: 1e-2,
             xi_substrate: 0.01,
             xi_cell: 1.0,
-            passive_force: PassiveForce::GradMu,
-            friction_weights: FrictionWeights::Phi,
+            passive_force: PassiveForce::PhiGradMu,
+            friction_weights: FrictionWeights::Presence,
             presence_threshold: 0.01,
             dt: 0.1,
             laplacian: Laplacian::FivePoint,
@@ -163,6 +173,7 @@ impl Default for Params {
             active_steps: 100_000,
             initial_radius_fraction: 0.5,
             initial_gap: 2.0,
+            time_unit_seconds: 5.0,
         }
     }
 }
@@ -196,6 +207,11 @@ impl Params {
     /// The friction ratio χ = ξ_s / ξ_cell (infinite in the dry limit ξ_cell = 0).
     pub fn chi(&self) -> f64 {
         self.xi_substrate / self.xi_cell
+    }
+
+    /// µm/h per lattice site per time unit (Δx ≈ 1 µm).
+    pub fn microns_per_hour(&self) -> f64 {
+        3600.0 / self.time_unit_seconds
     }
 
     /// Set ξ_s from χ, keeping ξ_cell.
@@ -333,6 +349,7 @@ impl Params {
                 fill * 100.0
             ),
         )?;
+        positive("time_unit_seconds", self.time_unit_seconds)?;
         Ok(())
     }
 }
@@ -350,6 +367,12 @@ mod tests {
         assert_eq!(p.relax_steps, 10_000);
         assert_eq!(p.active_steps, 100_000);
         assert!((p.chi() - 0.01).abs() < 1e-15);
+        // The conventions the calibration chose (docs/calibration.md).
+        assert_eq!((p.passive_force, p.friction_weights), (PassiveForce::PhiGradMu, FrictionWeights::Presence));
+        assert_eq!(p.q_magnitude, 0.5);
+        // One site per time unit is 720 µm/h at 5 s per time unit, 72 µm/h at 50 s.
+        assert_eq!(p.microns_per_hour(), 720.0);
+        assert_eq!(Params { time_unit_seconds: 50.0, ..p }.microns_per_hour(), 72.0);
     }
 
     #[test]
@@ -363,6 +386,9 @@ mod tests {
         let e = p.validate().unwrap_err();
         assert_eq!(e.name, "n_cells");
         assert!(e.to_string().contains("150 %"), "{e}");
+
+        let p = Params { time_unit_seconds: 0.0, ..Params::default() };
+        assert_eq!(p.validate().unwrap_err().name, "time_unit_seconds");
 
         let p = Params { relax_patch_size: 10, ..Params::default() };
         assert_eq!(p.validate().unwrap_err().name, "relax_patch_size");

@@ -27,9 +27,6 @@ use crate::io::{write_atomic, RunRecord};
 use crate::params::Params;
 use crate::runner::{Event, RunDir};
 
-/// µm/h per lattice site per time unit (paper: Δx ≈ 1 µm, one time unit ≈ 5 s).
-pub const MICRONS_PER_HOUR: f64 = 3600.0 / 5.0;
-
 /// A sweep as written in its file (or assembled from the command line).
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -204,6 +201,8 @@ pub struct RunSummary {
     /// (duration, closed): closed holes' lifetimes, and for open ones the time they were seen.
     pub lifetimes: Vec<(f64, bool)>,
     pub mean_speed: f64,
+    /// µm/h per site per time unit, from the run's `time_unit_seconds`.
+    pub microns_per_hour: f64,
     pub velocity_correlation_length: Option<f64>,
     pub nematic_correlation_length: Option<f64>,
     /// Minimum packing fraction over the frames with no hole open.
@@ -235,6 +234,7 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
     };
     let Ok(run) = RunFrames::open(dir) else { return Ok(s) };
     let p = &record.params;
+    s.microns_per_hour = p.microns_per_hour();
     let mut ra = RunAnalysis::new(p);
     let mut speeds = Vec::new();
     for (_, path) in &run.frames {
@@ -535,7 +535,7 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
             s.time_with_hole_open,
             lifetimes.join(";"),
             s.mean_speed,
-            s.mean_speed * MICRONS_PER_HOUR,
+            s.mean_speed * s.microns_per_hour,
             opt(s.velocity_correlation_length),
             opt(s.nematic_correlation_length),
             opt(s.min_packing_without_hole)

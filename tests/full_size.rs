@@ -4,6 +4,7 @@ mod common;
 
 use common::{phi_bits, relaxed_full_size};
 use monolayer::analysis::correlations::{correlation_length, Correlator};
+use monolayer::analysis::holes::{nucleation_area, VoidRegions};
 use monolayer::io::{read_checkpoint, write_checkpoint};
 use monolayer::{Monolayer, Params};
 
@@ -41,33 +42,73 @@ fn relaxation_reaches_confluence() {
 /// over a longer range than at χ = 1 from the same relaxed state.
 #[test]
 fn low_friction_runs_and_correlates_velocities_further() {
-    let relaxed = relaxed_full_size();
-    let l = relaxed.params().box_size;
     let mut lengths = Vec::new();
     for chi in [1.0, 0.001] {
-        let mut m = relaxed.clone();
-        let mut p = m.params().clone();
-        p.set_chi(chi);
-        m.set_params(p).unwrap();
+        let mut m = active_copy(chi);
         m.advance(300).unwrap_or_else(|e| panic!("χ = {chi}: {e}"));
-        let v = m.velocity_field().to_vec();
-        assert!(v.iter().all(|z| z.re.is_finite() && z.im.is_finite()));
-        let (vx, vy): (Vec<f64>, Vec<f64>) = v.iter().map(|z| (z.re, z.im)).unzip();
-        let mut c = Vec::new();
-        Correlator::new(l).correlate(&vx, &vy, &mut c);
-        lengths.push(correlation_length(&c).unwrap_or_else(|| panic!("χ = {chi}: C_v(r) never drops below 1/e")));
+        assert!(m.velocity_field().iter().all(|z| z.re.is_finite() && z.im.is_finite()));
+        lengths.push(velocity_correlation_length(&mut m));
     }
-    let r = relaxed.params().radius;
+    let r = relaxed_full_size().params().radius;
     assert!(lengths[1] > lengths[0], "correlation length χ = 0.001: {} vs χ = 1: {}", lengths[1], lengths[0]);
     assert!(lengths[0] < r, "at χ = 1 velocities decorrelate within a cell radius: {}", lengths[0]);
 }
 
 fn active_copy(chi: f64) -> Monolayer {
+    active_copy_at(chi, relaxed_full_size().params().zeta)
+}
+
+fn active_copy_at(chi: f64, zeta: f64) -> Monolayer {
     let mut m = relaxed_full_size().clone();
     let mut p = m.params().clone();
     p.set_chi(chi);
+    p.zeta = zeta;
     m.set_params(p).unwrap();
     m
+}
+
+/// The velocity correlation length (C_v = 1/e) of the unsmoothed tissue velocity field.
+fn velocity_correlation_length(m: &mut Monolayer) -> f64 {
+    let l = m.params().box_size;
+    let (vx, vy): (Vec<f64>, Vec<f64>) = m.velocity_field().iter().map(|z| (z.re, z.im)).unzip();
+    let mut c = Vec::new();
+    Correlator::new(l).correlate(&vx, &vy, &mut c);
+    correlation_length(&c).expect("C_v(r) drops below 1/e within the box")
+}
+
+/// Calibration guard, high-friction side (docs/calibration.md, target 2): at χ = 0.1 and the
+/// top of the paper's activity range, ζ = 0.5, the calibrated conventions keep the tissue whole
+/// for 3,000 active steps: no void region ever reaches the nucleation area πR²/4, checked every
+/// 100 steps. The φ-weighted friction sum opens holes here within 2,000 steps; so would anything
+/// that strengthened activity or weakened the passive response or the cell–cell friction.
+#[test]
+fn calibration_guard_no_hole_at_high_friction() {
+    let mut m = active_copy_at(0.1, 0.5);
+    let (l, r) = (m.params().box_size, m.params().radius);
+    let mut voids = VoidRegions::default();
+    for block in 1..=30 {
+        m.advance(100).unwrap_or_else(|e| panic!("χ = 0.1, ζ = 0.5: {e}"));
+        voids.find(m.phi_sum(), l);
+        let largest = voids.regions.iter().map(|v| v.area).max().unwrap_or(0);
+        assert!(
+            (largest as f64) <= nucleation_area(r),
+            "a hole of {largest} sites opened by active step {} at χ = 0.1, ζ = 0.5",
+            block * 100
+        );
+    }
+}
+
+/// Calibration guard, low-friction side (targets 3 and 5): at χ = 0.001, ζ = 0.5 the run stays
+/// finite through 500 active steps, and the flows it carries are collective: the velocity
+/// correlation length exceeds one cell radius (at χ = 1 it is below; see the test above).
+#[test]
+fn calibration_guard_low_friction_flows_are_collective_and_finite() {
+    let mut m = active_copy_at(0.001, 0.5);
+    m.advance(500).unwrap_or_else(|e| panic!("χ = 0.001, ζ = 0.5: {e}"));
+    assert!(m.phi_sum().iter().all(|s| s.is_finite()));
+    let length = velocity_correlation_length(&mut m);
+    let r = m.params().radius;
+    assert!(length > r, "velocity correlation length {length} at χ = 0.001 is not above R = {r}");
 }
 
 /// The same state stepped on one thread and on two gives the same bits.

@@ -25,11 +25,13 @@ export const FIELDS = {
   activediv: 'Active-force divergence ∇·fᵃ with ±½ defects',
 };
 
-// The paper's three regimes at this size, from native runs of the same core (`monolayer sweep`,
-// seeds 1 and 2, 1,500 relaxation steps; README, "Browser demo"). At ζ = 0.4 only χ changes:
-//   χ = 0.1:  no void site in 3,000 active steps;
-//   χ = 0.03: holes open within ~1,000 active steps and close after 2,200–2,500 (over 8,000);
-//   χ = 0.01: holes open within ~1,000 active steps and stay open to the end of 3,000.
+// The paper's three regimes at this size, from native runs of the same core with the calibrated
+// conventions (`monolayer sweep`, seeds 1 and 2, 1,500 relaxation steps, 8,000 active steps;
+// README, "Browser demo"). At ζ = 0.4 only χ changes:
+//   χ = 0.1:  no void site in 8,000 active steps (both seeds);
+//   χ = 0.03: a hole opens after 2,500–3,000 active steps; seed 1's closes after 250 time units;
+//   χ = 0.01: seed 1 (the default) opens a hole after 1,750 active steps that stays open until a
+//             stretched cell spans the box (step 5,292); seed 2 opens none in 8,000 steps.
 export const PRESETS = {
   'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 0.4, chi: 0.1, gamma: 0.06 },
   'short-lived': { label: 'Short-lived holes (χ = 0.03)', zeta: 0.4, chi: 0.03, gamma: 0.06 },
