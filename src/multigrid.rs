@@ -14,6 +14,8 @@
 
 use num_complex::Complex64 as C64;
 
+use crate::par;
+
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 
 /// The 8 neighbour offsets, in the order of [`Level::off`].
@@ -21,6 +23,9 @@ const DIRS: [(isize, isize); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), 
 
 /// Coarsening stops at this side; the level is then solved exactly.
 const COARSEST_SIDE: usize = 6;
+
+/// Levels at least this wide split their stencil products across threads.
+const PARALLEL_SIDE: usize = 64;
 
 /// `Level::coarse_dir` value for a bond inside one aggregate.
 const SAME: u8 = 8;
@@ -110,16 +115,29 @@ impl Level {
         self.nb[x][k] as usize
     }
 
-    /// out = A v.
+    /// out = A v. Each site's output is its own, so the rows split across threads without
+    /// changing a bit; only the large levels are worth splitting.
     fn apply(&self, v: &[C64], out: &mut [C64]) {
-        for (x, o) in out.iter_mut().enumerate() {
+        let site = |x: usize| {
             let (a, nb) = (&self.off[x], &self.nb[x]);
             let mut s = v[x] * self.diag[x];
             for k in 0..8 {
                 s += v[nb[k] as usize] * a[k];
             }
-            *o = s;
+            s
+        };
+        if self.m < PARALLEL_SIDE {
+            for (x, o) in out.iter_mut().enumerate() {
+                *o = site(x);
+            }
+            return;
         }
+        let chunk = self.m * par::band_rows(self.m);
+        par::for_each_chunk_mut(out, chunk, |k, band| {
+            for (i, o) in band.iter_mut().enumerate() {
+                *o = site(k * chunk + i);
+            }
+        });
     }
 
     /// One damped Jacobi sweep on A x = b (x starting from zero when `from_zero`).
