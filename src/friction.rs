@@ -21,7 +21,7 @@
 //! (`multigrid`), whose coarse levels see n, holes included. (An exact FFT inverse of the
 //! constant-coefficient operator, diagonally scaled, preconditioned well while n ≈ 1, but with
 //! every present cell counted n is 2–3 along cell edges and it took 71 iterations per solve at
-//! χ = 0.001, against 19 for multigrid.)
+//! χ = 0.001, against 11 for multigrid.)
 //! The two components (x, y) travel together as the real and imaginary parts of one complex
 //! field: C is real, so one cycle serves both.
 
@@ -359,7 +359,8 @@ mod tests {
     /// Every present cell counted makes n 2–3 along cell edges. The multigrid preconditioner
     /// solves such a tissue with a hole at χ = 0.001 from a cold start in few iterations (the
     /// diagonally scaled FFT preconditioner it replaced needed 71 per warm-started solve at full
-    /// size); the count is deterministic, so this guards the preconditioner's quality.
+    /// size); the count is deterministic (18 here; 24 without the multigrid's over-correction),
+    /// so this guards the preconditioner's quality.
     #[test]
     fn multigrid_converges_quickly_on_edge_networks() {
         let l = 70;
@@ -381,6 +382,6 @@ mod tests {
         let pb =
             FrictionProblem { weight: &n, force: &f, xi_s: &xi_s, xi_c: 1.0, tolerance: 1e-5, max_iterations: 500 };
         let st = s.solve(&pb, HeunStage::Predictor).unwrap();
-        assert!(st.iterations <= 30, "{st:?}");
+        assert!(st.iterations <= 22, "{st:?}");
     }
 }

@@ -24,6 +24,13 @@ const DIRS: [(isize, isize); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), 
 /// Coarsening stops at this side; the level is then solved exactly.
 const COARSEST_SIDE: usize = 6;
 
+/// Factor on every coarse correction. Piecewise-constant interpolation stores too much energy
+/// in the coarse vectors, so a plain correction falls short; over-correcting makes up for it
+/// (Vaněk's classic remedy for unsmoothed aggregation). Any value in (0, 2) keeps the cycle
+/// symmetric positive definite. Measured at full size, iterations per solve at χ = 0.1 and
+/// χ = 0.001: 1.0 → 7.1 and 18.7; 1.4 → 6.7 and 11.6; 1.5 → 7.3 and 10.7; 1.8 → 9.2 and 10.2.
+const OVER_CORRECTION: f64 = 1.5;
+
 /// Levels at least this wide split their stencil products across threads.
 const PARALLEL_SIDE: usize = 64;
 
@@ -202,7 +209,7 @@ impl Level {
     fn prolong(&mut self, coarse: &Level) {
         for ((x, a), c) in self.x.iter_mut().zip(&self.active).zip(&self.agg) {
             if *a {
-                *x += coarse.x[*c as usize];
+                *x += coarse.x[*c as usize] * OVER_CORRECTION;
             }
         }
     }
@@ -441,19 +448,21 @@ mod tests {
     }
 
     /// The rigid translation is the soft mode at low friction (C·1 = ξ_s n): one V-cycle maps
-    /// its residual back to it almost exactly, which the diagonally scaled FFT inverse could
-    /// not do where n ≠ 1.
+    /// its residual back to a uniform field, so it is (nearly) an eigenvector of the
+    /// preconditioned operator, which the diagonally scaled FFT inverse could not manage where
+    /// n ≠ 1. (The over-correction scales it, uniformly: CG does not mind a scale.)
     #[test]
-    fn v_cycle_recovers_a_rigid_translation() {
+    fn v_cycle_maps_a_rigid_translation_to_a_uniform_field() {
         let l = 40;
         let (mut mg, n) = setup(l);
         let r: Vec<C64> = n.iter().map(|n| C64::new(0.001 * n, 0.0)).collect();
         let mut z = vec![ZERO; l * l];
         mg.precondition(&r, &mut z);
-        for (x, (z, n)) in z.iter().zip(&n).enumerate() {
-            if *n > 0.0 {
-                assert!((z.re - 1.0).abs() < 0.05 && z.im.abs() < 1e-12, "site {x}: {z}");
-            }
-        }
+        let active: Vec<f64> = z.iter().zip(&n).filter(|(_, n)| **n > 0.0).map(|(z, _)| z.re).collect();
+        let mean = active.iter().sum::<f64>() / active.len() as f64;
+        let spread = active.iter().map(|v| (v - mean).abs()).fold(0.0, f64::max);
+        assert!(mean > 0.5, "mean {mean}");
+        assert!(spread < 0.05 * mean, "spread {spread} about the mean {mean}");
+        assert!(z.iter().all(|z| z.im.abs() < 1e-12));
     }
 }
