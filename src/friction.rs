@@ -365,17 +365,7 @@ mod tests {
     fn multigrid_converges_quickly_on_edge_networks() {
         let l = 70;
         let (_, f) = problem_fields(l, false);
-        let n: Vec<f64> = (0..l * l)
-            .map(|x| {
-                let (i, j) = (x % l, x / l);
-                let d2 = (i as f64 - 30.0).powi(2) + (j as f64 - 20.0).powi(2);
-                if d2 < 60.0 {
-                    0.0
-                } else {
-                    1.0 + (i % 13 < 4) as u8 as f64 + ((i + 2 * j) % 17 < 5) as u8 as f64
-                }
-            })
-            .collect();
+        let n = crate::multigrid::fixtures::edge_network(l);
         let f: Vec<C64> = f.iter().zip(&n).map(|(f, n)| f * n).collect();
         let xi_s = vec![0.001; l * l];
         let mut s = FrictionSolver::new(l);

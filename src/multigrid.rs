@@ -335,12 +335,11 @@ impl Multigrid {
     }
 }
 
+/// Test fixtures shared with the friction solve's tests.
 #[cfg(test)]
-mod tests {
-    use super::*;
-
+pub(crate) mod fixtures {
     /// Presence-like weights: 1 inside cells, 2–3 along a network of edges, 0 in a hole.
-    fn weights(l: usize) -> Vec<f64> {
+    pub(crate) fn edge_network(l: usize) -> Vec<f64> {
         (0..l * l)
             .map(|x| {
                 let (i, j) = (x % l, x / l);
@@ -353,6 +352,12 @@ mod tests {
             })
             .collect()
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fixtures::edge_network;
+    use super::*;
 
     fn fine_diag(n: &[f64], l: usize, xi_s: f64, xi_c: f64) -> Vec<f64> {
         let level = Level::with_side(l);
@@ -379,7 +384,7 @@ mod tests {
     }
 
     fn setup(l: usize) -> (Multigrid, Vec<f64>) {
-        let n = weights(l);
+        let n = edge_network(l);
         let diag = fine_diag(&n, l, 0.001, 1.0);
         let mut mg = Multigrid::new(l);
         mg.setup(&n, &diag, 1.0);
