@@ -49,3 +49,15 @@ pub fn band_rows(l: usize) -> usize {
     let bands = (threads() * 4).max(1);
     l.div_ceil(bands).max(1)
 }
+
+/// Runs `a` and `b`, side by side where threads are available, and returns both results.
+pub fn join<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::join(a, b)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        (a(), b())
+    }
+}
