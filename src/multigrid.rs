@@ -37,7 +37,9 @@ const NORTH_WEST: usize = 2;
 const NORTH: usize = 3;
 const NORTH_EAST: usize = 4;
 
-/// The eight neighbour directions, and (0, 0) last.
+/// The eight neighbour directions, and (0, 0) last: the order of [`direction`] and
+/// `ALL_AS_FORWARD` (which the tests check against it).
+#[cfg(test)]
 const ALL: [(isize, isize); 9] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1), (0, 0)];
 
 /// Where the bond in direction `ALL[d]` is stored: the stencil entry, and whether it is the
@@ -211,7 +213,7 @@ impl Level {
 
     #[cfg(test)]
     fn in_solve(&self, x: usize) -> bool {
-        self.stencil[x][DIAG] > 0.0
+        self.coefficients[DIAG][x] > 0.0
     }
 
     /// Row j of A v, in three passes over the row: the bonds within the column, those to the
@@ -345,41 +347,48 @@ impl Level {
         }
     }
 
-    /// The bond between site (i, j) and its neighbour in direction `ALL[d]`.
+    /// The bond from site (i, j) to its neighbour in direction `FORWARD[k]`.
     #[inline]
-    fn bond(&self, i: usize, j: usize, d: usize) -> f64 {
-        let m = self.m;
-        let (k, backward) = ALL_AS_FORWARD[d];
-        if backward {
-            let (dx, dy) = ALL[d];
-            self.stencil[step(j, dy, m) * m + step(i, dx, m)][k]
-        } else {
-            self.stencil[j * m + i][k]
+    fn forward_bond(&self, i: usize, j: usize, k: usize) -> f64 {
+        match &self.weights {
+            Some(w) => {
+                let (m, (dx, dy)) = (self.m, FORWARD[k]);
+                -w.xi_c * w.n[j * m + i] * w.n[step(j, dy, m) * m + step(i, dx, m)]
+            }
+            None => self.stencil[j * self.m + i][1 + k],
         }
     }
 
-    /// The Galerkin coarse level Pᵀ A P, P constant on 2×2 aggregates. Each coarse site gathers
-    /// its own entries (its aggregate's diagonals and inner bonds, and the bonds leaving it in the
-    /// four forward coarse directions), so coarse rows are independent.
+    /// The Galerkin coarse level Pᵀ A P, P constant on 2×2 aggregates: every fine bond lands
+    /// on its aggregate's diagonal (both ends inside: twice, once from each end) or on the
+    /// coarse bond between the two aggregates it joins. Forward fine bonds never point down a
+    /// row, so those of coarse row jc land in coarse row jc: the rows are independent.
     fn coarsen(&self, coarse: &mut Level) {
-        let m = self.m;
-        let mc = self.coarse_side();
+        let (m, mc) = (self.m, self.coarse_side());
+        // Whether a step d from offset p inside an aggregate of width w leaves it.
+        let leaves = |p: usize, d: isize, w: usize| -> isize {
+            if (0..w as isize).contains(&(p as isize + d)) {
+                0
+            } else {
+                d
+            }
+        };
         for_rows(&mut coarse.stencil, mc, |jc, row| {
-            for (ic, s) in row.iter_mut().enumerate() {
-                *s = [0.0; 5];
-                for j in (2 * jc..2 * jc + 2).filter(|&j| j < m) {
-                    for i in (2 * ic..2 * ic + 2).filter(|&i| i < m) {
-                        let x = j * m + i;
-                        s[DIAG] += self.stencil[x][DIAG];
-                        for (d, &(dx, dy)) in ALL[..8].iter().enumerate() {
-                            // Which way the bond leaves the aggregate, if it does; bonds
-                            // leaving backwards are the other aggregate's forward ones.
-                            let cdx = if step(i, dx, m) / 2 == ic { 0 } else { dx };
-                            let cdy = if step(j, dy, m) / 2 == jc { 0 } else { dy };
-                            let (k, backward) = ALL_AS_FORWARD[direction(cdx, cdy)];
-                            if !backward {
-                                s[k] += self.bond(i, j, d);
-                            }
+            row.fill([0.0; 5]);
+            let height = 2.min(m - 2 * jc);
+            for j in 2 * jc..2 * jc + height {
+                for i in 0..m {
+                    let ic = i / 2;
+                    let width = 2.min(m - 2 * ic);
+                    row[ic][DIAG] += self.coefficients[DIAG][j * m + i];
+                    for (k, &(dx, dy)) in FORWARD.iter().enumerate() {
+                        let b = self.forward_bond(i, j, k);
+                        let (cdx, cdy) = (leaves(i % 2, dx, width), leaves(j - 2 * jc, dy, height));
+                        match ALL_AS_FORWARD[direction(cdx, cdy)] {
+                            (DIAG, _) => row[ic][DIAG] += 2.0 * b,
+                            (c, false) => row[ic][c] += b,
+                            // Only (−1, 0): the east bond of the aggregate to the west.
+                            (c, true) => row[prev(ic, mc)][c] += b,
                         }
                     }
                 }
@@ -399,16 +408,18 @@ impl Level {
                 }
             });
         }
-        for_rows(&mut self.jacobi, m, |j, row| {
-            for (w, s) in row.iter_mut().zip(&stencil[j * m..][..m]) {
-                *w = if s[DIAG] > 0.0 { OMEGA / s[DIAG] } else { 0.0 };
-            }
-        });
-        for_rows(&mut self.prolongation, m, |j, row| {
-            for (p, s) in row.iter_mut().zip(&stencil[j * m..][..m]) {
-                *p = if s[DIAG] > 0.0 { OVER_CORRECTION } else { 0.0 };
-            }
-        });
+        self.set_steps();
+    }
+
+    /// The Jacobi steps and prolongation weights, from the diagonal.
+    fn set_steps(&mut self) {
+        let diag = &self.coefficients[DIAG];
+        for (w, d) in self.jacobi.iter_mut().zip(diag) {
+            *w = if *d > 0.0 { OMEGA / d } else { 0.0 };
+        }
+        for (p, d) in self.prolongation.iter_mut().zip(diag) {
+            *p = if *d > 0.0 { OVER_CORRECTION } else { 0.0 };
+        }
     }
 }
 
@@ -513,32 +524,14 @@ impl Multigrid {
     /// Sets up the hierarchy for C with bond weights −ξ_c n(x) n(x′) and diagonal `diag`
     /// (zero where n = 0, the sites outside the solve).
     pub fn setup(&mut self, n: &[f64], diag: &[f64], xi_c: f64) {
+        // The finest level keeps C's own form: its diagonal, and n for the bonds.
         let fine = &mut self.levels[0];
-        let m = fine.m;
-        for_rows(&mut fine.stencil, m, |j, row| {
-            for (i, s) in row.iter_mut().enumerate() {
-                let x = j * m + i;
-                *s = [0.0; 5];
-                if diag[x] > 0.0 {
-                    s[DIAG] = diag[x];
-                    for (k, (dx, dy)) in FORWARD.iter().enumerate() {
-                        let ni = (i as isize + dx).rem_euclid(m as isize) as usize;
-                        let nj = (j as isize + dy).rem_euclid(m as isize) as usize;
-                        let y = nj * m + ni;
-                        if diag[y] > 0.0 {
-                            s[1 + k] = -xi_c * n[x] * n[y];
-                        }
-                    }
-                }
-            }
-        });
-        fine.finish();
+        fine.coefficients[DIAG].copy_from_slice(diag);
+        fine.set_steps();
         let mut weights = fine.weights.take().unwrap_or_default();
         weights.xi_c = xi_c;
-        weights.n.resize(m * m, 0.0);
-        for ((w, n), d) in weights.n.iter_mut().zip(n).zip(diag) {
-            *w = if *d > 0.0 { *n } else { 0.0 };
-        }
+        weights.n.clear();
+        weights.n.extend(n.iter().zip(diag).map(|(n, d)| if *d > 0.0 { *n } else { 0.0 }));
         fine.weights = Some(weights);
         for k in 1..self.levels.len() {
             let (fine, coarse) = self.levels.split_at_mut(k);
