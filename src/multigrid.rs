@@ -85,14 +85,14 @@ const COARSEST_SIDE: usize = 6;
 /// (Vaněk's classic remedy for unsmoothed aggregation). Any value in (0, 2) keeps the cycle
 /// symmetric positive definite. Measured at full size with the V-cycle, iterations per solve at
 /// χ = 0.1 and χ = 0.001: 1.0 → 7.1 and 18.7; 1.4 → 6.7 and 11.6; 1.5 → 7.3 and 10.7; 1.8 → 9.2
-/// and 10.2. With the W-cycle at χ = 0.001: 1.3 → 8.9, 1.5 → 8.3, 1.7 → 8.0; but with three
+/// and 10.2. With the W-cycle at χ = 0.001 (over 100 steps): 1.3 → 8.9, 1.5 → 8.3, 1.7 → 8.0; but with three
 /// corrections per level 1.7 diverges, so 1.5 keeps a margin.
 const OVER_CORRECTION: f64 = 1.5;
 
 /// Coarse corrections per visit of every level but the finest: 1 is a V-cycle, 2 a W-cycle.
 /// Unsmoothed aggregation loses accuracy level by level; visiting the coarse levels twice makes
 /// up for it at little cost (they hold a third of the sites). Measured at full size, χ = 0.001:
-/// 10.7 iterations per warm-started solve with the V-cycle, 8.3 with the W-cycle (18 → 12 from a
+/// 10.7 iterations per warm-started solve with the V-cycle, 8.6 with the W-cycle (18 → 12 from a
 /// cold start); three corrections gain no more.
 const COARSE_CORRECTIONS: usize = 2;
 
