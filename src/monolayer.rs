@@ -45,8 +45,9 @@ pub struct LatticeFields {
     pub weight: Vec<f64>,
     /// F(x) = Σ_j w_j f_j.
     pub force: Vec<C64>,
-    /// ξ_s(x) + ξ_c N(x): the denominator of every cell's velocity.
-    pub denominator: Vec<f64>,
+    /// 1/[ξ_s(x) + ξ_c N(x)]: every cell's velocity is its force plus the pull, times this
+    /// (one division per site of the lattice instead of two per site of every patch).
+    pub mobility: Vec<f64>,
     /// ξ_c S(x).
     pub pull: Vec<C64>,
     /// Per-site multiplier of ξ_s (soft < 1 < stiff substrate); 1 everywhere by default.
@@ -66,7 +67,7 @@ impl LatticeFields {
             sum_phi2: vec![0.0; n],
             weight: vec![0.0; n],
             force: vec![ZERO; n],
-            denominator: vec![0.0; n],
+            mobility: vec![0.0; n],
             pull: vec![ZERO; n],
             substrate: vec![1.0; n],
             xi_s: vec![0.0; n],
@@ -449,26 +450,28 @@ impl Monolayer {
             counters.iterations += stats.iterations as u64;
             counters.max_residual = counters.max_residual.max(stats.residual);
             self.last_solve = stats;
-            for (((d, pl), (&xs, &nb)), &s) in lat
-                .denominator
+            for (((mob, pl), (&xs, &nb)), &s) in lat
+                .mobility
                 .iter_mut()
                 .zip(lat.pull.iter_mut())
                 .zip(lat.xi_s.iter().zip(&solver.weight_nb))
                 .zip(&solver.velocity_nb)
             {
-                *d = xs + xi_c * nb;
+                *mob = 1.0 / (xs + xi_c * nb);
                 *pl = s * xi_c;
             }
         } else if active {
-            lat.denominator.copy_from_slice(&lat.xi_s);
+            for (mob, xs) in lat.mobility.iter_mut().zip(&lat.xi_s) {
+                *mob = 1.0 / xs;
+            }
             lat.pull.fill(ZERO);
         } else {
-            lat.denominator.fill(p.xi_relax);
+            lat.mobility.fill(1.0 / p.xi_relax);
             lat.pull.fill(ZERO);
         }
 
         counters.time(Stage::Velocity, || {
-            let drag = Drag { denominator: &lat.denominator, pull: &lat.pull };
+            let drag = Drag { mobility: &lat.mobility, pull: &lat.pull };
             par::for_each_mut(cells, |_, c| {
                 let fields = MotionFields {
                     phi: &c.phi,

@@ -1,6 +1,8 @@
 //! The equation of motion (Eq. 1) on each patch, given the lattice friction fields:
 //!
 //!   v_i(x) = [f_i(x) + ξ_c S(x)] / [ξ_s(x) + ξ_c N(x)]        (Eq. 2, see [`crate::friction`])
+//!
+//! (the division is a product with the mobility 1/[ξ_s + ξ_c N], computed once per lattice site)
 //!   ∂_t φ_i = −v_i · ∇φ_i − J₀ μ_i                           (Eq. 1)
 //!
 //! During relaxation ξ_c = 0 and ξ_s is replaced by ξ_relax, so v_i = f_i / ξ_relax.
@@ -29,8 +31,8 @@ pub fn friction_weight(kind: FrictionWeights, phi: f64, threshold: f64) -> f64 {
 
 /// Lattice fields the velocity of every cell is built from.
 pub struct Drag<'a> {
-    /// ξ_s(x) + ξ_c N(x).
-    pub denominator: &'a [f64],
+    /// 1/[ξ_s(x) + ξ_c N(x)].
+    pub mobility: &'a [f64],
     /// ξ_c S(x), x and y as re and im.
     pub pull: &'a [C64],
 }
@@ -51,15 +53,15 @@ pub fn velocity_and_rate(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j
     for run in patch.runs(l) {
         let len = run.len;
         let f = Neighbourhood::new(c.phi, patch, run.b, run.a0, len);
-        let den = &drag.denominator[run.global..][..len];
+        let mobility = &drag.mobility[run.global..][..len];
         let pull = &drag.pull[run.global..][..len];
         let (mu, fx, fy) = (&c.mu[run.padded..][..len], &c.fx[run.padded..][..len], &c.fy[run.padded..][..len]);
         let vx_out = &mut c.vx[run.padded..][..len];
         let vy_out = &mut c.vy[run.padded..][..len];
         let rate = &mut c.rate[run.padded..][..len];
         for k in 0..len {
-            let vx = (fx[k] + pull[k].re) / den[k];
-            let vy = (fy[k] + pull[k].im) / den[k];
+            let vx = (fx[k] + pull[k].re) * mobility[k];
+            let vy = (fy[k] + pull[k].im) * mobility[k];
             vx_out[k] = vx;
             vy_out[k] = vy;
             let (gx, gy) = match advection {
@@ -94,13 +96,13 @@ mod tests {
         let fx = vec![2.0; n];
         let fy = vec![0.0; n];
         let (mut vx, mut vy, mut rate) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        let den = vec![2.0; l * l];
+        let mobility = vec![0.5; l * l];
         let pull = vec![C64::new(0.0, 0.0); l * l];
         for adv in [Advection::Central, Advection::Upwind] {
             velocity_and_rate(
                 patch,
                 MotionFields { phi: &phi, mu: &mu, fx: &fx, fy: &fy, vx: &mut vx, vy: &mut vy, rate: &mut rate },
-                &Drag { denominator: &den, pull: &pull },
+                &Drag { mobility: &mobility, pull: &pull },
                 l,
                 1.0,
                 adv,
