@@ -29,7 +29,7 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::lattice::neighbour_sum8;
+use crate::lattice::neighbour_sum8_row;
 use crate::multigrid::{CycleWork, Multigrid};
 use crate::par;
 
@@ -147,46 +147,52 @@ impl FrictionSolver {
     /// initial guess.
     pub fn solve(&mut self, pb: &FrictionProblem, stage: HeunStage) -> Result<SolveStats, SolveError> {
         let l = self.l;
-        if stage == HeunStage::Corrector {
-            for (u, d) in self.mean_velocity.iter_mut().zip(&self.corrector_shift) {
-                *u += d;
-            }
-        }
         neighbour_sum8(pb.weight, &mut self.weight_nb, l);
-
-        // C's diagonal; sites with n = 0 are outside the solve.
         self.weight.copy_from_slice(pb.weight);
+        // C's diagonal; sites with n = 0 are outside the solve.
+        let weight_nb = &self.weight_nb;
+        par::for_each_chunk_mut(&mut self.diag, l, |y, row| {
+            for (i, d) in row.iter_mut().enumerate() {
+                let x = y * l + i;
+                let n = pb.weight[x];
+                *d = if n > 0.0 { n * (pb.xi_s[x] + pb.xi_c * weight_nb[x]) } else { 0.0 };
+            }
+        });
+        // Each component takes its part of F and of the initial guess (the corrector's is one
+        // step's drift ahead), zero outside the solve.
+        let shift = (stage == HeunStage::Corrector).then_some(&self.corrector_shift[..]);
+        let (u, diag) = (&self.mean_velocity, &self.diag);
         let [cx, cy] = &mut self.components;
-        for x in 0..l * l {
-            let n = pb.weight[x];
-            let (d, f, u) = if n > 0.0 {
-                (n * (pb.xi_s[x] + pb.xi_c * self.weight_nb[x]), pb.force[x], self.mean_velocity[x])
-            } else {
-                (0.0, ZERO, ZERO)
-            };
-            self.diag[x] = d;
-            (cx.rhs[x], cy.rhs[x]) = (f.re, f.im);
-            (cx.x[x], cy.x[x]) = (u.re, u.im);
-        }
+        par::join(|| cx.load(pb.force, u, shift, diag, |z| z.re), || cy.load(pb.force, u, shift, diag, |z| z.im));
         self.mg.setup(&self.weight, &self.diag, pb.xi_c);
         let stats = self.pcg(pb);
         let [cx, cy] = &self.components;
-        for ((u, x), y) in self.mean_velocity.iter_mut().zip(&cx.x).zip(&cy.x) {
-            *u = C64::new(*x, *y);
-        }
+        let chunk = l * par::band_rows(l);
+        par::for_each_chunk_mut(&mut self.mean_velocity, chunk, |k, band| {
+            let o = k * chunk;
+            for (i, u) in band.iter_mut().enumerate() {
+                *u = C64::new(cx.x[o + i], cy.x[o + i]);
+            }
+        });
+        let (u, n) = (&self.mean_velocity, &self.weight);
         match stage {
-            HeunStage::Predictor => self.predictor_solution.copy_from_slice(&self.mean_velocity),
+            HeunStage::Predictor => self.predictor_solution.copy_from_slice(u),
             HeunStage::Corrector => {
-                for ((d, u), p) in
-                    self.corrector_shift.iter_mut().zip(&self.mean_velocity).zip(&self.predictor_solution)
-                {
-                    *d = u - p;
-                }
+                let predictor = &self.predictor_solution;
+                par::for_each_chunk_mut(&mut self.corrector_shift, chunk, |k, band| {
+                    let o = k * chunk;
+                    for (i, d) in band.iter_mut().enumerate() {
+                        *d = u[o + i] - predictor[o + i];
+                    }
+                });
             }
         }
-        for ((v, u), n) in self.velocity.iter_mut().zip(&self.mean_velocity).zip(&self.weight) {
-            *v = u * *n;
-        }
+        par::for_each_chunk_mut(&mut self.velocity, chunk, |k, band| {
+            let o = k * chunk;
+            for (i, v) in band.iter_mut().enumerate() {
+                *v = u[o + i] * n[o + i];
+            }
+        });
         neighbour_sum8(&self.velocity, &mut self.velocity_nb, l);
         stats
     }
@@ -255,6 +261,14 @@ impl Component {
         Component { rhs: v(), x: v(), r: v(), z: v(), p: v(), q: v(), work: mg.work() }
     }
 
+    /// rhs = part(F) and x = part(u + shift) on the sites in the solve, 0 elsewhere.
+    fn load(&mut self, force: &[C64], u: &[C64], shift: Option<&[C64]>, diag: &[f64], part: impl Fn(C64) -> f64) {
+        for (x, (rhs, sol)) in self.rhs.iter_mut().zip(self.x.iter_mut()).enumerate() {
+            (*rhs, *sol) =
+                if diag[x] > 0.0 { (part(force[x]), part(u[x] + shift.map_or(ZERO, |s| s[x]))) } else { (0.0, 0.0) };
+        }
+    }
+
     /// Conjugate gradients on C x = rhs, preconditioned by one multigrid cycle, until
     /// ‖rhs − C x‖ ≤ target.
     fn pcg(&mut self, mg: &Multigrid, target: f64, max_iterations: usize) -> Outcome {
@@ -296,6 +310,16 @@ impl Component {
         }
         done(max_iterations, rr, Some(""))
     }
+}
+
+/// dst = Σ_{N8} src, in row bands across threads (each site's sum is its own).
+fn neighbour_sum8<T: Copy + Send + Sync + std::ops::Add<Output = T>>(src: &[T], dst: &mut [T], l: usize) {
+    let rows = par::band_rows(l);
+    par::for_each_chunk_mut(dst, l * rows, |k, band| {
+        for (r, row) in band.chunks_mut(l).enumerate() {
+            neighbour_sum8_row(src, row, k * rows + r, l);
+        }
+    });
 }
 
 /// Σ a·b in site order.
