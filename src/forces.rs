@@ -24,20 +24,21 @@ pub fn force_density(
     fy: &mut [f64],
 ) {
     let (qxx, qxy) = (q_hat[0], q_hat[1]);
+    let phi_weighted = passive == PassiveForce::PhiGradMu;
+    let w = patch.w;
     for b in 0..patch.h {
-        let p = row_neighbourhood(phi, patch, b);
-        let m = row_neighbourhood(mu, patch, b);
-        let ox = row_mut(fx, patch, b);
-        let oy = row_mut(fy, patch, b);
-        for k in 0..patch.w {
-            let (mx, my) = m.gradient(k);
-            let (px, py) = p.gradient(k);
-            let w = match passive {
-                PassiveForce::GradMu => 1.0,
-                PassiveForce::PhiGradMu => p.c[k],
-            };
-            ox[k] = -w * mx - zeta * (qxx * px + qxy * py);
-            oy[k] = -w * my - zeta * (qxy * px - qxx * py);
+        let (p, m) = (row_neighbourhood(phi, patch, b), row_neighbourhood(mu, patch, b));
+        // Rows of one length, so that the loop runs without bounds checks.
+        let (pc, pxm, pxp, pym, pyp) = (&p.c[..w], &p.xm[..w], &p.xp[..w], &p.ym[..w], &p.yp[..w]);
+        let (mxm, mxp, mym, myp) = (&m.xm[..w], &m.xp[..w], &m.ym[..w], &m.yp[..w]);
+        let ox = &mut row_mut(fx, patch, b)[..w];
+        let oy = &mut row_mut(fy, patch, b)[..w];
+        for k in 0..w {
+            let (mx, my) = (0.5 * (mxp[k] - mxm[k]), 0.5 * (myp[k] - mym[k]));
+            let (px, py) = (0.5 * (pxp[k] - pxm[k]), 0.5 * (pyp[k] - pym[k]));
+            let weight = if phi_weighted { pc[k] } else { 1.0 };
+            ox[k] = -weight * mx - zeta * (qxx * px + qxy * py);
+            oy[k] = -weight * my - zeta * (qxy * px - qxx * py);
         }
     }
 }
