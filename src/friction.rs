@@ -282,12 +282,10 @@ impl Component {
         if rr <= target_sq {
             return done(0, rr, None);
         }
-        mg.precondition(&mut self.work, &self.r, &mut self.z);
+        let mut rz = mg.precondition(&mut self.work, &self.r, &mut self.z);
         self.p.copy_from_slice(&self.z);
-        let mut rz = dot(&self.r, &self.z);
         for it in 1..=max_iterations {
-            mg.apply(&self.p, &mut self.q);
-            let alpha = rz / dot(&self.p, &self.q);
+            let alpha = rz / mg.apply(&self.p, &mut self.q);
             if !alpha.is_finite() {
                 return done(it, rr, Some(": breakdown (non-finite step)"));
             }
@@ -300,8 +298,7 @@ impl Component {
             if rr <= target_sq {
                 return done(it, rr, None);
             }
-            mg.precondition(&mut self.work, &self.r, &mut self.z);
-            let rz_new = dot(&self.r, &self.z);
+            let rz_new = mg.precondition(&mut self.work, &self.r, &mut self.z);
             let beta = rz_new / rz;
             rz = rz_new;
             for (p, z) in self.p.iter_mut().zip(&self.z) {

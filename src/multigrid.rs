@@ -219,6 +219,8 @@ struct Work {
     x: Vec<Real>,
     b: Vec<Real>,
     t: Vec<Real>,
+    /// One row of work space for the products.
+    column: Vec<Real>,
 }
 
 /// The work space of one cycle at a time: one per velocity component, so that the two can run
@@ -337,11 +339,10 @@ impl Level {
     }
 
     /// t = b − A x.
-    fn residual(&self, x: &[Real], b: &[Real], t: &mut [Real]) {
+    fn residual(&self, x: &[Real], b: &[Real], t: &mut [Real], column: &mut [Real]) {
         let m = self.m;
-        let mut column = vec![0.0; m];
         for (j, row) in t.chunks_mut(m).enumerate() {
-            self.product_row(x, j, row, &mut column);
+            self.product_row(x, j, row, column);
             for (t, b) in row.iter_mut().zip(row_of(b, j, m)) {
                 *t = b - *t;
             }
@@ -350,13 +351,14 @@ impl Level {
 
     /// coarse_b = Pᵀ (b − A x): the residual summed over each aggregate, a pair of rows at a
     /// time (the residual itself is not kept).
-    fn restrict_residual(&self, x: &[Real], b: &[Real], coarse_b: &mut [Real]) {
+    /// `scratch` holds at least two rows.
+    fn restrict_residual(&self, x: &[Real], b: &[Real], coarse_b: &mut [Real], scratch: &mut [Real]) {
         let (m, mc) = (self.m, self.coarse_side());
-        let (mut t, mut column) = (vec![0.0; m], vec![0.0; m]);
+        let (t, column) = scratch[..2 * m].split_at_mut(m);
         for (jc, coarse_row) in coarse_b.chunks_mut(mc).enumerate() {
             coarse_row.fill(0.0);
             for j in (2 * jc..2 * jc + 2).filter(|&j| j < m) {
-                self.product_row(x, j, &mut t, &mut column);
+                self.product_row(x, j, t, column);
                 let b = row_of(b, j, m);
                 let (pairs, odd) = t.split_at(m & !1);
                 for ((c, t), b) in coarse_row.iter_mut().zip(pairs.chunks_exact(2)).zip(b.chunks_exact(2)) {
@@ -377,8 +379,8 @@ impl Level {
     }
 
     /// x += ω D⁻¹ (b − A x), with t as work space.
-    fn smooth(&self, x: &mut [Real], b: &[Real], t: &mut [Real]) {
-        self.residual(x, b, t);
+    fn smooth(&self, x: &mut [Real], b: &[Real], t: &mut [Real], column: &mut [Real]) {
+        self.residual(x, b, t, column);
         for ((x, t), w) in x.iter_mut().zip(&*t).zip(&self.jacobi) {
             *x += t * w;
         }
@@ -569,7 +571,7 @@ impl Multigrid {
                 let n = level.m * level.m;
                 // The finest level's solution and right-hand side are the caller's.
                 let own = if k == 0 { 0 } else { n };
-                Work { x: vec![0.0; own], b: vec![0.0; own], t: vec![0.0; n] }
+                Work { x: vec![0.0; own], b: vec![0.0; own], t: vec![0.0; n], column: vec![0.0; level.m] }
             })
             .collect();
         let n = self.levels[0].m * self.levels[0].m;
@@ -603,31 +605,40 @@ impl Multigrid {
     }
 
     /// out = C v, the finest level's operator (zero on the sites outside the solve).
-    pub fn apply(&self, v: &[f64], out: &mut [f64]) {
+    /// Returns ⟨v, C v⟩ (summed row by row), which CG needs next, while the rows are at hand.
+    pub fn apply(&self, v: &[f64], out: &mut [f64]) -> f64 {
         let (fine, m) = (&self.levels[0], self.levels[0].m);
         let w = fine.weights.as_ref().expect("set up");
         let mut column = vec![0.0; m];
+        let mut dot = 0.0;
         for (j, row) in out.chunks_mut(m).enumerate() {
             weights_row(&w.n, &w.diag, w.xi_c, v, m, j, row, &mut column);
+            dot += row.iter().zip(row_of(v, j, m)).map(|(a, b)| a * b).sum::<f64>();
         }
+        dot
     }
 
-    /// z = M r: one symmetric cycle from zero.
-    pub fn precondition(&self, work: &mut CycleWork, r: &[f64], z: &mut [f64]) {
-        let (mut rr, mut zz, mut t) =
-            (std::mem::take(&mut work.r), std::mem::take(&mut work.z), std::mem::take(&mut work.levels[0].t));
+    /// z = M r: one symmetric cycle from zero. Returns ⟨r, z⟩, which CG needs next.
+    pub fn precondition(&self, work: &mut CycleWork, r: &[f64], z: &mut [f64]) -> f64 {
+        let (mut rr, mut zz) = (std::mem::take(&mut work.r), std::mem::take(&mut work.z));
+        let mut fine = std::mem::take(&mut work.levels[0]);
         for (a, b) in rr.iter_mut().zip(r) {
             *a = *b as Real;
         }
-        self.cycle(work, 0, &mut zz, &rr, &mut t);
-        for (a, b) in z.iter_mut().zip(&zz) {
+        self.cycle(work, 0, &mut zz, &rr, &mut fine.t, &mut fine.column);
+        let mut dot = 0.0;
+        for ((a, b), r) in z.iter_mut().zip(&zz).zip(r) {
             *a = *b as f64;
+            dot += *a * r;
         }
-        (work.r, work.z, work.levels[0].t) = (rr, zz, t);
+        (work.r, work.z, work.levels[0]) = (rr, zz, fine);
+        dot
     }
 
     /// x ≈ A_k⁻¹ b from zero on level k: a smoothing sweep, coarse corrections, a smoothing sweep.
-    fn cycle(&self, work: &mut CycleWork, k: usize, x: &mut [Real], b: &[Real], t: &mut [Real]) {
+    /// `t` and `column` are work space of the level (a field and a row).
+    #[allow(clippy::too_many_arguments)]
+    fn cycle(&self, work: &mut CycleWork, k: usize, x: &mut [Real], b: &[Real], t: &mut [Real], column: &mut [Real]) {
         if k + 1 == self.levels.len() {
             self.coarsest.solve(x, b, &mut work.coarsest);
             return;
@@ -637,11 +648,11 @@ impl Multigrid {
         level.smooth_from_zero(x, b);
         let corrections = if k == 0 { 1 } else { COARSE_CORRECTIONS };
         for _ in 0..corrections {
-            level.restrict_residual(x, b, &mut coarse.b);
-            self.cycle(work, k + 1, &mut coarse.x, &coarse.b, &mut coarse.t);
+            level.restrict_residual(x, b, &mut coarse.b, t);
+            self.cycle(work, k + 1, &mut coarse.x, &coarse.b, &mut coarse.t, &mut coarse.column);
             level.prolong(&coarse.x, x);
         }
-        level.smooth(x, b, t);
+        level.smooth(x, b, t, column);
         work.levels[k + 1] = coarse;
     }
 }
