@@ -58,6 +58,23 @@ pub struct LatticeFields {
     pub phi_sum: Vec<f64>,
     /// Σ_i φ_i v_i (Eq. S4), filled on request.
     pub velocity: Vec<C64>,
+    /// n and F gathered together (then copied into `weight` and `force`).
+    weighted_force: Vec<WeightedForce>,
+}
+
+/// A cell's friction weight and weighted force at one site: summed over the cells in one walk
+/// over their patches, each in the same order as on its own.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct WeightedForce {
+    n: f64,
+    f: C64,
+}
+
+impl std::ops::AddAssign for WeightedForce {
+    fn add_assign(&mut self, o: Self) {
+        self.n += o.n;
+        self.f += o.f;
+    }
 }
 
 impl LatticeFields {
@@ -73,6 +90,7 @@ impl LatticeFields {
             xi_s: vec![0.0; n],
             phi_sum: vec![0.0; n],
             velocity: vec![ZERO; n],
+            weighted_force: vec![WeightedForce::default(); n],
         }
     }
 }
@@ -428,10 +446,20 @@ impl Monolayer {
 
         if xi_c > 0.0 {
             counters.time(Stage::Gather, || {
-                gather(&mut lat.weight, 0.0, cells, l, |c, i| friction_weight(weights, c.phi[i], threshold));
-                gather(&mut lat.force, ZERO, cells, l, |c, i| {
-                    let w = friction_weight(weights, c.phi[i], threshold);
-                    C64::new(w * c.fx[i], w * c.fy[i])
+                gather(&mut lat.weighted_force, WeightedForce::default(), cells, l, |c, i| {
+                    let n = friction_weight(weights, c.phi[i], threshold);
+                    WeightedForce { n, f: C64::new(n * c.fx[i], n * c.fy[i]) }
+                });
+                let wf = &lat.weighted_force;
+                par::for_each_chunk_mut(&mut lat.weight, l, |y, row| {
+                    for (n, wf) in row.iter_mut().zip(&wf[y * l..]) {
+                        *n = wf.n;
+                    }
+                });
+                par::for_each_chunk_mut(&mut lat.force, l, |y, row| {
+                    for (f, wf) in row.iter_mut().zip(&wf[y * l..]) {
+                        *f = wf.f;
+                    }
                 });
             });
             let solver = &mut self.solver;
