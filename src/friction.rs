@@ -29,7 +29,7 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::lattice::neighbour_sum8_row;
+use crate::lattice::neighbour_sum8;
 use crate::multigrid::{CycleWork, Multigrid};
 use crate::par;
 
@@ -82,8 +82,6 @@ pub struct FrictionSolver {
     mg: Multigrid,
     /// N(x) = Σ_{N8} n.
     pub weight_nb: Vec<f64>,
-    /// n(x), the weights of the last solve.
-    weight: Vec<f64>,
     /// Diagonal of C, zero on sites with n = 0 (excluded from the solve).
     diag: Vec<f64>,
     /// The x and y components' CG.
@@ -109,7 +107,6 @@ impl FrictionSolver {
         FrictionSolver {
             l,
             weight_nb: vec![0.0; n],
-            weight: vec![0.0; n],
             diag: vec![0.0; n],
             components: std::array::from_fn(|_| Component::new(n, &mg)),
             mean_velocity: vec![ZERO; n],
@@ -148,15 +145,11 @@ impl FrictionSolver {
     pub fn solve(&mut self, pb: &FrictionProblem, stage: HeunStage) -> Result<SolveStats, SolveError> {
         let l = self.l;
         neighbour_sum8(pb.weight, &mut self.weight_nb, l);
-        self.weight.copy_from_slice(pb.weight);
         // C's diagonal; sites with n = 0 are outside the solve.
         let weight_nb = &self.weight_nb;
-        par::for_each_chunk_mut(&mut self.diag, l, |y, row| {
-            for (i, d) in row.iter_mut().enumerate() {
-                let x = y * l + i;
-                let n = pb.weight[x];
-                *d = if n > 0.0 { n * (pb.xi_s[x] + pb.xi_c * weight_nb[x]) } else { 0.0 };
-            }
+        par::for_each_mut(&mut self.diag, |x, d| {
+            let n = pb.weight[x];
+            *d = if n > 0.0 { n * (pb.xi_s[x] + pb.xi_c * weight_nb[x]) } else { 0.0 };
         });
         // Each component takes its part of F and of the initial guess (the corrector's is one
         // step's drift ahead), zero outside the solve.
@@ -164,35 +157,19 @@ impl FrictionSolver {
         let (u, diag) = (&self.mean_velocity, &self.diag);
         let [cx, cy] = &mut self.components;
         par::join(|| cx.load(pb.force, u, shift, diag, |z| z.re), || cy.load(pb.force, u, shift, diag, |z| z.im));
-        self.mg.setup(&self.weight, &self.diag, pb.xi_c);
+        self.mg.setup(pb.weight, &self.diag, pb.xi_c);
         let stats = self.pcg(pb);
         let [cx, cy] = &self.components;
-        let chunk = l * par::band_rows(l);
-        par::for_each_chunk_mut(&mut self.mean_velocity, chunk, |k, band| {
-            let o = k * chunk;
-            for (i, u) in band.iter_mut().enumerate() {
-                *u = C64::new(cx.x[o + i], cy.x[o + i]);
-            }
-        });
-        let (u, n) = (&self.mean_velocity, &self.weight);
+        par::for_each_mut(&mut self.mean_velocity, |x, u| *u = C64::new(cx.x[x], cy.x[x]));
+        let u = &self.mean_velocity;
         match stage {
             HeunStage::Predictor => self.predictor_solution.copy_from_slice(u),
             HeunStage::Corrector => {
                 let predictor = &self.predictor_solution;
-                par::for_each_chunk_mut(&mut self.corrector_shift, chunk, |k, band| {
-                    let o = k * chunk;
-                    for (i, d) in band.iter_mut().enumerate() {
-                        *d = u[o + i] - predictor[o + i];
-                    }
-                });
+                par::for_each_mut(&mut self.corrector_shift, |x, d| *d = u[x] - predictor[x]);
             }
         }
-        par::for_each_chunk_mut(&mut self.velocity, chunk, |k, band| {
-            let o = k * chunk;
-            for (i, v) in band.iter_mut().enumerate() {
-                *v = u[o + i] * n[o + i];
-            }
-        });
+        par::for_each_mut(&mut self.velocity, |x, v| *v = u[x] * pb.weight[x]);
         neighbour_sum8(&self.velocity, &mut self.velocity_nb, l);
         stats
     }
@@ -307,16 +284,6 @@ impl Component {
         }
         done(max_iterations, rr, Some(""))
     }
-}
-
-/// dst = Σ_{N8} src, in row bands across threads (each site's sum is its own).
-fn neighbour_sum8<T: Copy + Send + Sync + std::ops::Add<Output = T>>(src: &[T], dst: &mut [T], l: usize) {
-    let rows = par::band_rows(l);
-    par::for_each_chunk_mut(dst, l * rows, |k, band| {
-        for (r, row) in band.chunks_mut(l).enumerate() {
-            neighbour_sum8_row(src, row, k * rows + r, l);
-        }
-    });
 }
 
 /// Σ a·b in site order.

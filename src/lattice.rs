@@ -6,6 +6,8 @@
 
 use std::ops::Add;
 
+use crate::par;
+
 /// A w×h window of the periodic L×L lattice, with origin (x0, y0) ∈ [0, L)².
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Patch {
@@ -126,6 +128,15 @@ impl<'a> Neighbourhood<'a> {
     pub fn gradient(&self, k: usize) -> (f64, f64) {
         (0.5 * (self.xp[k] - self.xm[k]), 0.5 * (self.yp[k] - self.ym[k]))
     }
+
+    /// The same at every site of the run, in order: zipped slices, so a loop over them carries
+    /// no bounds checks and runs in SIMD lanes.
+    #[inline(always)]
+    pub fn gradients(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        let x = self.xp.iter().zip(self.xm);
+        let y = self.yp.iter().zip(self.ym);
+        x.zip(y).map(|((xp, xm), (yp, ym))| (0.5 * (xp - xm), 0.5 * (yp - ym)))
+    }
 }
 
 /// A whole patch row (the `w` interior sites of row b) as a [`Neighbourhood`].
@@ -149,12 +160,16 @@ pub fn wrap(x: i64, l: usize) -> usize {
 
 /// dst(x) = Σ over the 8 neighbours x' of x of src(x'), periodic. This is the sum over N(x) in
 /// Eq. 2 of the paper.
-pub fn neighbour_sum8<T: Copy + Add<Output = T>>(src: &[T], dst: &mut [T], l: usize) {
+/// Row bands run across threads (each site's sum is its own, so the bits do not change).
+pub fn neighbour_sum8<T: Copy + Send + Sync + Add<Output = T>>(src: &[T], dst: &mut [T], l: usize) {
     debug_assert_eq!(src.len(), l * l);
     debug_assert_eq!(dst.len(), l * l);
-    for y in 0..l {
-        neighbour_sum8_row(src, &mut dst[y * l..(y + 1) * l], y, l);
-    }
+    let rows = par::band_rows(l);
+    par::for_each_chunk_mut(dst, l * rows, |k, band| {
+        for (r, row) in band.chunks_mut(l).enumerate() {
+            neighbour_sum8_row(src, row, k * rows + r, l);
+        }
+    });
 }
 
 /// One row of [`neighbour_sum8`]: lets callers split the lattice into row bands.

@@ -451,16 +451,8 @@ impl Monolayer {
                     WeightedForce { n, f: C64::new(n * c.fx[i], n * c.fy[i]) }
                 });
                 let wf = &lat.weighted_force;
-                par::for_each_chunk_mut(&mut lat.weight, l, |y, row| {
-                    for (n, wf) in row.iter_mut().zip(&wf[y * l..]) {
-                        *n = wf.n;
-                    }
-                });
-                par::for_each_chunk_mut(&mut lat.force, l, |y, row| {
-                    for (f, wf) in row.iter_mut().zip(&wf[y * l..]) {
-                        *f = wf.f;
-                    }
-                });
+                par::for_each_mut(&mut lat.weight, |x, n| *n = wf[x].n);
+                par::for_each_mut(&mut lat.force, |x, f| *f = wf[x].f);
             });
             let solver = &mut self.solver;
             let problem = FrictionProblem {
