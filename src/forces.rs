@@ -25,20 +25,14 @@ pub fn force_density(
 ) {
     let (qxx, qxy) = (q_hat[0], q_hat[1]);
     let phi_weighted = passive == PassiveForce::PhiGradMu;
-    let w = patch.w;
     for b in 0..patch.h {
         let (p, m) = (row_neighbourhood(phi, patch, b), row_neighbourhood(mu, patch, b));
-        // Rows of one length, so that the loop runs without bounds checks.
-        let (pc, pxm, pxp, pym, pyp) = (&p.c[..w], &p.xm[..w], &p.xp[..w], &p.ym[..w], &p.yp[..w]);
-        let (mxm, mxp, mym, myp) = (&m.xm[..w], &m.xp[..w], &m.ym[..w], &m.yp[..w]);
-        let ox = &mut row_mut(fx, patch, b)[..w];
-        let oy = &mut row_mut(fy, patch, b)[..w];
-        for k in 0..w {
-            let (mx, my) = (0.5 * (mxp[k] - mxm[k]), 0.5 * (myp[k] - mym[k]));
-            let (px, py) = (0.5 * (pxp[k] - pxm[k]), 0.5 * (pyp[k] - pym[k]));
-            let weight = if phi_weighted { pc[k] } else { 1.0 };
-            ox[k] = -weight * mx - zeta * (qxx * px + qxy * py);
-            oy[k] = -weight * my - zeta * (qxy * px - qxx * py);
+        let out = row_mut(fx, patch, b).iter_mut().zip(row_mut(fy, patch, b).iter_mut());
+        let grads = m.gradients().zip(p.gradients()).zip(p.c);
+        for ((ox, oy), (((mx, my), (px, py)), &c)) in out.zip(grads) {
+            let weight = if phi_weighted { c } else { 1.0 };
+            *ox = -weight * mx - zeta * (qxx * px + qxy * py);
+            *oy = -weight * my - zeta * (qxy * px - qxx * py);
         }
     }
 }

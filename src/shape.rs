@@ -22,12 +22,9 @@ pub fn shape_tensor(patch: Patch, phi: &[f64]) -> [f64; 2] {
     // Two partial sums per component (even and odd sites), so that the loop runs in SIMD lanes;
     // the order is fixed, so the bits are too.
     let (mut qxx, mut qxy) = ([0.0; 2], [0.0; 2]);
-    let w = patch.w;
     for b in 0..patch.h {
         let f = row_neighbourhood(phi, patch, b);
-        let (xm, xp, ym, yp) = (&f.xm[..w], &f.xp[..w], &f.ym[..w], &f.yp[..w]);
-        for k in 0..w {
-            let (gx, gy) = (0.5 * (xp[k] - xm[k]), 0.5 * (yp[k] - ym[k]));
+        for (k, (gx, gy)) in f.gradients().enumerate() {
             qxx[k % 2] -= 0.5 * (gx * gx - gy * gy);
             qxy[k % 2] -= gx * gy;
         }
