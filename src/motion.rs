@@ -1,9 +1,9 @@
 //! The equation of motion (Eq. 1) on each patch, given the lattice friction fields:
 //!
 //!   v_i(x) = [f_i(x) + ξ_c S(x)] / [ξ_s(x) + ξ_c N(x)]        (Eq. 2, see [`crate::friction`])
-//!
-//! (the division is a product with the mobility 1/[ξ_s + ξ_c N], computed once per lattice site)
 //!   ∂_t φ_i = −v_i · ∇φ_i − J₀ μ_i                           (Eq. 1)
+//!
+//! The division is a product with the mobility 1/[ξ_s + ξ_c N], computed once per lattice site.
 //!
 //! During relaxation ξ_c = 0 and ξ_s is replaced by ξ_relax, so v_i = f_i / ξ_relax.
 

@@ -295,7 +295,7 @@ impl Level {
     /// independent sites, so it runs in SIMD lanes; the wrapped end site of each shifted pass is
     /// added on its own.
     #[inline]
-    fn apply_row(&self, v: &[Real], j: usize, out: &mut [Real]) {
+    fn stencil_row(&self, v: &[Real], j: usize, out: &mut [Real]) {
         let m = self.m;
         let (jm, jp) = (prev(j, m), next(j, m));
         let (vm, v0, vp) = (row_of(v, jm, m), row_of(v, j, m), row_of(v, jp, m));
@@ -328,7 +328,7 @@ impl Level {
                 let (diag, xi_c) = (&self.coefficients[DIAG], w.xi_c as Real);
                 weights_row(&w.n_real, diag, xi_c, v, self.m, j, out, column)
             }
-            None => self.apply_row(v, j, out),
+            None => self.stencil_row(v, j, out),
         }
     }
 
@@ -353,8 +353,7 @@ impl Level {
     }
 
     /// coarse_b = Pᵀ (b − A x): the residual summed over each aggregate, a pair of rows at a
-    /// time (the residual itself is not kept).
-    /// `scratch` holds at least two rows.
+    /// time (the residual itself is not kept); `scratch` holds at least two rows.
     fn restrict_residual(&self, x: &[Real], b: &[Real], coarse_b: &mut [Real], scratch: &mut [Real]) {
         let (m, mc) = (self.m, self.coarse_side());
         let (t, column) = scratch[..2 * m].split_at_mut(m);

@@ -247,3 +247,63 @@ fn bad_parameters_name_themselves() {
         assert!(e.contains(&format!("`{name}`")), "{e}");
     }
 }
+
+/// Eq. 2 cell by cell: every cell's velocity, as the stepping computes it, satisfies
+///   ξ_s v_i(x) + ξ_c Σ_{x′∈N8(x)} Σ_j w_j(x′) [v_i(x) − v_j(x′)] = f_i(x)
+/// at every site of its patch, with w_j the presence weights, summed here directly over the
+/// cells (not through the lattice fields the solver uses). A wrong factor in the mobility
+/// 1/(ξ_s + ξ_c N) or in the pull ξ_c S, or a sign, breaks it.
+#[test]
+fn every_cell_velocity_satisfies_the_friction_balance() {
+    let (l, w, h) = (64, 30, 30);
+    let cells = vec![
+        (Patch { x0: 10, y0: 10, w, h }, ellipse(w, h, 8.0, 6.0, 0.3)),
+        (Patch { x0: 22, y0: 15, w, h }, ellipse(w, h, 7.0, 6.0, -0.5)),
+    ];
+    let (xi_s, xi_c) = (0.05, 0.7);
+    let p = Params { xi_substrate: xi_s, xi_cell: xi_c, zeta: 0.4, friction_tolerance: 1e-11, ..small(2, l) };
+    let threshold = p.presence_threshold;
+    let mut m = with_cells(p, cells, 0);
+    m.evaluate_now().unwrap();
+    // Every cell's weight and velocity on the lattice (zero off its patch).
+    let maps: Vec<(Vec<f64>, Vec<[f64; 2]>)> = m
+        .cells()
+        .iter()
+        .map(|c| {
+            let (pt, phi, (vx, vy)) = (c.patch(), c.phi(), c.velocity());
+            let (mut wgt, mut vel) = (vec![0.0; l * l], vec![[0.0; 2]; l * l]);
+            for b in 0..pt.h {
+                for a in 0..pt.w {
+                    let x = (pt.y0 + b) * l + pt.x0 + a;
+                    wgt[x] = if phi.at(a, b) > threshold { 1.0 } else { 0.0 };
+                    vel[x] = [vx.at(a, b), vy.at(a, b)];
+                }
+            }
+            (wgt, vel)
+        })
+        .collect();
+    let mut scale: f64 = 0.0;
+    let mut worst: f64 = 0.0;
+    for (i, c) in m.cells().iter().enumerate() {
+        let (pt, (fx, fy)) = (c.patch(), c.force());
+        for b in 1..pt.h - 1 {
+            for a in 1..pt.w - 1 {
+                let (gx, gy) = (pt.x0 + a, pt.y0 + b);
+                let vi = maps[i].1[gy * l + gx];
+                let mut lhs = [xi_s * vi[0], xi_s * vi[1]];
+                for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                    let y = (gy as i64 + dy) as usize * l + (gx as i64 + dx) as usize;
+                    for (wj, vj) in &maps {
+                        lhs[0] += xi_c * wj[y] * (vi[0] - vj[y][0]);
+                        lhs[1] += xi_c * wj[y] * (vi[1] - vj[y][1]);
+                    }
+                }
+                let f = [fx.at(a, b), fy.at(a, b)];
+                scale = scale.max(f[0].abs()).max(f[1].abs());
+                worst = worst.max((lhs[0] - f[0]).abs()).max((lhs[1] - f[1]).abs());
+            }
+        }
+    }
+    assert!(scale > 1e-3, "the cells must carry forces: {scale}");
+    assert!(worst < 1e-7 * scale, "Eq. 2 misses by {worst} (largest force {scale})");
+}
