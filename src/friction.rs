@@ -226,7 +226,6 @@ struct Component {
     /// The solution; on entry to [`Component::pcg`], the initial guess.
     x: Vec<f64>,
     r: Vec<f64>,
-    z: Vec<f64>,
     p: Vec<f64>,
     q: Vec<f64>,
     work: CycleWork,
@@ -235,7 +234,7 @@ struct Component {
 impl Component {
     fn new(n: usize, mg: &Multigrid) -> Self {
         let v = || vec![0.0; n];
-        Component { rhs: v(), x: v(), r: v(), z: v(), p: v(), q: v(), work: mg.work() }
+        Component { rhs: v(), x: v(), r: v(), p: v(), q: v(), work: mg.work() }
     }
 
     /// rhs = part(F) and x = part(u + shift) on the sites in the solve, 0 elsewhere.
@@ -247,7 +246,8 @@ impl Component {
     }
 
     /// Conjugate gradients on C x = rhs, preconditioned by one multigrid cycle, until
-    /// ‖rhs − C x‖ ≤ target.
+    /// ‖rhs − C x‖ ≤ target. The step x += α p is taken in the pass that next updates p (or at
+    /// the end), which reads p anyway: one pass over the vectors fewer per iteration.
     fn pcg(&mut self, mg: &Multigrid, target: f64, max_iterations: usize) -> Outcome {
         let target_sq = target * target;
         let done = |iterations, residual_sq, failure| Outcome { iterations, residual_sq, failure };
@@ -259,27 +259,32 @@ impl Component {
         if rr <= target_sq {
             return done(0, rr, None);
         }
-        let mut rz = mg.precondition(&mut self.work, &self.r, &mut self.z);
-        self.p.copy_from_slice(&self.z);
+        let mut rz = mg.precondition(&mut self.work, &self.r);
+        for (p, z) in self.p.iter_mut().zip(self.work.preconditioned()) {
+            *p = *z as f64;
+        }
         for it in 1..=max_iterations {
             let alpha = rz / mg.apply(&self.p, &mut self.q);
             if !alpha.is_finite() {
                 return done(it, rr, Some(": breakdown (non-finite step)"));
             }
             rr = 0.0;
-            for (((x, r), p), q) in self.x.iter_mut().zip(self.r.iter_mut()).zip(&self.p).zip(&self.q) {
-                *x += p * alpha;
+            for (r, q) in self.r.iter_mut().zip(&self.q) {
                 *r -= q * alpha;
                 rr += *r * *r;
             }
             if rr <= target_sq {
+                for (x, p) in self.x.iter_mut().zip(&self.p) {
+                    *x += p * alpha;
+                }
                 return done(it, rr, None);
             }
-            let rz_new = mg.precondition(&mut self.work, &self.r, &mut self.z);
+            let rz_new = mg.precondition(&mut self.work, &self.r);
             let beta = rz_new / rz;
             rz = rz_new;
-            for (p, z) in self.p.iter_mut().zip(&self.z) {
-                *p = z + *p * beta;
+            for ((x, p), z) in self.x.iter_mut().zip(self.p.iter_mut()).zip(self.work.preconditioned()) {
+                *x += *p * alpha;
+                *p = *z as f64 + *p * beta;
             }
         }
         done(max_iterations, rr, Some(""))
