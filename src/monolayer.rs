@@ -362,9 +362,12 @@ impl Monolayer {
         let mut counters = std::mem::take(&mut self.counters);
         counters.time(Stage::Update, || {
             par::for_each_mut(&mut self.cells, |_, c| {
-                c.phi0.copy_from_slice(&c.phi);
-                c.k1.copy_from_slice(&c.rate);
-                for ((phi, &p0), &k) in c.phi.iter_mut().zip(&c.phi0).zip(&c.rate) {
+                // φ_n and R(φ_n) are kept by swapping buffers, not copying them; the stale
+                // buffers left in φ and R are overwritten whole, φ here and R by the corrector's
+                // evaluation (its padding stays zero in both).
+                std::mem::swap(&mut c.phi0, &mut c.phi);
+                std::mem::swap(&mut c.k1, &mut c.rate);
+                for ((phi, &p0), &k) in c.phi.iter_mut().zip(&c.phi0).zip(&c.k1) {
                     *phi = p0 + dt * k;
                 }
             })
