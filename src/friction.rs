@@ -146,30 +146,35 @@ impl FrictionSolver {
         let l = self.l;
         neighbour_sum8(pb.weight, &mut self.weight_nb, l);
         // C's diagonal; sites with n = 0 are outside the solve.
-        let weight_nb = &self.weight_nb;
-        par::for_each_mut(&mut self.diag, |x, d| {
+        for (x, (d, nb)) in self.diag.iter_mut().zip(&self.weight_nb).enumerate() {
             let n = pb.weight[x];
-            *d = if n > 0.0 { n * (pb.xi_s[x] + pb.xi_c * weight_nb[x]) } else { 0.0 };
-        });
+            *d = if n > 0.0 { n * (pb.xi_s[x] + pb.xi_c * nb) } else { 0.0 };
+        }
         // Each component takes its part of F and of the initial guess (the corrector's is one
         // step's drift ahead), zero outside the solve.
         let shift = (stage == HeunStage::Corrector).then_some(&self.corrector_shift[..]);
         let (u, diag) = (&self.mean_velocity, &self.diag);
         let [cx, cy] = &mut self.components;
-        par::join(|| cx.load(pb.force, u, shift, diag, |z| z.re), || cy.load(pb.force, u, shift, diag, |z| z.im));
+        cx.load(pb.force, u, shift, diag, |z| z.re);
+        cy.load(pb.force, u, shift, diag, |z| z.im);
         self.mg.setup(pb.weight, &self.diag, pb.xi_c);
         let stats = self.pcg(pb);
         let [cx, cy] = &self.components;
-        par::for_each_mut(&mut self.mean_velocity, |x, u| *u = C64::new(cx.x[x], cy.x[x]));
+        for (x, u) in self.mean_velocity.iter_mut().enumerate() {
+            *u = C64::new(cx.x[x], cy.x[x]);
+        }
         let u = &self.mean_velocity;
         match stage {
             HeunStage::Predictor => self.predictor_solution.copy_from_slice(u),
             HeunStage::Corrector => {
-                let predictor = &self.predictor_solution;
-                par::for_each_mut(&mut self.corrector_shift, |x, d| *d = u[x] - predictor[x]);
+                for ((d, u), p) in self.corrector_shift.iter_mut().zip(u).zip(&self.predictor_solution) {
+                    *d = u - p;
+                }
             }
         }
-        par::for_each_mut(&mut self.velocity, |x, v| *v = u[x] * pb.weight[x]);
+        for ((v, u), n) in self.velocity.iter_mut().zip(u).zip(pb.weight) {
+            *v = u * n;
+        }
         neighbour_sum8(&self.velocity, &mut self.velocity_nb, l);
         stats
     }

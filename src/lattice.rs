@@ -6,8 +6,6 @@
 
 use std::ops::Add;
 
-use crate::par;
-
 /// A w×h window of the periodic L×L lattice, with origin (x0, y0) ∈ [0, L)².
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Patch {
@@ -160,21 +158,17 @@ pub fn wrap(x: i64, l: usize) -> usize {
 
 /// dst(x) = Σ over the 8 neighbours x' of x of src(x'), periodic. This is the sum over N(x) in
 /// Eq. 2 of the paper.
-/// Row bands run across threads (each site's sum is its own, so the bits do not change).
-pub fn neighbour_sum8<T: Copy + Send + Sync + Add<Output = T>>(src: &[T], dst: &mut [T], l: usize) {
+pub fn neighbour_sum8<T: Copy + Add<Output = T>>(src: &[T], dst: &mut [T], l: usize) {
     debug_assert_eq!(src.len(), l * l);
     debug_assert_eq!(dst.len(), l * l);
-    let rows = par::band_rows(l);
-    par::for_each_chunk_mut(dst, l * rows, |k, band| {
-        for (r, row) in band.chunks_mut(l).enumerate() {
-            neighbour_sum8_row(src, row, k * rows + r, l);
-        }
-    });
+    for (y, row) in dst.chunks_mut(l).enumerate() {
+        neighbour_sum8_row(src, row, y, l);
+    }
 }
 
-/// One row of [`neighbour_sum8`]: lets callers split the lattice into row bands.
+/// One row of [`neighbour_sum8`].
 #[inline]
-pub fn neighbour_sum8_row<T: Copy + Add<Output = T>>(src: &[T], out: &mut [T], y: usize, l: usize) {
+fn neighbour_sum8_row<T: Copy + Add<Output = T>>(src: &[T], out: &mut [T], y: usize, l: usize) {
     let up = &src[((y + l - 1) % l) * l..][..l];
     let mid = &src[y * l..][..l];
     let dn = &src[((y + 1) % l) * l..][..l];

@@ -453,9 +453,9 @@ impl Monolayer {
                     let n = friction_weight(weights, c.phi[i], threshold);
                     WeightedForce { n, f: C64::new(n * c.fx[i], n * c.fy[i]) }
                 });
-                let wf = &lat.weighted_force;
-                par::for_each_mut(&mut lat.weight, |x, n| *n = wf[x].n);
-                par::for_each_mut(&mut lat.force, |x, f| *f = wf[x].f);
+                for ((n, f), wf) in lat.weight.iter_mut().zip(lat.force.iter_mut()).zip(&lat.weighted_force) {
+                    (*n, *f) = (wf.n, wf.f);
+                }
             });
             let solver = &mut self.solver;
             let problem = FrictionProblem {

@@ -24,13 +24,12 @@
 //! product and vectors stay f64, so the solution meets the stated residual all the same. f32
 //! halves the memory the cycle streams and doubles its SIMD lanes.
 //!
-//! Threads: the hierarchy is built once per solve with its passes split into row bands (each
-//! output site written once, so the bits do not change); it is then read-only, and the cycles of
-//! the two velocity components run side by side, each with its own [`CycleWork`].
+//! Threads: the hierarchy is built once per solve, on one thread (0.24 ms at full size; split
+//! into row bands it took 0.29 ms on two threads, as waking the second worker costs more than
+//! the share it takes, see `par`); it is then read-only, and the cycles of the two velocity
+//! components run side by side, each with its own [`CycleWork`].
 
 use std::ops::{Add, Mul, Sub};
-
-use crate::par;
 
 /// The precision of the multigrid cycle (see the module's notes).
 pub type Real = f32;
@@ -109,9 +108,6 @@ const OVER_CORRECTION: f64 = 1.5;
 /// additive correction on the finest, take 18–43 iterations.
 const COARSE_CORRECTIONS: usize = 2;
 
-/// Levels at least this wide split their setup passes across threads.
-const PARALLEL_SIDE: usize = 64;
-
 /// Damped Jacobi weight: the operators are weakly diagonally dominant M-matrices on every
 /// level (Galerkin aggregation keeps that), so D⁻¹A has its spectrum in [0, 2) and 2/3 keeps the
 /// smoother convergent while damping the highest modes. One sweep before and one after each
@@ -168,22 +164,6 @@ where
         out[i] = site(out[i], i, column[i - 1], column[i + 1]);
     }
     out[m - 1] = site(out[m - 1], m - 1, column[m - 2], column[0]);
-}
-
-/// Runs `f(row, values)` over the rows of an m×m field, in bands across threads when m is large.
-fn for_rows<T: Send>(out: &mut [T], m: usize, f: impl Fn(usize, &mut [T]) + Sync + Send) {
-    if m < PARALLEL_SIDE {
-        for (j, row) in out.chunks_mut(m).enumerate() {
-            f(j, row);
-        }
-        return;
-    }
-    let rows = par::band_rows(m);
-    par::for_each_chunk_mut(out, rows * m, |k, band| {
-        for (r, row) in band.chunks_mut(m).enumerate() {
-            f(k * rows + r, row);
-        }
-    });
 }
 
 /// One level: the operator on an m×m periodic grid.
@@ -434,7 +414,7 @@ impl Level {
                 d
             }
         };
-        for_rows(&mut coarse.stencil, mc, |jc, row| {
+        for (jc, row) in coarse.stencil.chunks_mut(mc).enumerate() {
             row.fill([0.0; 5]);
             let height = 2.min(m - 2 * jc);
             for j in 2 * jc..2 * jc + height {
@@ -454,7 +434,7 @@ impl Level {
                     }
                 }
             }
-        });
+        }
         coarse.finish();
     }
 
@@ -463,11 +443,9 @@ impl Level {
         let m = self.m;
         let stencil = &self.stencil;
         for (k, c) in self.coefficients.iter_mut().enumerate() {
-            for_rows(c, m, |j, row| {
-                for (c, s) in row.iter_mut().zip(&stencil[j * m..][..m]) {
-                    *c = s[k] as Real;
-                }
-            });
+            for (c, s) in c.iter_mut().zip(&stencil[..m * m]) {
+                *c = s[k] as Real;
+            }
         }
         self.set_steps();
     }
