@@ -190,9 +190,14 @@ struct BenchArgs {
     /// Relaxation steps before timing (a confluent tissue).
     #[arg(long, default_value_t = 3000)]
     relax_steps: u64,
-    /// Worker threads.
-    #[arg(long, default_value_t = 1)]
-    threads: usize,
+    /// Worker threads; a list (e.g. `1,2`) times each count on the same trajectory, block by
+    /// block in turn, and reports the speed-ups over the first.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    threads: Vec<usize>,
+    /// Timed blocks per friction ratio: the steps are split into this many, so that the best
+    /// and the median block can be told from the mean on a machine whose speed drifts.
+    #[arg(long, default_value_t = 10)]
+    blocks: u64,
     #[arg(long, default_value_t = 1)]
     seed: u64,
 }
@@ -201,7 +206,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(a) => with_threads(a.threads, || run(&a)),
-        Command::Bench(a) => with_threads(Some(a.threads), || bench(&a)),
+        Command::Bench(a) => bench(&a),
         Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| e.to_string()),
         Command::Fingerprint(a) => fingerprint(&a),
         Command::Sweep(a) => sweep(&a),
@@ -360,40 +365,104 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
 }
 
 fn bench(a: &BenchArgs) -> Result<(), String> {
+    if a.threads.is_empty() || a.threads.contains(&0) {
+        return Err(format!("--threads {:?}: every count must be ≥ 1", a.threads));
+    }
+    if a.blocks == 0 || a.blocks > a.steps {
+        return Err(format!("--blocks {}: must be in [1, --steps = {}]", a.blocks, a.steps));
+    }
+    let pools = a
+        .threads
+        .iter()
+        .map(|&n| rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| format!("--threads {n}: {e}")))
+        .collect::<Result<Vec<_>, _>>()?;
     println!(
-        "full size (N = 100, L = 140), {} thread(s), {} relaxation steps then {} timed active steps",
-        a.threads, a.relax_steps, a.steps
+        "full size (N = 100, L = 140), {} relaxation steps then {} timed active steps in {} blocks, thread(s): {:?}",
+        a.relax_steps, a.steps, a.blocks, a.threads
     );
     // The benchmark point: ζ = 0.5 at χ = 0.1 and χ = 0.001.
     let base = Params { relax_steps: a.relax_steps, zeta: 0.5, ..Params::default() };
     let mut relaxed = Monolayer::new(base.clone(), a.seed).map_err(|e| e.to_string())?;
     let t = Instant::now();
-    relaxed.advance(a.relax_steps).map_err(|e| e.to_string())?;
+    pools[0].install(|| relaxed.advance(a.relax_steps)).map_err(|e| e.to_string())?;
     println!(
-        "relaxation: {:.3} ms/step\n{}",
+        "relaxation, {} thread(s): {:.3} ms/step\n{}",
+        a.threads[0],
         1e3 * t.elapsed().as_secs_f64() / a.relax_steps.max(1) as f64,
         relaxed.counters().report()
     );
     for chi in [0.1, 0.001] {
-        let mut m = relaxed.clone();
         let mut p = base.clone();
         p.set_chi(chi);
-        m.set_params(p).map_err(|e| e.to_string())?;
-        // The first solve starts from rest; time the steady state.
-        m.advance(5).map_err(|e| e.to_string())?;
-        m.counters_mut().reset();
-        let t = Instant::now();
-        let r = m.advance(a.steps);
-        let done = m.counters().steps.max(1);
-        println!(
-            "χ = {chi}, ζ = {}: {:.3} ms/step over {done} steps{}\n{}",
-            m.params().zeta,
-            1e3 * t.elapsed().as_secs_f64() / done as f64,
-            r.err().map(|e| format!(" (stopped: {e})")).unwrap_or_default(),
-            m.counters().report()
-        );
+        // One copy per thread count; they follow the same trajectory (the bits do not depend on
+        // the thread count), so block k costs each the same work.
+        let mut runs = Vec::new();
+        for pool in &pools {
+            let mut m = relaxed.clone();
+            m.set_params(p.clone()).map_err(|e| e.to_string())?;
+            // The first solve starts from rest; time the steady state.
+            pool.install(|| m.advance(5)).map_err(|e| e.to_string())?;
+            m.counters_mut().reset();
+            runs.push(m);
+        }
+        let mut block_ms = vec![Vec::new(); pools.len()];
+        let mut seconds = vec![0.0; pools.len()];
+        let mut stopped = None;
+        'blocks: for k in 0..a.blocks {
+            let steps = a.steps * (k + 1) / a.blocks - a.steps * k / a.blocks;
+            for (((m, pool), times), total) in runs.iter_mut().zip(&pools).zip(&mut block_ms).zip(&mut seconds) {
+                let t = Instant::now();
+                let r = pool.install(|| m.advance(steps));
+                *total += t.elapsed().as_secs_f64();
+                if let Err(e) = r {
+                    stopped = Some(e.to_string());
+                    break 'blocks;
+                }
+                times.push(1e3 * t.elapsed().as_secs_f64() / steps as f64);
+            }
+        }
+        for (((m, times), threads), total) in runs.iter().zip(&block_ms).zip(&a.threads).zip(&seconds) {
+            let c = m.counters();
+            println!(
+                "χ = {chi}, ζ = {}, {threads} thread(s): {:.3} ms/step over {} steps; blocks: median {:.3}, best {:.3}\n{}",
+                m.params().zeta,
+                1e3 * total / c.steps.max(1) as f64,
+                c.steps,
+                median(times),
+                times.iter().copied().fold(f64::INFINITY, f64::min),
+                c.report()
+            );
+        }
+        for (times, threads) in block_ms.iter().zip(&a.threads).skip(1) {
+            let ratios: Vec<f64> = block_ms[0].iter().zip(times).map(|(t0, t)| t0 / t).collect();
+            let best = |t: &[f64]| t.iter().copied().fold(f64::INFINITY, f64::min);
+            println!(
+                "  speed-up of {threads} over {} thread(s): median block {:.2}×, best blocks {:.2}×",
+                a.threads[0],
+                median(&ratios),
+                best(&block_ms[0]) / best(times)
+            );
+        }
+        if let Some(e) = stopped {
+            return Err(format!("χ = {chi}: stopped: {e}"));
+        }
     }
     Ok(())
+}
+
+/// The median of a few timings (the mean of the middle two for an even count).
+fn median(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let h = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[h]
+    } else {
+        0.5 * (v[h - 1] + v[h])
+    }
 }
 
 /// `analyze DIR`, or with --bench the timings of the measurements at full size.
