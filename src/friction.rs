@@ -35,13 +35,6 @@ use crate::par;
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 
-/// Which evaluation of a Heun step a solve belongs to: it picks the initial guess.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum HeunStage {
-    Predictor,
-    Corrector,
-}
-
 /// What a solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SolveStats {
@@ -88,12 +81,8 @@ pub struct FrictionSolver {
     components: [Component; 2],
     /// u = V/n: the solution, and the warm start of the next solve.
     pub mean_velocity: Vec<C64>,
-    /// u(corrector) − u(predictor) of the last Heun step: added to the predictor's solution it
-    /// starts the corrector's solve one step's drift closer.
-    pub corrector_shift: Vec<C64>,
-    predictor_solution: Vec<C64>,
-    /// Copies of the guesses while an out-of-step evaluation runs (see [`Self::hold_guesses`]).
-    held: [Vec<C64>; 3],
+    /// A copy of the warm start while an out-of-step evaluation runs (see [`Self::hold_guesses`]).
+    held: Vec<C64>,
     /// V(x) = Σ_j w_j v_j = n u.
     pub velocity: Vec<C64>,
     /// S(x) = Σ_{N8} V.
@@ -110,9 +99,7 @@ impl FrictionSolver {
             diag: vec![0.0; n],
             components: std::array::from_fn(|_| Component::new(n, &mg)),
             mean_velocity: vec![ZERO; n],
-            corrector_shift: vec![ZERO; n],
-            predictor_solution: vec![ZERO; n],
-            held: [vec![ZERO; n], vec![ZERO; n], vec![ZERO; n]],
+            held: vec![ZERO; n],
             velocity: vec![ZERO; n],
             velocity_nb: vec![ZERO; n],
             mg,
@@ -122,27 +109,22 @@ impl FrictionSolver {
     /// Forgets the warm start.
     pub fn reset(&mut self) {
         self.mean_velocity.fill(ZERO);
-        self.corrector_shift.fill(ZERO);
     }
 
-    /// Keeps the initial guesses of the next solves aside, so that an evaluation outside the
+    /// Keeps the initial guess of the next solve aside, so that an evaluation outside the
     /// stepping (a frame, a live view) does not change the trajectory.
     pub fn hold_guesses(&mut self) {
-        self.held[0].copy_from_slice(&self.mean_velocity);
-        self.held[1].copy_from_slice(&self.corrector_shift);
-        self.held[2].copy_from_slice(&self.predictor_solution);
+        self.held.copy_from_slice(&self.mean_velocity);
     }
 
     /// Puts back what [`Self::hold_guesses`] kept.
     pub fn release_guesses(&mut self) {
-        self.mean_velocity.copy_from_slice(&self.held[0]);
-        self.corrector_shift.copy_from_slice(&self.held[1]);
-        self.predictor_solution.copy_from_slice(&self.held[2]);
+        self.mean_velocity.copy_from_slice(&self.held);
     }
 
     /// Solves for u, then V = n u and S = Σ_{N8} V; `self.mean_velocity` on entry is the
     /// initial guess.
-    pub fn solve(&mut self, pb: &FrictionProblem, stage: HeunStage) -> Result<SolveStats, SolveError> {
+    pub fn solve(&mut self, pb: &FrictionProblem) -> Result<SolveStats, SolveError> {
         let l = self.l;
         neighbour_sum8(pb.weight, &mut self.weight_nb, l);
         // C's diagonal; sites with n = 0 are outside the solve.
@@ -150,13 +132,11 @@ impl FrictionSolver {
             let n = pb.weight[x];
             *d = if n > 0.0 { n * (pb.xi_s[x] + pb.xi_c * nb) } else { 0.0 };
         }
-        // Each component takes its part of F and of the initial guess (the corrector's is one
-        // step's drift ahead), zero outside the solve.
-        let shift = (stage == HeunStage::Corrector).then_some(&self.corrector_shift[..]);
+        // Each component takes its part of F and of the initial guess, zero outside the solve.
         let (u, diag) = (&self.mean_velocity, &self.diag);
         let [cx, cy] = &mut self.components;
-        cx.load(pb.force, u, shift, diag, |z| z.re);
-        cy.load(pb.force, u, shift, diag, |z| z.im);
+        cx.load(pb.force, u, diag, |z| z.re);
+        cy.load(pb.force, u, diag, |z| z.im);
         self.mg.setup(pb.weight, &self.diag, pb.xi_c);
         let stats = self.pcg(pb);
         let [cx, cy] = &self.components;
@@ -164,14 +144,6 @@ impl FrictionSolver {
             *u = C64::new(cx.x[x], cy.x[x]);
         }
         let u = &self.mean_velocity;
-        match stage {
-            HeunStage::Predictor => self.predictor_solution.copy_from_slice(u),
-            HeunStage::Corrector => {
-                for ((d, u), p) in self.corrector_shift.iter_mut().zip(u).zip(&self.predictor_solution) {
-                    *d = u - p;
-                }
-            }
-        }
         for ((v, u), n) in self.velocity.iter_mut().zip(u).zip(pb.weight) {
             *v = u * n;
         }
@@ -242,11 +214,10 @@ impl Component {
         Component { rhs: v(), x: v(), r: v(), p: v(), q: v(), work: mg.work() }
     }
 
-    /// rhs = part(F) and x = part(u + shift) on the sites in the solve, 0 elsewhere.
-    fn load(&mut self, force: &[C64], u: &[C64], shift: Option<&[C64]>, diag: &[f64], part: impl Fn(C64) -> f64) {
+    /// rhs = part(F) and x = part(u) on the sites in the solve, 0 elsewhere.
+    fn load(&mut self, force: &[C64], u: &[C64], diag: &[f64], part: impl Fn(C64) -> f64) {
         for (x, (rhs, sol)) in self.rhs.iter_mut().zip(self.x.iter_mut()).enumerate() {
-            (*rhs, *sol) =
-                if diag[x] > 0.0 { (part(force[x]), part(u[x] + shift.map_or(ZERO, |s| s[x]))) } else { (0.0, 0.0) };
+            (*rhs, *sol) = if diag[x] > 0.0 { (part(force[x]), part(u[x])) } else { (0.0, 0.0) };
         }
     }
 
@@ -334,11 +305,11 @@ mod tests {
         let mut s = FrictionSolver::new(l);
         let pb =
             FrictionProblem { weight: &n, force: &f, xi_s: &xi_s, xi_c: 1.0, tolerance: 1e-10, max_iterations: 500 };
-        let st = s.solve(&pb, HeunStage::Predictor).unwrap();
+        let st = s.solve(&pb).unwrap();
         assert!(st.residual <= 1e-10);
         assert!(s.relative_residual() <= 1e-9);
         // The warm start makes the same solve free.
-        let st2 = s.solve(&pb, HeunStage::Predictor).unwrap();
+        let st2 = s.solve(&pb).unwrap();
         assert!(st2.iterations <= 1, "{st2:?}");
         // Sites with no cell carry no velocity.
         assert_eq!(s.velocity[12 * l + 10], ZERO);
@@ -364,7 +335,7 @@ mod tests {
         let mut s = FrictionSolver::new(l);
         let pb =
             FrictionProblem { weight: &n, force: &f, xi_s: &xi_s, xi_c: 1.0, tolerance: 1e-5, max_iterations: 500 };
-        let st = s.solve(&pb, HeunStage::Predictor).unwrap();
+        let st = s.solve(&pb).unwrap();
         assert!(st.iterations <= 15, "{st:?}");
     }
 }

@@ -189,7 +189,6 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
         offsets.push(phi.len() as i64);
     }
     let warm = complex_field(&s.warm_start, l);
-    let shift = complex_field(&s.corrector_shift, l);
     let substrate = Array2::from_shape_vec((l, l), s.substrate.clone()).expect("L×L");
     write_atomic(path, |w| {
         let mut z = NpzWriter::new_compressed(w);
@@ -199,7 +198,6 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
         z.add_array("phi_padded", &Array1::from(phi)).map_err(&e)?;
         z.add_array("phi_offsets", &Array1::from(offsets)).map_err(&e)?;
         z.add_array("warm_start", &warm).map_err(&e)?;
-        z.add_array("corrector_shift", &shift).map_err(&e)?;
         z.add_array("substrate", &substrate).map_err(&e)?;
         z.finish().map_err(&e)?;
         Ok(())
@@ -219,9 +217,8 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     let phi: Array1<f64> = z.by_name("phi_padded").map_err(e("phi_padded"))?;
     let offsets: Array1<i64> = z.by_name("phi_offsets").map_err(e("phi_offsets"))?;
     let warm: Array3<f64> = z.by_name("warm_start").map_err(e("warm_start"))?;
-    let shift: Array3<f64> = z.by_name("corrector_shift").map_err(e("corrector_shift"))?;
     let substrate: Array2<f64> = z.by_name("substrate").map_err(e("substrate"))?;
-    if warm.dim() != (l, l, 2) || shift.dim() != (l, l, 2) || substrate.dim() != (l, l) {
+    if warm.dim() != (l, l, 2) || substrate.dim() != (l, l) {
         return Err(err(path, format!("lattice arrays are not {l}×{l}")));
     }
     let n = patches.nrows();
@@ -247,7 +244,6 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
         step: step.into_scalar() as u64,
         cells,
         warm_start: complex(&warm),
-        corrector_shift: complex(&shift),
         substrate: substrate.iter().copied().collect(),
     })
 }

@@ -17,7 +17,7 @@ use crate::counters::{Counters, Stage};
 use crate::error::SimError;
 use crate::forces::force_density;
 use crate::free_energy::{area, FreeEnergy};
-use crate::friction::{FrictionProblem, FrictionSolver, HeunStage, SolveStats};
+use crate::friction::{FrictionProblem, FrictionSolver, SolveStats};
 use crate::init::random_disks;
 use crate::lattice::{wrap, Patch};
 use crate::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
@@ -103,8 +103,6 @@ pub struct State {
     pub cells: Vec<(Patch, Vec<f64>)>,
     /// u = V/n of the last friction solve: the next solve's warm start.
     pub warm_start: Vec<C64>,
-    /// u(corrector) − u(predictor) of the last step: the corrector's extrapolated guess.
-    pub corrector_shift: Vec<C64>,
     pub substrate: Vec<f64>,
 }
 
@@ -184,7 +182,7 @@ impl Monolayer {
                 params.n_cells
             )));
         }
-        if state.warm_start.len() != l * l || state.corrector_shift.len() != l * l || state.substrate.len() != l * l {
+        if state.warm_start.len() != l * l || state.substrate.len() != l * l {
             return Err(SimError::Invalid(format!("checkpoint lattice is not {l}×{l}")));
         }
         let mut cells = Vec::with_capacity(state.cells.len());
@@ -199,7 +197,6 @@ impl Monolayer {
         m.lattice.substrate = state.substrate;
         m.update_substrate();
         m.solver.mean_velocity = state.warm_start;
-        m.solver.corrector_shift = state.corrector_shift;
         Ok(m)
     }
 
@@ -209,7 +206,6 @@ impl Monolayer {
             step: self.step,
             cells: self.cells.iter().map(|c| (c.patch, c.phi.clone())).collect(),
             warm_start: self.solver.mean_velocity.clone(),
-            corrector_shift: self.solver.corrector_shift.clone(),
             substrate: self.lattice.substrate.clone(),
         }
     }
@@ -341,7 +337,7 @@ impl Monolayer {
     /// per-cell field and the lattice fields). The trajectory is the same with or without it.
     pub fn evaluate_now(&mut self) -> Result<(), SimError> {
         self.solver.hold_guesses();
-        let r = self.evaluate(self.phase(), HeunStage::Predictor);
+        let r = self.evaluate(self.phase());
         self.solver.release_guesses();
         r
     }
@@ -358,7 +354,7 @@ impl Monolayer {
     pub fn step(&mut self) -> Result<(), SimError> {
         let phase = self.phase();
         let dt = self.params.dt;
-        self.evaluate(phase, HeunStage::Predictor)?;
+        self.evaluate(phase)?;
         let mut counters = std::mem::take(&mut self.counters);
         counters.time(Stage::Update, || {
             par::for_each_mut(&mut self.cells, |_, c| {
@@ -373,7 +369,7 @@ impl Monolayer {
             })
         });
         self.counters = counters;
-        if let Err(e) = self.evaluate(phase, HeunStage::Corrector) {
+        if let Err(e) = self.evaluate(phase) {
             self.restore();
             return Err(e);
         }
@@ -417,7 +413,7 @@ impl Monolayer {
         par::for_each_mut(&mut self.cells, |_, c| c.phi.copy_from_slice(&c.phi0));
     }
 
-    fn evaluate(&mut self, phase: Phase, stage: HeunStage) -> Result<(), SimError> {
+    fn evaluate(&mut self, phase: Phase) -> Result<(), SimError> {
         let p = &self.params;
         let l = p.box_size;
         let active = phase == Phase::Active;
@@ -467,7 +463,7 @@ impl Monolayer {
                 max_iterations: p.friction_max_iterations,
             };
             let stats = counters
-                .time(Stage::FrictionSolve, || solver.solve(&problem, stage))
+                .time(Stage::FrictionSolve, || solver.solve(&problem))
                 .map_err(|source| SimError::Friction { step: self.step, source })?;
             counters.solves += 1;
             counters.iterations += stats.iterations as u64;

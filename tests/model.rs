@@ -4,7 +4,7 @@
 mod common;
 
 use common::{ellipse, with_cells};
-use monolayer::friction::{FrictionProblem, FrictionSolver, HeunStage};
+use monolayer::friction::{FrictionProblem, FrictionSolver};
 use monolayer::lattice::Patch;
 use monolayer::params::PassiveForce;
 use monolayer::{Monolayer, Params};
@@ -154,7 +154,7 @@ fn friction_solve_is_exact_for_a_full_uniform_tissue() {
     let mut solver = FrictionSolver::new(l);
     let pb =
         FrictionProblem { weight: &weight, force: &force, xi_s: &xis, xi_c, tolerance: 1e-12, max_iterations: 200 };
-    solver.solve(&pb, HeunStage::Predictor).unwrap();
+    solver.solve(&pb).unwrap();
     // Exact: Û(k) = F̂(k) / λ(k).
     let mut planner = FftPlanner::<f64>::new();
     let (fwd, inv) = (planner.plan_fft_forward(l), planner.plan_fft_inverse(l));
