@@ -69,18 +69,24 @@ impl Counters {
     /// Runs `f`, adding its wall time to `stage` (natively; a plain call in wasm).
     #[inline]
     pub fn time<R>(&mut self, stage: Stage, f: impl FnOnce() -> R) -> R {
-        #[cfg(not(target_arch = "wasm32"))]
-        {
-            let t = std::time::Instant::now();
-            let r = f();
-            self.seconds[stage as usize] += t.elapsed().as_secs_f64();
-            r
+        let (r, seconds) = wall_time(f);
+        self.seconds[stage as usize] += seconds;
+        r
+    }
+
+    /// Runs `f`, a parallel loop that runs the `stages` cell by cell, each timed through
+    /// [`Laps`], and shares its wall time between them in proportion to the time each took
+    /// on its threads.
+    pub fn time_laps<R, const N: usize>(&mut self, stages: [Stage; N], f: impl FnOnce(&Laps<N>) -> R) -> R {
+        let laps = Laps::default();
+        let (r, wall) = wall_time(|| f(&laps));
+        let shares = laps.nanos();
+        let total: u64 = shares.iter().sum();
+        for (stage, share) in stages.iter().zip(shares) {
+            let part = if total > 0 { share as f64 / total as f64 } else { 1.0 / N as f64 };
+            self.seconds[*stage as usize] += wall * part;
         }
-        #[cfg(target_arch = "wasm32")]
-        {
-            let _ = stage;
-            f()
-        }
+        r
     }
 
     pub fn total_seconds(&self) -> f64 {
@@ -111,5 +117,86 @@ impl Counters {
             );
         }
         s
+    }
+}
+
+/// `f`'s result and its wall time in seconds (zero in wasm, which has no `std` clock).
+#[inline]
+fn wall_time<R>(f: impl FnOnce() -> R) -> (R, f64) {
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        let t = std::time::Instant::now();
+        let r = f();
+        (r, t.elapsed().as_secs_f64())
+    }
+    #[cfg(target_arch = "wasm32")]
+    {
+        (f(), 0.0)
+    }
+}
+
+/// Time per stage inside one parallel loop that runs several stages cell by cell: each lap is
+/// timed on its own thread and summed over the cells (see [`Counters::time_laps`]).
+#[derive(Debug)]
+pub struct Laps<const N: usize> {
+    #[cfg(not(target_arch = "wasm32"))]
+    nanos: [std::sync::atomic::AtomicU64; N],
+}
+
+impl<const N: usize> Default for Laps<N> {
+    fn default() -> Self {
+        Laps {
+            #[cfg(not(target_arch = "wasm32"))]
+            nanos: std::array::from_fn(|_| std::sync::atomic::AtomicU64::new(0)),
+        }
+    }
+}
+
+impl<const N: usize> Laps<N> {
+    /// Runs `f`, adding its time to stage `k` of the loop (a plain call in wasm).
+    #[inline]
+    pub fn lap<R>(&self, k: usize, f: impl FnOnce() -> R) -> R {
+        #[cfg(not(target_arch = "wasm32"))]
+        {
+            let t = std::time::Instant::now();
+            let r = f();
+            self.nanos[k].fetch_add(t.elapsed().as_nanos() as u64, std::sync::atomic::Ordering::Relaxed);
+            r
+        }
+        #[cfg(target_arch = "wasm32")]
+        {
+            let _ = k;
+            f()
+        }
+    }
+
+    fn nanos(&self) -> [u64; N] {
+        #[cfg(not(target_arch = "wasm32"))]
+        {
+            std::array::from_fn(|k| self.nanos[k].load(std::sync::atomic::Ordering::Relaxed))
+        }
+        #[cfg(target_arch = "wasm32")]
+        {
+            [0; N]
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A loop's wall time goes to its stages in proportion to their laps, and all of it.
+    #[test]
+    fn laps_share_the_wall_time() {
+        let mut c = Counters::default();
+        let sleep = |ms| std::thread::sleep(std::time::Duration::from_millis(ms));
+        c.time_laps([Stage::Velocity, Stage::Update], |laps| {
+            laps.lap(0, || sleep(1));
+            laps.lap(1, || sleep(20));
+        });
+        let (v, u) = (c.seconds[Stage::Velocity as usize], c.seconds[Stage::Update as usize]);
+        assert!(u > 5.0 * v && v > 0.0, "velocity {v} s, update {u} s");
+        assert!(v + u >= 0.021 && v + u == c.total_seconds());
     }
 }
