@@ -30,7 +30,7 @@
 use num_complex::Complex64 as C64;
 
 use crate::lattice::neighbour_sum8;
-use crate::multigrid::{CycleWork, Multigrid};
+use crate::multigrid::{CycleWork, Multigrid, Real};
 use crate::par;
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
@@ -228,14 +228,12 @@ impl Component {
         let target_sq = target * target;
         let done = |iterations, residual_sq, failure| Outcome { iterations, residual_sq, failure };
         mg.apply(&self.x, &mut self.q);
-        for ((r, b), q) in self.r.iter_mut().zip(&self.rhs).zip(&self.q) {
-            *r = b - q;
-        }
-        let mut rr = dot(&self.r, &self.r);
+        self.r.copy_from_slice(&self.rhs);
+        let mut rr = subtract_scaled(&mut self.r, self.work.residual_mut(), &self.q, 1.0);
         if rr <= target_sq {
             return done(0, rr, None);
         }
-        let mut rz = mg.precondition(&mut self.work, &self.r);
+        let mut rz = mg.precondition(&mut self.work);
         for (p, z) in self.p.iter_mut().zip(self.work.preconditioned()) {
             *p = *z as f64;
         }
@@ -244,18 +242,14 @@ impl Component {
             if !alpha.is_finite() {
                 return done(it, rr, Some(": breakdown (non-finite step)"));
             }
-            rr = 0.0;
-            for (r, q) in self.r.iter_mut().zip(&self.q) {
-                *r -= q * alpha;
-                rr += *r * *r;
-            }
+            rr = subtract_scaled(&mut self.r, self.work.residual_mut(), &self.q, alpha);
             if rr <= target_sq {
                 for (x, p) in self.x.iter_mut().zip(&self.p) {
                     *x += p * alpha;
                 }
                 return done(it, rr, None);
             }
-            let rz_new = mg.precondition(&mut self.work, &self.r);
+            let rz_new = mg.precondition(&mut self.work);
             let beta = rz_new / rz;
             rz = rz_new;
             for ((x, p), z) in self.x.iter_mut().zip(self.p.iter_mut()).zip(self.work.preconditioned()) {
@@ -265,6 +259,18 @@ impl Component {
         }
         done(max_iterations, rr, Some(""))
     }
+}
+
+/// r ← r − α q, and r in the cycle's precision, in one pass; returns ‖r‖².
+#[inline]
+fn subtract_scaled(r: &mut [f64], r_cycle: &mut [Real], q: &[f64], alpha: f64) -> f64 {
+    let mut rr = 0.0;
+    for ((r, rc), q) in r.iter_mut().zip(r_cycle.iter_mut()).zip(q) {
+        *r -= q * alpha;
+        rr += *r * *r;
+        *rc = *r as Real;
+    }
+    rr
 }
 
 /// Σ a·b in site order.

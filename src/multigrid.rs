@@ -219,6 +219,12 @@ pub struct CycleWork {
 }
 
 impl CycleWork {
+    /// Where the caller puts r, in the cycle's precision, for [`Multigrid::precondition`]
+    /// (CG writes it in the pass that updates r, so that r is not read once more to convert it).
+    pub fn residual_mut(&mut self) -> &mut [Real] {
+        &mut self.r
+    }
+
     /// z = M r of the last [`Multigrid::precondition`].
     pub fn preconditioned(&self) -> &[Real] {
         &self.z
@@ -605,17 +611,15 @@ impl Multigrid {
         dot
     }
 
-    /// z = M r: one symmetric cycle from zero, left in `work` ([`CycleWork::preconditioned`])
-    /// in the cycle's precision, which CG reads as it updates its direction (a copy in f64
-    /// would only add a pass). Returns ⟨r, z⟩, which CG needs next.
-    pub fn precondition(&self, work: &mut CycleWork, r: &[f64]) -> f64 {
-        let (mut rr, mut zz) = (std::mem::take(&mut work.r), std::mem::take(&mut work.z));
+    /// z = M r for the r in `work` ([`CycleWork::residual_mut`]): one symmetric cycle from
+    /// zero, left in `work` ([`CycleWork::preconditioned`]) in the cycle's precision, which CG
+    /// reads as it updates its direction (a copy in f64 would only add a pass). Returns ⟨r, z⟩
+    /// (summed in f64), which CG needs next.
+    pub fn precondition(&self, work: &mut CycleWork) -> f64 {
+        let (rr, mut zz) = (std::mem::take(&mut work.r), std::mem::take(&mut work.z));
         let mut fine = std::mem::take(&mut work.levels[0]);
-        for (a, b) in rr.iter_mut().zip(r) {
-            *a = *b as Real;
-        }
         self.cycle(work, 0, &mut zz, &rr, &mut fine.t, &mut fine.column);
-        let dot = zz.iter().zip(r).map(|(z, r)| *z as f64 * r).sum();
+        let dot = zz.iter().zip(&rr).map(|(z, r)| *z as f64 * *r as f64).sum();
         (work.r, work.z, work.levels[0]) = (rr, zz, fine);
         dot
     }
@@ -705,7 +709,10 @@ mod tests {
 
     /// M r in f64, and the ⟨r, M r⟩ the cycle returned.
     fn preconditioned(mg: &Multigrid, work: &mut CycleWork, r: &[f64]) -> (Vec<f64>, f64) {
-        let rz = mg.precondition(work, r);
+        for (a, b) in work.residual_mut().iter_mut().zip(r) {
+            *a = *b as Real;
+        }
+        let rz = mg.precondition(work);
         (work.preconditioned().iter().map(|&z| z as f64).collect(), rz)
     }
 
@@ -794,8 +801,10 @@ mod tests {
         let (ma, aa) = preconditioned(&mg, &mut work, &a);
         let (mb, bb) = preconditioned(&mg, &mut work, &b);
         let (ab, ba) = (dot(&ma, &b), dot(&a, &mb));
-        // The returned ⟨r, M r⟩ is the product of the z the work space holds.
-        assert_eq!((aa, bb), (dot(&ma, &a), dot(&mb, &b)));
+        // The returned ⟨r, M r⟩ is the product of the z the work space holds with r as the
+        // cycle saw it (in its precision).
+        let rounded = |v: &[f64]| -> Vec<f64> { v.iter().map(|&x| x as Real as f64).collect() };
+        assert_eq!((aa, bb), (dot(&ma, &rounded(&a)), dot(&mb, &rounded(&b))));
         // Symmetric up to the cycle's f32 rounding, which adds up over the levels (4e-5 here);
         // CG does not mind: it takes as many iterations as with the cycle in f64.
         assert!((ab - ba).abs() < 2e-4 * ab.abs().max(1.0), "⟨Ma, b⟩ = {ab}, ⟨a, Mb⟩ = {ba}");
