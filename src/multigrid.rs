@@ -386,10 +386,16 @@ impl Level {
         let (m, mc) = (self.m, self.coarse_side());
         for (j, row) in x.chunks_mut(m).enumerate() {
             let coarse_row = row_of(coarse_x, j / 2, mc);
-            for ((pair, w), c) in row.chunks_mut(2).zip(row_of(&self.prolongation, j, m).chunks(2)).zip(coarse_row) {
-                for (x, w) in pair.iter_mut().zip(w) {
-                    *x += c * w;
-                }
+            let w = row_of(&self.prolongation, j, m);
+            // Whole pairs as fixed-size chunks (so the loop is straight-line code), then the
+            // odd side's one-site-wide last aggregate.
+            let (pairs, odd) = row.split_at_mut(m & !1);
+            for ((pair, w), c) in pairs.chunks_exact_mut(2).zip(w.chunks_exact(2)).zip(coarse_row) {
+                pair[0] += c * w[0];
+                pair[1] += c * w[1];
+            }
+            if let Some(x) = odd.first_mut() {
+                *x += coarse_row[mc - 1] * w[m - 1];
             }
         }
     }
