@@ -53,7 +53,7 @@ pub struct RunRecord {
     pub seed: u64,
     /// Steps between frames in the active phase.
     pub frame_interval: u64,
-    /// "running", "finished", or "failed: <why>".
+    /// "running", "finished", or "failed: …" with the reason.
     pub status: String,
     /// Last step with a frame (None before the first).
     pub last_frame_step: Option<u64>,

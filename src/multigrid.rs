@@ -13,7 +13,7 @@
 //! preconditioner for CG.
 //!
 //! Layout, for speed: every level is a 9-point stencil stored as its diagonal and the four
-//! "forward" bonds of each site ([`FORWARD`]); the other four are the neighbours' forward bonds
+//! "forward" bonds of each site (`FORWARD`); the other four are the neighbours' forward bonds
 //! (A is symmetric), so a product streams through rows with no index tables, one array per
 //! coefficient so that the loops run in SIMD lanes. Sites outside the solve (n = 0) have a zero
 //! diagonal and zero bonds: the finest level *is* C, which CG applies through
