@@ -75,8 +75,6 @@ pub struct FrictionSolver {
     mg: Multigrid,
     /// N(x) = Σ_{N8} n.
     pub weight_nb: Vec<f64>,
-    /// Diagonal of C, zero on sites with n = 0 (excluded from the solve).
-    diag: Vec<f64>,
     /// The x and y components' CG.
     components: [Component; 2],
     /// u = V/n: the solution, and the warm start of the next solve.
@@ -96,8 +94,7 @@ impl FrictionSolver {
         FrictionSolver {
             l,
             weight_nb: vec![0.0; n],
-            diag: vec![0.0; n],
-            components: std::array::from_fn(|_| Component::new(n, &mg)),
+            components: std::array::from_fn(|_| Component::new(l, &mg)),
             mean_velocity: vec![ZERO; n],
             held: vec![ZERO; n],
             velocity: vec![ZERO; n],
@@ -127,17 +124,13 @@ impl FrictionSolver {
     pub fn solve(&mut self, pb: &FrictionProblem) -> Result<SolveStats, SolveError> {
         let l = self.l;
         neighbour_sum8(pb.weight, &mut self.weight_nb, l);
-        // C's diagonal; sites with n = 0 are outside the solve.
-        for (x, (d, nb)) in self.diag.iter_mut().zip(&self.weight_nb).enumerate() {
-            let n = pb.weight[x];
-            *d = if n > 0.0 { n * (pb.xi_s[x] + pb.xi_c * nb) } else { 0.0 };
-        }
-        // Each component takes its part of F and of the initial guess, zero outside the solve.
-        let (u, diag) = (&self.mean_velocity, &self.diag);
+        self.mg.setup(pb.weight, &self.weight_nb, pb.xi_s, pb.xi_c);
+        // Each component takes its part of F and of the initial guess, zero outside the solve
+        // (where C's diagonal is zero).
+        let (u, diag) = (&self.mean_velocity, self.mg.diagonal());
         let [cx, cy] = &mut self.components;
         cx.load(pb.force, u, diag, |z| z.re);
         cy.load(pb.force, u, diag, |z| z.im);
-        self.mg.setup(pb.weight, &self.diag, pb.xi_c);
         let stats = self.pcg(pb);
         let [cx, cy] = &self.components;
         for (x, u) in self.mean_velocity.iter_mut().enumerate() {
@@ -179,7 +172,7 @@ impl FrictionSolver {
     pub fn relative_residual(&mut self) -> f64 {
         let (mut num, mut den) = (0.0, 0.0);
         for c in &mut self.components {
-            self.mg.apply(&c.x, &mut c.q);
+            self.mg.apply(&c.x, &mut c.q, &mut c.column);
             num += c.rhs.iter().zip(&c.q).map(|(b, q)| (b - q).powi(2)).sum::<f64>();
             den += dot(&c.rhs, &c.rhs);
         }
@@ -205,13 +198,15 @@ struct Component {
     r: Vec<f64>,
     p: Vec<f64>,
     q: Vec<f64>,
+    /// One row of work space for C's product.
+    column: Vec<f64>,
     work: CycleWork,
 }
 
 impl Component {
-    fn new(n: usize, mg: &Multigrid) -> Self {
-        let v = || vec![0.0; n];
-        Component { rhs: v(), x: v(), r: v(), p: v(), q: v(), work: mg.work() }
+    fn new(l: usize, mg: &Multigrid) -> Self {
+        let v = || vec![0.0; l * l];
+        Component { rhs: v(), x: v(), r: v(), p: v(), q: v(), column: vec![0.0; l], work: mg.work() }
     }
 
     /// rhs = part(F) and x = part(u) on the sites in the solve, 0 elsewhere.
@@ -227,7 +222,7 @@ impl Component {
     fn pcg(&mut self, mg: &Multigrid, target: f64, max_iterations: usize) -> Outcome {
         let target_sq = target * target;
         let done = |iterations, residual_sq, failure| Outcome { iterations, residual_sq, failure };
-        mg.apply(&self.x, &mut self.q);
+        mg.apply(&self.x, &mut self.q, &mut self.column);
         self.r.copy_from_slice(&self.rhs);
         let mut rr = subtract_scaled(&mut self.r, self.work.residual_mut(), &self.q, 1.0);
         if rr <= target_sq {
@@ -238,7 +233,7 @@ impl Component {
             *p = *z as f64;
         }
         for it in 1..=max_iterations {
-            let alpha = rz / mg.apply(&self.p, &mut self.q);
+            let alpha = rz / mg.apply(&self.p, &mut self.q, &mut self.column);
             if !alpha.is_finite() {
                 return done(it, rr, Some(": breakdown (non-finite step)"));
             }

@@ -170,7 +170,8 @@ where
 #[derive(Clone, Debug, Default)]
 struct Level {
     m: usize,
-    /// Per site: the diagonal, then the bonds to x + FORWARD[k]. Built here by the setup.
+    /// Per site: the diagonal, then the bonds to x + FORWARD[k]. Built here by the setup;
+    /// empty on the finest level, which keeps C's own form (`weights`).
     stencil: Vec<Stencil>,
     /// The same in the cycle's precision, one array per coefficient (what the products read).
     coefficients: [Vec<Real>; 5],
@@ -189,6 +190,7 @@ struct Level {
 struct Weights {
     /// n on the sites in the solve, 0 elsewhere.
     n: Vec<f64>,
+    /// n (ξ_s + ξ_c N), 0 where n = 0 (the sites outside the solve).
     diag: Vec<f64>,
     xi_c: f64,
     /// n in the cycle's precision.
@@ -256,7 +258,16 @@ impl Level {
 
     #[cfg(test)]
     fn in_solve(&self, x: usize) -> bool {
-        self.stencil[x][DIAG] > 0.0
+        self.diagonal(x) > 0.0
+    }
+
+    /// The diagonal coefficient of site x, in whichever form the level keeps.
+    #[inline]
+    fn diagonal(&self, x: usize) -> f64 {
+        match &self.weights {
+            Some(w) => w.diag[x],
+            None => self.stencil[x][DIAG],
+        }
     }
 
     /// A v in f64 from the stencil as built (the reference for the tests).
@@ -433,7 +444,7 @@ impl Level {
                 for i in 0..m {
                     let ic = i / 2;
                     let width = 2.min(m - 2 * ic);
-                    row[ic][DIAG] += self.stencil[j * m + i][DIAG];
+                    row[ic][DIAG] += self.diagonal(j * m + i);
                     for (k, &(dx, dy)) in FORWARD.iter().enumerate() {
                         let b = self.forward_bond(i, j, k);
                         let (cdx, cdy) = (leaves(i % 2, dx, width), leaves(j - 2 * jc, dy, height));
@@ -464,11 +475,14 @@ impl Level {
 
     /// The Jacobi steps and prolongation weights, from the diagonal.
     fn set_steps(&mut self) {
-        for ((w, p), s) in self.jacobi.iter_mut().zip(&mut self.prolongation).zip(&self.stencil) {
-            let d = s[DIAG];
+        let mut jacobi = std::mem::take(&mut self.jacobi);
+        let mut prolongation = std::mem::take(&mut self.prolongation);
+        for (x, (w, p)) in jacobi.iter_mut().zip(&mut prolongation).enumerate() {
+            let d = self.diagonal(x);
             *w = if d > 0.0 { (OMEGA / d) as Real } else { 0.0 };
             *p = if d > 0.0 { OVER_CORRECTION as Real } else { 0.0 };
         }
+        (self.jacobi, self.prolongation) = (jacobi, prolongation);
     }
 }
 
@@ -488,12 +502,12 @@ impl Coarsest {
         let a = &mut self.l;
         for x in 0..n {
             // Sites outside the solve get an identity row: their right-hand side is zero.
-            let d = level.stencil[x][DIAG];
+            let d = level.diagonal(x);
             a[x * n + x] += if d > 0.0 { d } else { 1.0 };
-            let (i, j) = ((x % m) as isize, (x / m) as isize);
-            for (k, (dx, dy)) in FORWARD.iter().enumerate() {
-                let y = ((j + dy).rem_euclid(m as isize) * m as isize + (i + dx).rem_euclid(m as isize)) as usize;
-                let b = level.stencil[x][1 + k];
+            let (i, j) = (x % m, x / m);
+            for (k, &(dx, dy)) in FORWARD.iter().enumerate() {
+                let y = step(j, dy, m) * m + step(i, dx, m);
+                let b = level.forward_bond(i, j, k);
                 a[x * n + y] += b;
                 a[y * n + x] += b;
             }
@@ -551,7 +565,7 @@ pub struct Multigrid {
 
 impl Multigrid {
     pub fn new(l: usize) -> Self {
-        let mut levels = vec![Level::with_side(l)];
+        let mut levels = vec![Level { stencil: Vec::new(), ..Level::with_side(l) }];
         let mut m = l;
         while m > COARSEST_SIDE {
             m = m.div_ceil(2);
@@ -577,25 +591,27 @@ impl Multigrid {
         CycleWork { levels, r: vec![0.0; n], z: vec![0.0; n], coarsest: Vec::new() }
     }
 
-    /// Sets up the hierarchy for C with bond weights −ξ_c n(x) n(x′) and diagonal `diag`
-    /// (zero where n = 0, the sites outside the solve).
-    pub fn setup(&mut self, n: &[f64], diag: &[f64], xi_c: f64) {
+    /// Sets up the hierarchy for C = diag(n (ξ_s + ξ_c N)) − ξ_c diag(n) A₈ diag(n), given n,
+    /// N = Σ_{N8} n and ξ_s on the lattice. Sites with n = 0 are outside the solve: their
+    /// diagonal and bonds are zero.
+    pub fn setup(&mut self, n: &[f64], n_nb: &[f64], xi_s: &[f64], xi_c: f64) {
         // The finest level keeps C's own form: its diagonal, and n for the bonds.
         let fine = &mut self.levels[0];
-        for ((s, c), d) in fine.stencil.iter_mut().zip(&mut fine.coefficients[DIAG]).zip(diag) {
-            s[DIAG] = *d;
+        let mut w = fine.weights.take().unwrap_or_default();
+        w.xi_c = xi_c;
+        w.diag.clear();
+        w.diag.extend(
+            n.iter().zip(n_nb).zip(xi_s).map(|((&n, &nb), &xs)| if n > 0.0 { n * (xs + xi_c * nb) } else { 0.0 }),
+        );
+        w.n.clear();
+        w.n.extend(n.iter().zip(&w.diag).map(|(n, d)| if *d > 0.0 { *n } else { 0.0 }));
+        w.n_real.clear();
+        w.n_real.extend(w.n.iter().map(|&n| n as Real));
+        for (c, d) in fine.coefficients[DIAG].iter_mut().zip(&w.diag) {
             *c = *d as Real;
         }
+        fine.weights = Some(w);
         fine.set_steps();
-        let mut weights = fine.weights.take().unwrap_or_default();
-        weights.xi_c = xi_c;
-        weights.n.clear();
-        weights.n.extend(n.iter().zip(diag).map(|(n, d)| if *d > 0.0 { *n } else { 0.0 }));
-        weights.n_real.clear();
-        weights.n_real.extend(weights.n.iter().map(|&n| n as Real));
-        weights.diag.clear();
-        weights.diag.extend_from_slice(diag);
-        fine.weights = Some(weights);
         for k in 1..self.levels.len() {
             let (fine, coarse) = self.levels.split_at_mut(k);
             fine[k - 1].coarsen(&mut coarse[0]);
@@ -603,15 +619,20 @@ impl Multigrid {
         self.coarsest.factor(self.levels.last().expect("at least one level"));
     }
 
-    /// out = C v, the finest level's operator (zero on the sites outside the solve).
-    /// Returns ⟨v, C v⟩ (summed row by row), which CG needs next, while the rows are at hand.
-    pub fn apply(&self, v: &[f64], out: &mut [f64]) -> f64 {
+    /// C's diagonal as set up, zero on the sites outside the solve.
+    pub fn diagonal(&self) -> &[f64] {
+        &self.levels[0].weights.as_ref().expect("set up").diag
+    }
+
+    /// out = C v, the finest level's operator (zero on the sites outside the solve); `column`
+    /// is work space of one row. Returns ⟨v, C v⟩ (summed row by row), which CG needs next,
+    /// while the rows are at hand.
+    pub fn apply(&self, v: &[f64], out: &mut [f64], column: &mut [f64]) -> f64 {
         let (fine, m) = (&self.levels[0], self.levels[0].m);
         let w = fine.weights.as_ref().expect("set up");
-        let mut column = vec![0.0; m];
         let mut dot = 0.0;
         for (j, row) in out.chunks_mut(m).enumerate() {
-            weights_row(&w.n, &w.diag, w.xi_c, v, m, j, row, &mut column);
+            weights_row(&w.n, &w.diag, w.xi_c, v, m, j, row, column);
             dot += row.iter().zip(row_of(v, j, m)).map(|(a, b)| a * b).sum::<f64>();
         }
         dot
@@ -676,21 +697,6 @@ mod tests {
     use super::fixtures::edge_network;
     use super::*;
 
-    fn fine_diag(n: &[f64], l: usize, xi_s: f64, xi_c: f64) -> Vec<f64> {
-        let mut nn = vec![0.0; l * l];
-        crate::lattice::neighbour_sum8(n, &mut nn, l);
-        (0..l * l)
-            .map(|x| {
-                let nn = nn[x];
-                if n[x] > 0.0 {
-                    n[x] * (xi_s + xi_c * nn)
-                } else {
-                    0.0
-                }
-            })
-            .collect()
-    }
-
     fn field(l: usize, seed: u64) -> Vec<f64> {
         // A small deterministic pseudo-random field (an LCG is enough for a test vector).
         let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -703,9 +709,10 @@ mod tests {
 
     fn setup(l: usize) -> (Multigrid, Vec<f64>) {
         let n = edge_network(l);
-        let diag = fine_diag(&n, l, 0.001, 1.0);
+        let mut nn = vec![0.0; l * l];
+        crate::lattice::neighbour_sum8(&n, &mut nn, l);
         let mut mg = Multigrid::new(l);
-        mg.setup(&n, &diag, 1.0);
+        mg.setup(&n, &nn, &vec![0.001; l * l], 1.0);
         (mg, n)
     }
 
