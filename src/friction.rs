@@ -79,7 +79,7 @@ pub struct FrictionSolver {
     components: [Component; 2],
     /// u = V/n: the solution, and the warm start of the next solve.
     pub mean_velocity: Vec<C64>,
-    /// A copy of the warm start while an out-of-step evaluation runs (see [`Self::hold_guesses`]).
+    /// A copy of the warm start while an out-of-step evaluation runs (see [`Self::hold_warm_start`]).
     held: Vec<C64>,
     /// V(x) = Σ_j w_j v_j = n u.
     pub velocity: Vec<C64>,
@@ -110,12 +110,12 @@ impl FrictionSolver {
 
     /// Keeps the initial guess of the next solve aside, so that an evaluation outside the
     /// stepping (a frame, a live view) does not change the trajectory.
-    pub fn hold_guesses(&mut self) {
+    pub fn hold_warm_start(&mut self) {
         self.held.copy_from_slice(&self.mean_velocity);
     }
 
-    /// Puts back what [`Self::hold_guesses`] kept.
-    pub fn release_guesses(&mut self) {
+    /// Puts back what [`Self::hold_warm_start`] kept.
+    pub fn release_warm_start(&mut self) {
         self.mean_velocity.copy_from_slice(&self.held);
     }
 

@@ -377,9 +377,9 @@ impl Monolayer {
     /// Evaluates forces and velocities for the current φ without stepping (fills every
     /// per-cell field and the lattice fields). The trajectory is the same with or without it.
     pub fn evaluate_now(&mut self) -> Result<(), SimError> {
-        self.solver.hold_guesses();
+        self.solver.hold_warm_start();
         let r = self.evaluate(self.phase(), Then::Nothing);
-        self.solver.release_guesses();
+        self.solver.release_warm_start();
         r
     }
 
