@@ -10,37 +10,24 @@
 //! seed: no threads, files or clocks inside it. Native extras (threads, files, the CLI) sit
 //! behind the `parallel` and `cli` features.
 //!
-//! Module per concept, in the order of one evaluation:
-//! [`params`] → [`init`] → [`free_energy`] → [`shape`] → [`forces`] → [`friction`] → [`motion`],
-//! driven by [`monolayer`]; [`lattice`] and [`cell`] hold the geometry, [`counters`] the timings.
+//! Four layers, each a folder; imports go downwards only (model ← analysis ← run, web), which
+//! `tests/layers.rs` checks:
+//!
+//! - [`model`]: the physics core, one module per concept of the paper;
+//! - [`analysis`]: the paper's measurements, pure, for both faces (live and offline);
+//! - `run` (native, feature `cli`): files, runs, sweeps, the offline analysis, plots;
+//! - `web` (wasm32): the browser binding and the wgpu renderer.
 
 pub mod analysis;
-pub mod cell;
-pub mod counters;
-pub mod error;
-pub mod forces;
-pub mod free_energy;
-pub mod friction;
-pub mod init;
-pub mod lattice;
-pub mod monolayer;
-pub mod motion;
-pub mod multigrid;
-pub mod par;
-pub mod params;
-pub mod shape;
+pub mod model;
 
 #[cfg(feature = "cli")]
-pub mod io;
-#[cfg(feature = "cli")]
-pub mod runner;
-#[cfg(feature = "cli")]
-pub mod sweep;
+pub mod run;
 
 /// The browser demo's binding and wgpu drawing (see `www/`).
 #[cfg(target_arch = "wasm32")]
 pub mod web;
 
-pub use error::SimError;
-pub use monolayer::{Monolayer, Phase, State};
-pub use params::Params;
+pub use model::error::SimError;
+pub use model::monolayer::{Monolayer, Phase, State};
+pub use model::params::Params;

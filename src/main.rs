@@ -8,12 +8,12 @@ use std::time::Instant;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use monolayer::analysis::offline::analyze_run;
-use monolayer::analysis::plots::Background;
 use monolayer::analysis::Analysis;
-use monolayer::io::{frame_path, load_params, write_frame, RunRecord};
-use monolayer::runner::{Event, RunDir};
-use monolayer::sweep::{run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
+use monolayer::run::files::{frame_path, load_params, write_frame, RunRecord};
+use monolayer::run::offline::analyze_run;
+use monolayer::run::plots::Background;
+use monolayer::run::runner::{Event, RunDir};
+use monolayer::run::sweep::{run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
 use monolayer::{Monolayer, Params, Phase};
 
 #[derive(Parser)]

@@ -4,9 +4,9 @@
 mod common;
 
 use common::{ellipse, with_cells};
-use monolayer::friction::{FrictionProblem, FrictionSolver};
-use monolayer::lattice::Patch;
-use monolayer::params::PassiveForce;
+use monolayer::model::friction::{FrictionProblem, FrictionSolver};
+use monolayer::model::lattice::Patch;
+use monolayer::model::params::PassiveForce;
 use monolayer::{Monolayer, Params};
 use num_complex::Complex64 as C64;
 use rustfft::FftPlanner;

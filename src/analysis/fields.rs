@@ -9,7 +9,7 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::lattice::Patch;
+use crate::model::lattice::Patch;
 
 /// The lattice fields of Eq. S4, one array per component.
 #[derive(Clone, Debug)]
@@ -49,7 +49,7 @@ impl CoarseFields {
 
     /// Adds one cell: φ_i on its padded patch storage, its Q̂_i, and optionally its velocity v_i
     /// (padded like φ). Frames store only Σ_i φ_i v_i; they set it with [`Self::set_velocity`].
-    /// The active force is recomputed from φ_i and Q̂_i exactly as [`crate::forces`] does, so
+    /// The active force is recomputed from φ_i and Q̂_i exactly as [`crate::model::forces`] does, so
     /// live and offline analyses agree.
     pub fn add_cell(&mut self, patch: Patch, phi: &[f64], q_hat: [f64; 2], zeta: f64, v: Option<(&[f64], &[f64])>) {
         let l = self.l;

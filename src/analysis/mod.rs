@@ -14,7 +14,9 @@
 //!   flag one defect merged) and sub-site core positions, shared by defects and spirals.
 //!
 //! [`Analysis`] owns every buffer: after the first call, measuring a frame allocates nothing.
-//! Native only: `frames` (reading a run), `offline` (tables of a run), `plots`.
+//! - [`regime`]: the paper's regime criterion (Fig. 3c–d) from hole lifetimes.
+//!
+//! Reading a run's frames, its tables and plots are native and live in `run`.
 
 pub mod correlations;
 pub mod defects;
@@ -22,21 +24,15 @@ pub mod fields;
 pub mod holes;
 pub mod nucleation;
 pub mod precursors;
+pub mod regime;
 pub mod spirals;
 pub mod winding;
 
-#[cfg(feature = "cli")]
-pub mod frames;
-#[cfg(feature = "cli")]
-pub mod offline;
-#[cfg(feature = "cli")]
-pub mod plots;
-
 use num_complex::Complex64 as C64;
 
-use crate::lattice::Patch;
-use crate::monolayer::Monolayer;
-use crate::params::Params;
+use crate::model::lattice::Patch;
+use crate::model::monolayer::Monolayer;
+use crate::model::params::Params;
 use correlations::{correlation_length, Correlator};
 use defects::{Defect, DefectFinder};
 use fields::{divergence, strain_rate, CoarseFields};

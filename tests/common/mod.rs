@@ -3,7 +3,7 @@
 
 use std::sync::OnceLock;
 
-use monolayer::lattice::Patch;
+use monolayer::model::lattice::Patch;
 use monolayer::{Monolayer, Params, State};
 use num_complex::Complex64 as C64;
 

@@ -29,9 +29,9 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::lattice::neighbour_sum8;
-use crate::multigrid::{CycleWork, Multigrid, Real};
-use crate::par;
+use crate::model::lattice::neighbour_sum8;
+use crate::model::multigrid::{CycleWork, Multigrid, Real};
+use crate::model::par;
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 
@@ -330,7 +330,7 @@ mod tests {
     fn multigrid_converges_quickly_on_edge_networks() {
         let l = 70;
         let (_, f) = problem_fields(l, false);
-        let n = crate::multigrid::fixtures::edge_network(l);
+        let n = crate::model::multigrid::fixtures::edge_network(l);
         let f: Vec<C64> = f.iter().zip(&n).map(|(f, n)| f * n).collect();
         let xi_s = vec![0.001; l * l];
         let mut s = FrictionSolver::new(l);

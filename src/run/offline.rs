@@ -9,16 +9,16 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::correlations::correlation_length;
-use super::frames::{read_frame, Frame, RunFrames};
-use super::holes::HoleTracker;
-use super::nucleation::HoleProbability;
+use super::files::{read_frame, Frame, RunFrames};
 use super::plots::{self, Background};
-use super::precursors::Precursors;
-use super::{Analysis, FrameSummary};
-use crate::io::{frame_path, write_atomic};
-use crate::monolayer::Monolayer;
-use crate::params::Params;
+use crate::analysis::correlations::correlation_length;
+use crate::analysis::holes::HoleTracker;
+use crate::analysis::nucleation::HoleProbability;
+use crate::analysis::precursors::Precursors;
+use crate::analysis::{Analysis, FrameSummary};
+use crate::model::monolayer::Monolayer;
+use crate::model::params::Params;
+use crate::run::files::{frame_path, write_atomic};
 
 /// What a frame contributes to the tables.
 #[derive(Clone, Debug)]
@@ -170,7 +170,7 @@ impl RunAnalysis {
         let mut probability =
             String::from("strain_rate_bin_low,strain_rate_bin_high,sites,sites_opening_into_a_new_hole,probability\n");
         for (lo, n, h, p) in self.hole_probability.table() {
-            let hi = lo + super::nucleation::STRAIN_RATE_BIN;
+            let hi = lo + crate::analysis::nucleation::STRAIN_RATE_BIN;
             let _ = writeln!(probability, "{lo:.6},{hi:.6},{n},{h},{p:.6e}");
         }
         let mut precursors = String::from(

@@ -3,7 +3,7 @@
 //! outlines at φ_i = ½, elongation axes, ±½ defects (+½ with a line towards its tail), spiral
 //! cores and void sites.
 //!
-//! Both backends draw into memory and the files are written with [`crate::io::write_atomic`].
+//! Both backends draw into memory and the files are written with [`crate::run::files::write_atomic`].
 //! Text is laid out and rasterised by ab_glyph from DejaVu Sans embedded in the binary (crate
 //! `dejavu`): no fontconfig and no system fonts are needed, so plots work on a headless machine.
 
@@ -17,11 +17,11 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use super::frames::Frame;
-use super::holes::Hole;
-use super::Analysis;
-use crate::cell::Cell;
-use crate::io::write_atomic;
+use super::files::Frame;
+use crate::analysis::holes::Hole;
+use crate::analysis::Analysis;
+use crate::model::cell::Cell;
+use crate::run::files::write_atomic;
 
 pub(crate) const FONT: &str = "sans-serif";
 
@@ -221,7 +221,7 @@ fn diverging(t: f64) -> RGBColor {
 
 /// Segments of the φ = ½ contour of one cell (marching squares on its padded patch, the zero
 /// halo closing the outline), in lattice coordinates.
-fn outline(patch: crate::lattice::Patch, phi: &[f64], l: usize) -> Vec<[(f64, f64); 2]> {
+fn outline(patch: crate::model::lattice::Patch, phi: &[f64], l: usize) -> Vec<[(f64, f64); 2]> {
     let s = patch.stride();
     let rows = patch.h + 2;
     let mut segs = Vec::new();

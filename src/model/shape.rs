@@ -9,7 +9,7 @@
 //! "normalised by 0.5|Q|" read literally) and ε = `q_epsilon`, below which a nearly round cell
 //! fades to no direction instead of flipping between arbitrary ones.
 
-use crate::lattice::{row_neighbourhood, Patch};
+use crate::model::lattice::{row_neighbourhood, Patch};
 
 /// Central-difference gradient of a padded field (row stride s) at padded index i.
 #[inline(always)]

@@ -7,8 +7,8 @@
 //! With ζ > 0 (extensile) and Q̂ along the long axis, the active force at a tip points outwards:
 //! at the right tip of a cell elongated along x, ∂_xφ < 0 and f^a_x = −ζ Q̂_xx ∂_xφ > 0.
 
-use crate::lattice::{row_mut, row_neighbourhood, Patch};
-use crate::params::PassiveForce;
+use crate::model::lattice::{row_mut, row_neighbourhood, Patch};
+use crate::model::params::PassiveForce;
 
 /// f_i = f^p_i + f^a_i at every site of the patch. μ is read with zero outside the patch (its
 /// halo), where φ_i is below the presence threshold by the patch margin.
@@ -40,7 +40,7 @@ pub fn force_density(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shape::{normalise, shape_tensor};
+    use crate::model::shape::{normalise, shape_tensor};
 
     fn ellipse_x(patch: Patch) -> Vec<f64> {
         let mut phi = vec![0.0; patch.padded_len()];

@@ -6,8 +6,8 @@
 //!
 //! with A_i = ∫ φ_i², the area term read as squared, and c = `repulsion_factor` (4 as printed).
 
-use crate::lattice::{Neighbourhood, Patch};
-use crate::params::{Laplacian, Params};
+use crate::model::lattice::{Neighbourhood, Patch};
+use crate::model::params::{Laplacian, Params};
 
 /// The coefficients of μ_i, derived once from the parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -148,7 +148,7 @@ mod tests {
         }
         for kind in [Laplacian::FivePoint, Laplacian::NinePoint] {
             for b in 0..patch.h {
-                let n = crate::lattice::row_neighbourhood(&f, patch, b);
+                let n = crate::model::lattice::row_neighbourhood(&f, patch, b);
                 for k in 0..patch.w {
                     assert!((laplacian(kind, &n, k) - 8.0).abs() < 1e-9, "{kind:?} at ({k}, {b})");
                 }

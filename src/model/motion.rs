@@ -1,6 +1,6 @@
 //! The equation of motion (Eq. 1) on each patch, given the lattice friction fields:
 //!
-//!   v_i(x) = [f_i(x) + ξ_c S(x)] / [ξ_s(x) + ξ_c N(x)]        (Eq. 2, see [`crate::friction`])
+//!   v_i(x) = [f_i(x) + ξ_c S(x)] / [ξ_s(x) + ξ_c N(x)]        (Eq. 2, see [`crate::model::friction`])
 //!   ∂_t φ_i = −v_i · ∇φ_i − J₀ μ_i                           (Eq. 1)
 //!
 //! The division is a product with the mobility 1/[ξ_s + ξ_c N], computed once per lattice site.
@@ -9,8 +9,8 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::lattice::{Neighbourhood, Patch};
-use crate::params::{Advection, FrictionWeights};
+use crate::model::lattice::{Neighbourhood, Patch};
+use crate::model::params::{Advection, FrictionWeights};
 
 /// The weight w_j(x) with which cell j counts in the friction sum of Eq. 2 (model-notes §4).
 #[inline(always)]

@@ -1,12 +1,12 @@
 //! The monolayer: N cells on the periodic lattice, stepped by Heun's predictor–corrector through
 //! the paper's protocol (relaxation, then activity with cell–cell friction).
 //!
-//! One evaluation of the right-hand side R(φ) runs these stages (see [`crate::counters`]):
+//! One evaluation of the right-hand side R(φ) runs these stages (see [`crate::model::counters`]):
 //! 1. gather Σ_j φ_j² onto the lattice (for the repulsion term);
-//! 2. per cell: A_i and μ_i ([`crate::free_energy`]), then Q_i, Q̂_i ([`crate::shape`]) and f_i
-//!    ([`crate::forces`]);
-//! 3. the friction solve for V ([`crate::friction`]) — active phase only;
-//! 4. per cell: v_i and ∂_t φ_i ([`crate::motion`]), then the cell's Heun update.
+//! 2. per cell: A_i and μ_i ([`crate::model::free_energy`]), then Q_i, Q̂_i ([`crate::model::shape`]) and f_i
+//!    ([`crate::model::forces`]);
+//! 3. the friction solve for V ([`crate::model::friction`]) — active phase only;
+//! 4. per cell: v_i and ∂_t φ_i ([`crate::model::motion`]), then the cell's Heun update.
 //!
 //! A step is φ* = φ + Δt R(φ), φ' = φ + ½Δt [R(φ) + R(φ*)], then the patches follow the cells.
 //! The per-cell stages of 2 and of 4 run cell by cell in one parallel loop each, so that a patch
@@ -16,18 +16,18 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::cell::Cell;
-use crate::counters::{Counters, Stage};
-use crate::error::SimError;
-use crate::forces::force_density;
-use crate::free_energy::{area, FreeEnergy};
-use crate::friction::{FrictionProblem, FrictionSolver, SolveStats};
-use crate::init::random_disks;
-use crate::lattice::{wrap, Patch};
-use crate::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
-use crate::par;
-use crate::params::Params;
-use crate::shape::{normalise, shape_tensor};
+use crate::model::cell::Cell;
+use crate::model::counters::{Counters, Stage};
+use crate::model::error::SimError;
+use crate::model::forces::force_density;
+use crate::model::free_energy::{area, FreeEnergy};
+use crate::model::friction::{FrictionProblem, FrictionSolver, SolveStats};
+use crate::model::init::random_disks;
+use crate::model::lattice::{wrap, Patch};
+use crate::model::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
+use crate::model::par;
+use crate::model::params::Params;
+use crate::model::shape::{normalise, shape_tensor};
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 

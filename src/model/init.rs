@@ -3,10 +3,10 @@
 use rand_chacha::rand_core::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::cell::Cell;
-use crate::error::SimError;
-use crate::lattice::{wrap, Patch};
-use crate::params::Params;
+use crate::model::cell::Cell;
+use crate::model::error::SimError;
+use crate::model::lattice::{wrap, Patch};
+use crate::model::params::Params;
 
 /// A uniform number in [0, 1) from 53 random bits: the same on every platform.
 fn uniform(rng: &mut ChaCha8Rng) -> f64 {

@@ -5,10 +5,10 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use crate::analysis::offline::LiveRun;
-use crate::io::{frame_path, read_checkpoint, write_checkpoint, write_frame, RunRecord};
-use crate::monolayer::Monolayer;
-use crate::params::Params;
+use crate::model::monolayer::Monolayer;
+use crate::model::params::Params;
+use crate::run::files::{frame_path, read_checkpoint, write_checkpoint, write_frame, RunRecord};
+use crate::run::offline::LiveRun;
 
 /// What the protocol reports to whoever watches it (a progress bar, a sweep).
 #[derive(Clone, Debug, PartialEq, Eq)]

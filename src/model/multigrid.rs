@@ -710,7 +710,7 @@ mod tests {
     fn setup(l: usize) -> (Multigrid, Vec<f64>) {
         let n = edge_network(l);
         let mut nn = vec![0.0; l * l];
-        crate::lattice::neighbour_sum8(&n, &mut nn, l);
+        crate::model::lattice::neighbour_sum8(&n, &mut nn, l);
         let mut mg = Multigrid::new(l);
         mg.setup(&n, &nn, &vec![0.001; l * l], 1.0);
         (mg, n)

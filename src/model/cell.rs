@@ -1,7 +1,7 @@
 //! One cell: its phase field φ_i on a patch of the lattice, and the per-site quantities the
 //! dynamics computes on that patch (μ_i, f_i, v_i, dφ_i/dt).
 
-use crate::lattice::Patch;
+use crate::model::lattice::Patch;
 
 /// A read-only view of one per-cell field on its patch (no copy).
 #[derive(Clone, Copy, Debug)]
@@ -50,7 +50,7 @@ pub struct Cell {
     pub(crate) area: f64,
     /// Q_i = (Q_xx, Q_xy) of Eq. 5, unnormalised.
     pub(crate) shape: [f64; 2],
-    /// Q̂_i, normalised (see [`crate::shape`]).
+    /// Q̂_i, normalised (see [`crate::model::shape`]).
     pub(crate) q_hat: [f64; 2],
     /// The first patch site (a, b) and value where φ_i left its allowed range in the last step.
     pub(crate) fault: Option<(usize, usize, f64)>,

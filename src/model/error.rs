@@ -1,7 +1,7 @@
 //! Why a simulation stopped.
 
-use crate::friction::SolveError;
-use crate::params::ParamError;
+use crate::model::friction::SolveError;
+use crate::model::params::ParamError;
 
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SimError {

@@ -21,11 +21,12 @@ use std::sync::Mutex;
 
 use serde::Deserialize;
 
-use crate::analysis::frames::{read_frame, RunFrames};
-use crate::analysis::offline::RunAnalysis;
-use crate::io::{write_atomic, RunRecord};
-use crate::params::Params;
-use crate::runner::{Event, RunDir};
+use crate::analysis::regime::{classify, fitted_lifetime, Regime};
+use crate::model::params::Params;
+use crate::run::files::{read_frame, RunFrames};
+use crate::run::files::{write_atomic, RunRecord};
+use crate::run::offline::RunAnalysis;
+use crate::run::runner::{Event, RunDir};
 
 /// A sweep as written in its file (or assembled from the command line).
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -412,46 +413,6 @@ pub fn steps_to_run(jobs: &[Job], out: &Path, shard: Option<Shard>) -> u64 {
         .sum()
 }
 
-/// The paper's three regimes (Fig. 3d).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Regime {
-    NoHoles,
-    OnlyShortLived,
-    ShortAndLongLived,
-}
-
-impl Regime {
-    pub fn name(self) -> &'static str {
-        match self {
-            Regime::NoHoles => "no_holes",
-            Regime::OnlyShortLived => "only_short_lived",
-            Regime::ShortAndLongLived => "short_and_long_lived",
-        }
-    }
-}
-
-/// Fits an exponential survival S(τ) = exp(−τ/τ_h) to hole lifetimes, holes still open at the end
-/// counting as censored: the maximum-likelihood τ_h = (Σ durations) / (number closed), infinite
-/// when none closed.
-pub fn fitted_lifetime(lifetimes: &[(f64, bool)]) -> Option<f64> {
-    if lifetimes.is_empty() {
-        return None;
-    }
-    let total: f64 = lifetimes.iter().map(|l| l.0).sum();
-    let closed = lifetimes.iter().filter(|l| l.1).count();
-    Some(if closed == 0 { f64::INFINITY } else { total / closed as f64 })
-}
-
-/// The paper's criterion: no holes; else long-lived when the fitted lifetime exceeds half the
-/// run's active time.
-pub fn classify(lifetimes: &[(f64, bool)], active_time: f64) -> Regime {
-    match fitted_lifetime(lifetimes) {
-        None => Regime::NoHoles,
-        Some(t) if t > 0.5 * active_time => Regime::ShortAndLongLived,
-        Some(_) => Regime::OnlyShortLived,
-    }
-}
-
 /// A grid point (all seeds pooled) and its regime.
 #[derive(Clone, Debug)]
 pub struct RegimePoint {
@@ -585,7 +546,7 @@ pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>
 /// squares only short-lived, green triangles short- and long-lived; a cross where a run blew up.
 /// Drawn only when the grid varies both `chi` and `zeta`.
 fn plot_regime_map(base: &Path, points: &[RegimePoint]) -> Result<Vec<PathBuf>, String> {
-    use crate::analysis::plots::{both_of, plot_err, Draw, FONT};
+    use crate::run::plots::{both_of, plot_err, Draw, FONT};
     use plotters::coord::Shift;
     use plotters::prelude::*;
 
@@ -660,15 +621,5 @@ mod tests {
         assert!(toml::from_str::<SweepSpec>("sedes = [1]\n").is_err());
         assert_eq!("2/4".parse::<Shard>().unwrap(), Shard { index: 2, count: 4 });
         assert!("4/4".parse::<Shard>().is_err());
-    }
-
-    #[test]
-    fn regimes_follow_the_papers_criterion() {
-        assert_eq!(classify(&[], 100.0), Regime::NoHoles);
-        // Three holes closing after 5, 10, 15 of a run of 100: short-lived (τ = 10).
-        assert_eq!(classify(&[(5.0, true), (10.0, true), (15.0, true)], 100.0), Regime::OnlyShortLived);
-        // One closed after 10 and one open for 90: τ = 100 > 50.
-        assert_eq!(classify(&[(10.0, true), (90.0, false)], 100.0), Regime::ShortAndLongLived);
-        assert_eq!(fitted_lifetime(&[(30.0, false)]), Some(f64::INFINITY));
     }
 }

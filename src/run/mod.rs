@@ -1,0 +1,14 @@
+//! Native only (feature `cli`): everything that touches files, clocks and the terminal.
+//!
+//! - [`files`]: frames, checkpoints and `run.json`, the writer and the reader of each together;
+//! - [`runner`]: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume);
+//! - [`sweep`]: a grid of runs, one per core, resumable, its summary and regime map;
+//! - [`offline`]: `monolayer analyze`, the tables of a run's frames; [`plots`]: its figures.
+//!
+//! Uses `model` and `analysis`; nothing below it uses this layer.
+
+pub mod files;
+pub mod offline;
+pub mod plots;
+pub mod runner;
+pub mod sweep;
