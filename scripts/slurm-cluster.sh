@@ -42,7 +42,8 @@ configure() {
   cat >"$CONF" <<EOF
 $MARK
 ClusterName=monolayer
-SlurmctldHost=$host
+# 127.0.0.1: a fresh container's hostname need not resolve.
+SlurmctldHost=$host(127.0.0.1)
 AuthType=auth/munge
 CryptoType=crypto/munge
 SlurmUser=root
@@ -65,7 +66,7 @@ MaxArraySize=10001
 SlurmctldTimeout=30
 SlurmdTimeout=30
 MinJobAge=30
-NodeName=$host CPUs=$cpus RealMemory=$mem State=UNKNOWN
+NodeName=$host NodeAddr=127.0.0.1 CPUs=$cpus RealMemory=$mem State=UNKNOWN
 PartitionName=main Nodes=$host Default=YES MaxTime=INFINITE State=UP
 EOF
 }

@@ -397,9 +397,11 @@ pub struct Speed {
 
 impl Speed {
     /// Times `steps` relaxation and `steps` active steps at each (L, N) of `jobs`, at the plan's
-    /// lowest friction (the costliest solve). The tissue is not yet confluent this early, so this
-    /// is a floor rather than a bound; it is what the machine does now, not what a README says.
-    pub fn measure(jobs: &[&Job], steps: u64) -> Result<Speed, String> {
+    /// lowest friction (the costliest solve), after `warm_up` untimed steps of each (the first
+    /// steps from the small initial disks, and the first solves from rest, cost more than the
+    /// rest of a run). The tissue is not yet confluent this early, so this is an estimate, not a
+    /// bound; it is what the machine does now, not what a README says.
+    pub fn measure(jobs: &[&Job], warm_up: u64, steps: u64) -> Result<Speed, String> {
         let mut sizes: Vec<((usize, usize), (f64, f64))> = Vec::new();
         let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| e.to_string())?;
         for job in jobs {
@@ -408,7 +410,7 @@ impl Speed {
                 continue;
             }
             let mut p = job.params.clone();
-            p.relax_steps = steps;
+            p.relax_steps = warm_up + steps;
             if p.xi_cell == 0.0 {
                 p.xi_cell = 1.0;
             }
@@ -417,12 +419,15 @@ impl Speed {
             let mut m = (1..=10)
                 .find_map(|seed| Monolayer::new(p.clone(), seed).ok())
                 .ok_or_else(|| format!("timing a run at L = {}, N = {}: no seed of 1–10 starts", key.0, key.1))?;
-            let t = Instant::now();
-            pool.install(|| m.advance(steps)).map_err(|e| e.to_string())?;
-            let relax = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
-            let t = Instant::now();
-            pool.install(|| m.advance(steps)).map_err(|e| e.to_string())?;
-            let active = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
+            let mut timed = |n: u64| -> Result<f64, String> {
+                let t = Instant::now();
+                pool.install(|| m.advance(n)).map_err(|e| e.to_string())?;
+                Ok(1e3 * t.elapsed().as_secs_f64() / n as f64)
+            };
+            timed(warm_up)?;
+            let relax = timed(steps)?;
+            timed(warm_up.min(10))?;
+            let active = timed(steps)?;
             sizes.push((key, (relax, active)));
         }
         Ok(Speed { sizes })

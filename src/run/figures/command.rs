@@ -77,7 +77,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
     // The longest run and the whole plan, for the estimate and for Slurm's time limits.
     let every: Vec<&Job> = plan.jobs.iter().collect();
     let sample: Vec<&Job> = if todo.is_empty() && !o.slurm { Vec::new() } else { every.clone() };
-    let speed = Speed::measure(&sample, if o.scale == Scale::Smoke { 50 } else { 20 })?;
+    let speed = Speed::measure(&sample, 100, 30)?;
     for ((l, n), (r, a)) in &speed.sizes {
         eprintln!(
             "  measured on one thread at L = {l}, N = {n}: {r:.2} ms/step relaxing, {a:.2} ms/step active (χ = 0.001)"
@@ -90,7 +90,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
     let workers = o.jobs.min(todo.len().max(1));
     if !todo.is_empty() {
         eprintln!(
-            "  estimate: {:.2} core-hours, about {} on {} core(s) (a floor: measured before the tissue is confluent)",
+            "  estimate: {:.2} core-hours, about {} on {} core(s) (measured before the tissue is confluent: runs with holes cost more)",
             core_seconds / 3600.0,
             hours(core_seconds / workers as f64),
             workers

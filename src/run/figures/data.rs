@@ -270,9 +270,9 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
                 let _ = write!(line[before], ",{},{},{}", v.len(), num(m), num(e));
                 // The paper draws a χ without holes at zero.
                 if holes == 0 {
-                    series.push(-(before as f64), 0.0, 0.0);
+                    series.push(0.0 - before as f64, 0.0, 0.0);
                 } else if m.is_finite() {
-                    series.push(-(before as f64), m, e);
+                    series.push(0.0 - before as f64, m, e);
                 }
             }
             if holes == 0 {
@@ -318,6 +318,7 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
     for (p, t) in panels.iter_mut().zip(titles) {
         p.title = t.to_string();
         p.y_from_zero = true;
+        p.x_range = Some((-(DEPTH as f64) - 0.5, 0.5));
     }
     csv(base, "", &text, made)?;
     made.files.extend(draw::panels(base, &panels, None)?);

@@ -58,6 +58,8 @@ pub struct Panel {
     pub y_from_zero: bool,
     /// A dotted horizontal line (1/e on the correlations).
     pub hline: Option<f64>,
+    /// A fixed x range (the precursors' 10 frames), else the data's.
+    pub x_range: Option<(f64, f64)>,
     pub series: Vec<Series>,
 }
 
@@ -70,6 +72,7 @@ impl Panel {
             log_y: false,
             y_from_zero: false,
             hline: None,
+            x_range: None,
             series: Vec::new(),
         }
     }
@@ -85,7 +88,9 @@ impl Panel {
         let fold = |f: fn(&(f64, f64, f64)) -> f64, g: fn(f64, f64) -> f64, init| self.shown().map(f).fold(init, g);
         let (mut x0, mut x1) = (fold(|p| p.0, f64::min, f64::MAX), fold(|p| p.0, f64::max, f64::MIN));
         let (mut y0, mut y1) = (fold(|p| p.1 - p.2, f64::min, f64::MAX), fold(|p| p.1 + p.2, f64::max, f64::MIN));
-        if x0 > x1 {
+        if let Some(r) = self.x_range {
+            (x0, x1) = r;
+        } else if x0 > x1 {
             (x0, x1) = (0.0, 1.0);
         }
         if x1 - x0 < 1e-12 {
@@ -136,6 +141,15 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, smal
                 .x_desc(p.x.as_str())
                 .y_desc(p.y.as_str())
                 .label_style((FONT, label))
+                .x_labels(if small { 4 } else { 10 })
+                .y_labels(if small { 4 } else { 10 })
+                .y_label_formatter(&|v: &f64| {
+                    if p.log_y {
+                        format!("{v:.0e}")
+                    } else {
+                        format!("{}", (v * 1e6).round() / 1e6)
+                    }
+                })
                 .light_line_style(WHITE.mix(0.0))
                 .draw()
                 .map_err(plot_err)?;

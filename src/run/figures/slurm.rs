@@ -78,9 +78,9 @@ pub fn scripts(plan: &Plan, out: &Path, o: &SlurmOptions) -> (String, String, St
     let common = common_args(plan, out, o);
     let runs = format!(
         "#!/bin/bash\n\
-         # monolayer figures, scale `{scale}`: the {n} runs of the plan as a job array, task K running\n\
-         # runs K, K + {tasks}, K + {twice}, … ({per_task} at most), each on one core. Edit freely\n\
-         # (partition, account, the %N throttle, time); `bash submit.sh` submits this and figures.sbatch.\n\
+         # monolayer figures, scale `{scale}`: the {n} runs of the plan as a job array, {share}\n\
+         # on one core. Edit freely (partition, account, the %N throttle, time);\n\
+         # `bash submit.sh` submits this and figures.sbatch.\n\
          # A task that is killed resumes its run from the last checkpoint when run again.\n\
          #SBATCH --job-name=monolayer-runs\n\
          #SBATCH --array=0-{last}%{throttle}\n\
@@ -93,21 +93,29 @@ pub fn scripts(plan: &Plan, out: &Path, o: &SlurmOptions) -> (String, String, St
          exec {common} --stage runs --shard \"${{SLURM_ARRAY_TASK_ID}}/{tasks}\" --jobs 1 --quiet\n",
         scale = plan.scale.name(),
         n = plan.jobs.len(),
-        twice = 2 * tasks,
+        share = if per_task == 1 {
+            "one run per task".to_string()
+        } else {
+            format!(
+                "task K running runs K, K + {tasks}, K + {}, … ({per_task} at most), one after the other",
+                2 * tasks
+            )
+        },
         last = tasks - 1,
         throttle = o.throttle.max(1),
         // Twice the estimate (it is measured before the tissue is confluent) and ten minutes more.
         time = slurm_time(per_task as f64 * o.longest_run_seconds * 2.0 + 600.0),
         logs = logs.display(),
     );
-    // Measuring every frame of every run: about 1 % of running them, on 4 cores.
+    // Measuring every frame of every run costs about 1 % of running them; two cores, which every
+    // node has, halve it.
     let figures = format!(
         "#!/bin/bash\n\
          # monolayer figures, scale `{scale}`: draws the figures, their CSVs and figures.md into\n\
          # {out} once every run is done (submit.sh starts it with --dependency=afterok on the array).\n\
          #SBATCH --job-name=monolayer-figures\n\
          #SBATCH --ntasks=1\n\
-         #SBATCH --cpus-per-task=4\n\
+         #SBATCH --cpus-per-task=2\n\
          #SBATCH --time={time}\n\
          #SBATCH --output={logs}/figures-%j.out\n\
          {partition}\
