@@ -316,7 +316,8 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
         _ => &["Fig. S2a: nearest +½ defect", "Fig. S2b: second nearest +½ defect"],
     };
     for (p, t) in panels.iter_mut().zip(titles) {
-        p.title = t.to_string();
+        // ζ is not in the paper's caption: the one used goes into the title.
+        p.title = format!("{t} (ζ = {})", plan.base.zeta);
         p.y_from_zero = true;
         p.x_range = Some((-(DEPTH as f64) - 0.5, 0.5));
     }
@@ -565,6 +566,9 @@ fn fig3d(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<
     Ok(())
 }
 
+/// Which runs of a figure make one point of a curve.
+type Pick = Box<dyn Fn(&Point) -> bool>;
+
 /// Figs. 3a–b (against ζ, a curve per χ) and S3 (against γ): the largest hole over the box and
 /// the number of holes per run, mean and standard error over runs.
 fn holes_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
@@ -576,13 +580,10 @@ fn holes_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made
     let mut count = Panel::new(&format!("{t}b: number of holes"), xd, "holes per run");
     area.y_from_zero = true;
     count.y_from_zero = true;
-    let groups: Vec<(String, Vec<(f64, Box<dyn Fn(&Point) -> bool>)>)> = if s3 {
+    let groups: Vec<(String, Vec<(f64, Pick)>)> = if s3 {
         vec![(
             "χ = 0.001, ζ = 0.3".into(),
-            GAMMAS_S3
-                .into_iter()
-                .map(|g| (g, Box::new(move |p: &Point| same(p.gamma, g)) as Box<dyn Fn(&Point) -> bool>))
-                .collect(),
+            GAMMAS_S3.into_iter().map(|g| (g, Box::new(move |p: &Point| same(p.gamma, g)) as Pick)).collect(),
         )]
     } else {
         CHI_FIG3AB
@@ -592,13 +593,7 @@ fn holes_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made
                     format!("χ = {chi}"),
                     ZETAS
                         .into_iter()
-                        .map(|z| {
-                            (
-                                z,
-                                Box::new(move |p: &Point| is_chi(p, chi) && same(p.zeta, z))
-                                    as Box<dyn Fn(&Point) -> bool>,
-                            )
-                        })
+                        .map(|z| (z, Box::new(move |p: &Point| is_chi(p, chi) && same(p.zeta, z)) as Pick))
                         .collect(),
                 )
             })
@@ -653,8 +648,11 @@ fn plan_seeds(plan: &Plan, figure: Figure) -> u64 {
 fn fig_s1(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
     let mut text = String::from("chi,r,velocity_correlation,nematic_correlation\n");
     let mut lengths = String::from("chi,runs,velocity_correlation_length,nematic_correlation_length\n");
-    let mut cv_panel = Panel::new("Fig. S1: velocity correlation", "r (sites)", "C_v(r)");
-    let mut cq_panel = Panel::new("Fig. S1: nematic correlation", "r (sites)", "C_Q(r)");
+    let size =
+        plan.runs_of(Figure::FigS1).next().map(|(j, _)| (j.params.box_size, j.params.n_cells)).unwrap_or_default();
+    let title = |what: &str| format!("Fig. S1: {what} (ζ = {}, L = {}, N = {})", plan.base.zeta, size.0, size.1);
+    let mut cv_panel = Panel::new(&title("velocity"), "r (sites)", "C_v(r)");
+    let mut cq_panel = Panel::new(&title("nematic"), "r (sites)", "C_Q(r)");
     cv_panel.hline = Some((-1.0f64).exp());
     cq_panel.hline = Some((-1.0f64).exp());
     let frictions: Vec<Friction> = CHI_S1.into_iter().map(Friction::Chi).chain([Friction::Dry]).collect();

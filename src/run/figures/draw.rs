@@ -84,7 +84,13 @@ impl Panel {
             .filter(|p| p.0.is_finite() && p.1.is_finite() && (!self.log_y || p.1 > 0.0))
     }
 
-    fn ranges(&self) -> ((f64, f64), (f64, f64)) {
+    /// The axes' ranges, with room at the top for the legend (drawn in the upper right, where it
+    /// would otherwise hide the points there).
+    fn ranges(&self, legend: bool) -> ((f64, f64), (f64, f64)) {
+        let entries = self.series.iter().filter(|s| !s.label.is_empty()).count() + self.hline.is_some() as usize;
+        // The legend's share of a 500-pixel-high panel's plotting area, about 400 pixels.
+        let share = if legend && entries > 0 { ((entries * 17 + 14) as f64 / 400.0).min(0.6) } else { 0.0 };
+        let room = share / (1.0 - share);
         let fold = |f: fn(&(f64, f64, f64)) -> f64, g: fn(f64, f64) -> f64, init| self.shown().map(f).fold(init, g);
         let (mut x0, mut x1) = (fold(|p| p.0, f64::min, f64::MAX), fold(|p| p.0, f64::max, f64::MIN));
         let (mut y0, mut y1) = (fold(|p| p.1 - p.2, f64::min, f64::MAX), fold(|p| p.1 + p.2, f64::max, f64::MIN));
@@ -103,8 +109,11 @@ impl Panel {
         if self.log_y {
             let lo = self.shown().map(|p| p.1).fold(f64::MAX, f64::min);
             let hi = self.shown().map(|p| p.1).fold(f64::MIN, f64::max);
-            let (lo, hi) = if lo > hi { (1e-6, 1.0) } else { (lo, hi) };
-            return ((x0, x1 + 0.02 * (x1 - x0)), (lo / 2.0, (hi * 2.0).max(lo * 10.0)));
+            if lo > hi {
+                return ((x0, x1), (1e-6, 1.0));
+            }
+            let (lo, hi) = (lo / 2.0, (hi * 2.0).max(lo * 10.0));
+            return ((x0, x1 + 0.02 * (x1 - x0)), (lo, hi * (hi / lo).powf(room)));
         }
         if y0 > y1 {
             (y0, y1) = (0.0, 1.0);
@@ -114,7 +123,8 @@ impl Panel {
         }
         let pad = ((y1 - y0) * 0.08).max(1e-9);
         let xpad = (x1 - x0) * 0.04;
-        ((x0 - xpad, x1 + xpad), (if self.y_from_zero && y0 >= 0.0 { 0.0 } else { y0 - pad }, y1 + pad))
+        let bottom = if self.y_from_zero && y0 >= 0.0 { 0.0 } else { y0 - pad };
+        ((x0 - xpad, x1 + xpad), (bottom, y1 + pad + (y1 + pad - bottom) * room))
     }
 }
 
@@ -123,7 +133,7 @@ fn colour(s: &Series) -> RGBColor {
 }
 
 fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, small: bool) -> Result<(), String> {
-    let ((x0, x1), (y0, y1)) = p.ranges();
+    let ((x0, x1), (y0, y1)) = p.ranges(!small);
     let (caption, label) = if small { (12, 12) } else { (20, 14) };
     let mut builder = ChartBuilder::on(area);
     builder
