@@ -71,7 +71,8 @@ PartitionName=main Nodes=$host Default=YES MaxTime=INFINITE State=UP
 EOF
 }
 
-alive() { [ -f "$1" ] && kill -0 "$(cat "$1")" 2>/dev/null; }
+# A daemon removes its pid file as it exits: read it once, quietly.
+alive() { local pid; pid=$(cat "$1" 2>/dev/null) && kill -0 "$pid" 2>/dev/null; }
 
 start() {
   need_root
@@ -103,7 +104,7 @@ stop() {
   need_root
   for pid in "$RUN/slurmd.pid" "$RUN/slurmctld.pid" /run/munge/munged.pid; do
     if alive "$pid"; then
-      kill "$(cat "$pid")"
+      kill "$(cat "$pid" 2>/dev/null)" 2>/dev/null || true
       for _ in $(seq 50); do alive "$pid" || break; sleep 0.1; done
     fi
   done
@@ -112,7 +113,7 @@ stop() {
 
 status() {
   for pid in /run/munge/munged.pid "$RUN/slurmctld.pid" "$RUN/slurmd.pid"; do
-    if alive "$pid"; then echo "$(basename "$pid" .pid): running ($(cat "$pid"))"; else echo "$(basename "$pid" .pid): not running"; fi
+    if alive "$pid"; then echo "$(basename "$pid" .pid): running ($(cat "$pid" 2>/dev/null))"; else echo "$(basename "$pid" .pid): not running"; fi
   done
   sinfo 2>/dev/null || true
 }
