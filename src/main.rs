@@ -64,7 +64,8 @@ struct FiguresArgs {
     /// Simulations at a time, one per core (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
-    /// Run the `paper` scale on this machine (days of core time: it is refused without this).
+    /// Run the whole `paper` scale on this machine (days of core time: it is refused without
+    /// this; a --shard, as a Slurm array task runs, is not).
     #[arg(long)]
     yes: bool,
     /// all (runs, then figures), runs (only the runs: a Slurm array task), or figures (only the
