@@ -339,4 +339,66 @@ mod tests {
         let st = s.solve(&pb).unwrap();
         assert!(st.iterations <= 15, "{st:?}");
     }
+
+    /// Subdomain weights: n(x) = the number of rectangular patches (wrapping at the edges) that
+    /// cover x, 0 to 4 here, with an uncovered stretch (a hole no patch reaches).
+    fn subdomain_counts(l: usize) -> Vec<f64> {
+        let patches = [(3, 5, 24, 20), (20, 2, 22, 26), (30, 18, 19, 25), (8, 22, 26, 14), (33, 30, 16, 16)];
+        let mut n = vec![0.0; l * l];
+        for &(x0, y0, w, h) in &patches {
+            for b in 0..h {
+                for a in 0..w {
+                    n[((y0 + b) % l) * l + (x0 + a) % l] += 1.0;
+                }
+            }
+        }
+        n
+    }
+
+    /// With subdomain weights C is still a symmetric operator: ⟨a, C b⟩ = ⟨C a, b⟩ for
+    /// arbitrary a, b, and positive on the covered sites.
+    #[test]
+    fn subdomain_operator_is_symmetric_and_positive() {
+        let l = 40;
+        let n = subdomain_counts(l);
+        assert!(n.contains(&0.0) && n.contains(&3.0), "the fixture must have holes and overlaps");
+        let mut nn = vec![0.0; l * l];
+        neighbour_sum8(&n, &mut nn, l);
+        let mut mg = Multigrid::new(l);
+        mg.setup(&n, &nn, &vec![0.001; l * l], 1.0);
+        let vec_of = |k: f64| -> Vec<f64> {
+            (0..l * l).map(|x| if n[x] > 0.0 { (0.37 * k * x as f64).sin() + 0.1 * k } else { 0.0 }).collect()
+        };
+        let (a, b) = (vec_of(1.0), vec_of(2.3));
+        let (mut ca, mut cb, mut col) = (vec![0.0; l * l], vec![0.0; l * l], vec![0.0; l]);
+        let a_ca = mg.apply(&a, &mut ca, &mut col);
+        mg.apply(&b, &mut cb, &mut col);
+        let (x, y) = (dot(&a, &cb), dot(&ca, &b));
+        assert!((x - y).abs() <= 1e-12 * x.abs().max(y.abs()), "⟨a, Cb⟩ = {x}, ⟨Ca, b⟩ = {y}");
+        assert!(a_ca > 0.0);
+    }
+
+    /// A rigid translation passes through the cell–cell friction: if every cell pushes with
+    /// f_j = ξ_s u₀ on its whole subdomain (so F = ξ_s n u₀), all cells move with u₀ and the
+    /// cell–cell term vanishes; each cell's velocity [f + ξ_c S]/[ξ_s + ξ_c N] is u₀ too.
+    #[test]
+    fn rigid_translation_passes_through_with_subdomain_weights() {
+        let l = 40;
+        let n = subdomain_counts(l);
+        let (xi_s, u0) = (0.001, C64::new(0.03, -0.02));
+        let f: Vec<C64> = n.iter().map(|n| u0 * (xi_s * n)).collect();
+        let xis = vec![xi_s; l * l];
+        let mut s = FrictionSolver::new(l);
+        let pb =
+            FrictionProblem { weight: &n, force: &f, xi_s: &xis, xi_c: 1.0, tolerance: 1e-11, max_iterations: 500 };
+        s.solve(&pb).unwrap();
+        for x in 0..l * l {
+            let expected = if n[x] > 0.0 { u0 } else { ZERO };
+            assert!((s.mean_velocity[x] - expected).norm() < 1e-8, "site {x}: u = {}", s.mean_velocity[x]);
+            if n[x] > 0.0 {
+                let v = (u0 * xi_s + s.velocity_nb[x]) / (xi_s + s.weight_nb[x]);
+                assert!((v - u0).norm() < 1e-8, "site {x}: a cell moves with {v}");
+            }
+        }
+    }
 }

@@ -27,6 +27,12 @@ pub enum FrictionWeights {
     /// present at x', with the paper's own threshold; a stronger friction at cell edges. The
     /// calibrated default (docs/calibration.md).
     Presence,
+    /// Every cell whose subdomain (patch) covers x' weighs 1, whatever φ_j(x') is: in the
+    /// paper's code each phase field lives on its own subdomain (its SI Sec. A), so "all phase
+    /// fields at the lattice site x'" may be every field defined there. The patch rule
+    /// (`relax_patch_size`, then `patch_margin` beyond φ > `presence_threshold`) then becomes
+    /// part of the model. The strongest of the three readings (n ≈ 4.5 per site at full size).
+    Subdomain,
 }
 
 /// The discrete Laplacian used in the chemical potential.
@@ -132,10 +138,10 @@ pub struct Params {
     pub initial_gap: f64,
 
     // --- units (reporting only; the dynamics never read them) ---------------------------------
-    /// Seconds per simulation time unit, for speeds in µm/h (Δx ≈ 1 µm). The paper writes
-    /// "Δt ∼ 5 s" beside Δx ∼ 1 µm; model-notes §5 reads it as one time unit ≈ 5 s (the
-    /// default), while the paper's own Δt is the time step of 0.1, which reads as 50 s per time
-    /// unit. docs/calibration.md compares the two.
+    /// Seconds per simulation time unit, for speeds in µm/h (Δx ≈ 1 µm); it changes no
+    /// dynamics. The paper settles it itself: its persistence threshold τ_t > 0.5 t_total is
+    /// 5,000 time units, which it calls "∼ 5 h", so one time unit ≈ 3.6 s (the default); its
+    /// "Δt ∼ 5 s" is the same estimate rounded (docs/units.md).
     pub time_unit_seconds: f64,
 }
 
@@ -173,7 +179,7 @@ impl Default for Params {
             active_steps: 100_000,
             initial_radius_fraction: 0.5,
             initial_gap: 2.0,
-            time_unit_seconds: 5.0,
+            time_unit_seconds: 3.6,
         }
     }
 }
@@ -370,9 +376,9 @@ mod tests {
         // The conventions the calibration chose (docs/calibration.md).
         assert_eq!((p.passive_force, p.friction_weights), (PassiveForce::PhiGradMu, FrictionWeights::Presence));
         assert_eq!(p.q_magnitude, 0.5);
-        // One site per time unit is 720 µm/h at 5 s per time unit, 72 µm/h at 50 s.
-        assert_eq!(p.microns_per_hour(), 720.0);
-        assert_eq!(Params { time_unit_seconds: 50.0, ..p }.microns_per_hour(), 72.0);
+        // One site per time unit is 1,000 µm/h at 3.6 s per time unit, 720 µm/h at 5 s.
+        assert_eq!(p.microns_per_hour(), 1000.0);
+        assert_eq!(Params { time_unit_seconds: 5.0, ..p }.microns_per_hour(), 720.0);
     }
 
     #[test]

@@ -105,13 +105,14 @@ impl RunAnalysis {
         let time = |t: f64| (t * 1e9).round() / 1e9;
         let mut frames = String::from(
             "step,time,packing_fraction,void_fraction,void_regions,holes_open,largest_void_area,plus_half_defects,\
-             minus_half_defects,spiral_cores,max_strain_rate,velocity_correlation_length,nematic_correlation_length\n",
+             minus_half_defects,spiral_cores,max_strain_rate,velocity_correlation_length,nematic_correlation_length,\
+             mean_speed,aspect_ratio_mean,aspect_ratio_p90\n",
         );
         for f in &self.frames {
             let s = &f.summary;
             let _ = writeln!(
                 frames,
-                "{},{},{:.6},{:.6},{},{},{},{},{},{},{:.6e},{},{}",
+                "{},{},{:.6},{:.6},{},{},{},{},{},{},{:.6e},{},{},{:.6},{},{}",
                 f.step,
                 time(f.time),
                 s.packing_fraction,
@@ -124,7 +125,10 @@ impl RunAnalysis {
                 s.spiral_cores,
                 s.max_strain_rate,
                 opt(s.velocity_correlation_length),
-                opt(s.nematic_correlation_length)
+                opt(s.nematic_correlation_length),
+                s.mean_speed,
+                opt(s.aspect_ratio_mean),
+                opt(s.aspect_ratio_p90)
             );
         }
         let mut holes = String::from(

@@ -208,6 +208,13 @@ pub struct RunSummary {
     pub nematic_correlation_length: Option<f64>,
     /// Minimum packing fraction over the frames with no hole open.
     pub min_packing_without_hole: Option<f64>,
+    /// Cells' aspect ratio (shape tensor): the per-frame mean and 90th percentile, averaged
+    /// over the frames.
+    pub aspect_ratio_mean: Option<f64>,
+    pub aspect_ratio_p90: Option<f64>,
+    /// The most holes open in one frame, and the share of frames with more than one open.
+    pub max_holes_open: usize,
+    pub fraction_multiple_holes: f64,
     /// Wall time of the run in this invocation of the sweep (0 when it was done already).
     pub run_seconds: f64,
 }
@@ -237,14 +244,9 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
     let p = &record.params;
     s.microns_per_hour = p.microns_per_hour();
     let mut ra = RunAnalysis::new(p);
-    let mut speeds = Vec::new();
     for (_, path) in &run.frames {
         let frame = read_frame(path, p.box_size)?;
         ra.push_frame(&frame);
-        // Σ_x |Σ_i φ_i v_i| / Σ_x Σ_i φ_i: the mean speed of the tissue, weighted by φ.
-        let mass: f64 = frame.cells.iter().flat_map(|(_, phi)| phi.iter()).sum();
-        let flux: f64 = frame.velocity.iter().map(|v| v.norm()).sum();
-        speeds.push(flux / mass.max(1e-300));
         s.steps = frame.step;
     }
     let first = ra.frames.first().map(|f| f.time).unwrap_or(0.0);
@@ -265,7 +267,12 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
             None => (last - h.nucleated, false),
         })
         .collect();
-    s.mean_speed = mean(speeds.into_iter()).unwrap_or(0.0);
+    s.mean_speed = mean(ra.frames.iter().map(|f| f.summary.mean_speed)).unwrap_or(0.0);
+    s.aspect_ratio_mean = mean(ra.frames.iter().filter_map(|f| f.summary.aspect_ratio_mean));
+    s.aspect_ratio_p90 = mean(ra.frames.iter().filter_map(|f| f.summary.aspect_ratio_p90));
+    s.max_holes_open = ra.frames.iter().map(|f| f.open_holes).max().unwrap_or(0);
+    let multiple = ra.frames.iter().filter(|f| f.open_holes > 1).count() as f64;
+    s.fraction_multiple_holes = multiple / ra.frames.len().max(1) as f64;
     s.velocity_correlation_length = mean(ra.frames.iter().filter_map(|f| f.summary.velocity_correlation_length));
     s.nematic_correlation_length = mean(ra.frames.iter().filter_map(|f| f.summary.nematic_correlation_length));
     s.min_packing_without_hole = ra
@@ -473,8 +480,9 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
         runs += &format!("{k},");
     }
     runs += "seed,status,blew_up,steps,active_time,holes_nucleated,max_hole_area,time_with_hole_open,\
-             hole_lifetimes,mean_speed,mean_speed_um_per_h,velocity_correlation_length,\
-             nematic_correlation_length,min_packing_fraction_without_hole\n";
+             hole_lifetimes,max_holes_open,fraction_multiple_holes,mean_speed,mean_speed_um_per_h,\
+             mean_speed_um_per_h_at_3.6s,mean_speed_um_per_h_at_5s,velocity_correlation_length,\
+             nematic_correlation_length,min_packing_fraction_without_hole,aspect_ratio_mean,aspect_ratio_p90\n";
     for s in summaries {
         let lifetimes: Vec<String> =
             s.lifetimes.iter().map(|(t, closed)| format!("{t:.1}{}", if *closed { "" } else { "+" })).collect();
@@ -485,7 +493,7 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
         }
         let _ = writeln!(
             runs,
-            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{:.6},{:.3},{},{},{}",
+            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{},{:.4},{:.6},{:.3},{:.3},{:.3},{},{},{},{},{}",
             s.seed,
             status,
             s.blew_up(),
@@ -495,11 +503,17 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
             s.max_hole_area,
             s.time_with_hole_open,
             lifetimes.join(";"),
+            s.max_holes_open,
+            s.fraction_multiple_holes,
             s.mean_speed,
             s.mean_speed * s.microns_per_hour,
+            s.mean_speed * 3600.0 / 3.6,
+            s.mean_speed * 3600.0 / 5.0,
             opt(s.velocity_correlation_length),
             opt(s.nematic_correlation_length),
-            opt(s.min_packing_without_hole)
+            opt(s.min_packing_without_hole),
+            opt(s.aspect_ratio_mean),
+            opt(s.aspect_ratio_p90)
         );
     }
     let mut regimes = String::new();
