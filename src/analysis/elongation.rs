@@ -46,7 +46,7 @@ pub fn ellipse_eigenvalue_ratio(k: f64) -> f64 {
 /// 1 for a round cell; [`MAX_ASPECT_RATIO`] at most; None for a cell with no gradient.
 pub fn aspect_ratio(trace: f64, q: [f64; 2]) -> Option<f64> {
     let q = (q[0] * q[0] + q[1] * q[1]).sqrt();
-    if !(trace > 0.0) || !q.is_finite() {
+    if trace.is_nan() || trace <= 0.0 || !q.is_finite() {
         return None;
     }
     let (hi, lo) = (0.5 * trace + q, 0.5 * trace - q);
