@@ -1,4 +1,4 @@
-//! The paper's measurements of the monolayer (Sec. A–D, model-notes §6), apart from the dynamics:
+//! The paper's measurements of the monolayer (Sec. A–D, docs/reading.md §6), apart from the dynamics:
 //! the same code measures the running simulation (live, in the browser) and a run's frames
 //! (offline, `monolayer analyze`).
 //!

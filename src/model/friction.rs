@@ -1,6 +1,6 @@
 //! Substrate and cell–cell friction: the force balance of Eq. 2, solved on the lattice.
 //!
-//! Per cell i and site x (model-notes §4):
+//! Per cell i and site x (docs/reading.md §4):
 //!   ξ_s v_i(x) + ξ_c Σ_{x'∈N8(x)} Σ_j w_j(x') [v_i(x) − v_j(x')] = f_i(x).
 //! With n = Σ_j w_j, V = Σ_j w_j v_j, F = Σ_j w_j f_j, N = Σ_{N8} n and S = Σ_{N8} V, every cell's
 //! velocity follows once V is known,
@@ -11,17 +11,14 @@
 //!   C u = F,  C = diag(n (ξ_s + ξ_c N)) − ξ_c diag(n) A₈ diag(n)   (A₈: 8-neighbour adjacency),
 //! positive definite on the sites with n > 0 (u = 0 elsewhere). In u, a uniform translation is the
 //! soft mode (C·1 = ξ_s n), as for the constant-coefficient operator K = C|_{n≡1}; in V it would
-//! be V ∝ n, and a preconditioner built on K would then need 80 iterations per solve instead of
-//! a handful (measured at χ = 0.001).
+//! be V ∝ n, which no level of a preconditioner represents exactly.
 //!
 //! The screening length √(3ξ_c/ξ_s) is 55 sites at χ = 0.001, as large as the box: a few
 //! relaxation sweeps would quietly add friction and kill the long-range flows that make holes.
 //! C is solved to a stated relative residual ‖F − C u‖/‖F‖ by conjugate gradients, warm-started
 //! from the last solution, preconditioned by one W-cycle of aggregation multigrid
-//! (`multigrid`), whose coarse levels see n, holes included. (An exact FFT inverse of the
-//! constant-coefficient operator, diagonally scaled, preconditioned well while n ≈ 1, but with
-//! every present cell counted n is 2–3 along cell edges and it took 71 iterations per solve at
-//! χ = 0.001, against 8.6 for multigrid.)
+//! (`multigrid`), whose coarse levels see n, holes included (why not an FFT preconditioner:
+//! docs/performance.md).
 //! C is real, so the two components (x, y) are two independent real systems over one
 //! multigrid hierarchy: each runs its own CG, on its own thread where two are available, and
 //! stops at ‖F_c − C u_c‖ ≤ tolerance·‖F‖/√2, so that together they meet the stated residual.

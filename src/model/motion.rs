@@ -12,7 +12,7 @@ use num_complex::Complex64 as C64;
 use crate::model::lattice::{Neighbourhood, Patch};
 use crate::model::params::{Advection, FrictionWeights};
 
-/// The weight w_j(x) with which cell j counts in the friction sum of Eq. 2 (model-notes §4).
+/// The weight w_j(x) with which cell j counts in the friction sum of Eq. 2 (docs/reading.md §4).
 #[inline(always)]
 pub fn friction_weight(kind: FrictionWeights, phi: f64, threshold: f64) -> f64 {
     match kind {

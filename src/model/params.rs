@@ -1,7 +1,7 @@
 //! Every knob of the model in one struct, with the paper's values as defaults.
 //!
 //! Field names follow the paper's symbols (see the table in the README). The conventions the
-//! paper leaves open (`../shared/model-notes.md` §7) are named fields here, not constants buried
+//! paper leaves open (docs/reading.md §7) are named fields here, not constants buried
 //! in the kernels, so that the calibration can compare them run against run.
 
 use serde::{Deserialize, Serialize};
@@ -21,7 +21,7 @@ pub enum PassiveForce {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FrictionWeights {
-    /// Each cell j at x' weighs φ_j(x'), clamped to [0, 1] (model-notes §4).
+    /// Each cell j at x' weighs φ_j(x'), clamped to [0, 1] (docs/reading.md §4).
     Phi,
     /// Each cell with φ_j(x') > `presence_threshold` weighs 1: "j ∈ x'" read as every cell
     /// present at x', with the paper's own threshold; a stronger friction at cell edges. The
