@@ -1,5 +1,6 @@
 //! Native only (feature `cli`): everything that touches files, clocks and the terminal.
 //!
+//! - [`config`]: parameters from config files, `--set` and `--grid`, the one KEY=VALUE parser;
 //! - [`files`]: frames, checkpoints and `run.json`, the writer and the reader of each together;
 //! - [`runner`]: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume);
 //! - [`sweep`]: a grid of runs, one per core, resumable, its summary and regime map;
@@ -7,6 +8,7 @@
 //!
 //! Uses `model` and `analysis`; nothing below it uses this layer.
 
+pub mod config;
 pub mod files;
 pub mod offline;
 pub mod plots;
