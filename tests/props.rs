@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use monolayer::run::config::load_params;
-use monolayer::run::files::{read_checkpoint, read_frame, write_checkpoint, write_frame};
+use monolayer::run::files::{read_checkpoint, read_frame, write_checkpoint, write_frame, RunRecord};
 use monolayer::{Monolayer, Params};
 use proptest::prelude::*;
 
@@ -92,6 +92,18 @@ proptest! {
         fs::write(&path, &text).unwrap();
         if let Err(e) = load_params(Some(&path), &[]) {
             prop_assert!(e.contains("c.toml"), "{text:?}: {e}");
+        }
+    }
+
+    /// A run record cut short or with a bit flipped is refused or read, never a panic (every
+    /// command that opens a run reads it first).
+    #[test]
+    fn damaged_run_records_never_panic(cut in 0.0f64..1.3, flip in proptest::option::of(0.0f64..1.0)) {
+        let dir = tempfile::tempdir().unwrap();
+        RunRecord::new(small(), 1, 10).save(dir.path()).unwrap();
+        let (_damaged, path) = damaged(&dir.path().join("run.json"), cut, flip, "run.json");
+        if let Ok(r) = RunRecord::load(path.parent().unwrap()) {
+            prop_assert!(r.frame_interval >= 1 && r.params.validate().is_ok());
         }
     }
 
