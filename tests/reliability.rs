@@ -249,6 +249,12 @@ fn a_full_disk_stops_a_run_cleanly() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("File too large"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("ZipWriter"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--resume"), "the way on: {}", stderr(&o));
+    assert!(matches!(RunRecord::load(&run).unwrap().status, RunStatus::Stopped(_)));
+    // Space again: the run goes on from its checkpoint to its end.
+    ok(&monolayer(&["run", "--quiet", "--resume", arg(&run)]));
+    let record = RunRecord::load(&run).unwrap();
+    assert_eq!((record.status, record.last_frame_step), (RunStatus::Finished, Some(100)));
 }
 
 // ---- 4. frame_interval 0 in run.json ----
