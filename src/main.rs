@@ -8,7 +8,8 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use monolayer::run::bench::BenchOptions;
-use monolayer::run::files::load_params;
+use monolayer::run::config::{load_params, parse_assignment};
+use monolayer::run::files::RunStatus;
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
 use monolayer::run::runner::{Event, RunDir};
@@ -137,8 +138,13 @@ struct RunArgs {
     /// Worker threads (results do not depend on it); default: all cores.
     #[arg(long)]
     threads: Option<usize>,
-    /// Continue the run in this directory from its last checkpoint (ignores parameter options).
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["out", "seed"])]
+    /// Continue the run in this directory from its last checkpoint (with its own parameters,
+    /// seed and frame interval, which no option changes).
+    #[arg(
+        long,
+        value_name = "DIR",
+        conflicts_with_all = ["out", "seed", "frame_interval", "config", "set", "chi", "zeta", "steps", "relax_steps"]
+    )]
     resume: Option<PathBuf>,
     /// No progress bar (for batch jobs); a line per frame instead.
     #[arg(long)]
@@ -213,7 +219,11 @@ struct BenchArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run(a) => with_threads(a.threads, || run(&a)),
+        Command::Run(a) => a
+            .threads
+            .map(|n| check_threads("--threads", n))
+            .transpose()
+            .and_then(|threads| with_threads(threads, || run(&a))),
         Command::Bench(a) => bench(&a),
         Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| e.to_string()),
         Command::Fingerprint(a) => fingerprint(&a),
@@ -229,10 +239,23 @@ fn main() -> ExitCode {
     }
 }
 
+fn cores() -> usize {
+    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+}
+
+/// A count of threads or simulations at a time: at least 1, and at most 4 per core (results do
+/// not depend on it, and past the cores more only share them).
+fn check_threads(flag: &str, n: usize) -> Result<usize, String> {
+    let max = 4 * cores();
+    if n == 0 || n > max {
+        return Err(format!("{flag} {n}: must be in [1, {max}] (4 × the {} cores here)", cores()));
+    }
+    Ok(n)
+}
+
 fn with_threads(threads: Option<usize>, f: impl FnOnce() -> Result<(), String> + Send) -> Result<(), String> {
     match threads {
         None => f(),
-        Some(0) => Err("--threads 0: must be ≥ 1".into()),
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build()
@@ -303,12 +326,8 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
         None => SweepSpec { seeds: vec![1], frame_interval: 1000, ..SweepSpec::default() },
     };
     for s in &a.set {
-        let (k, v) = s.split_once('=').ok_or_else(|| format!("--set {s}: expected key=value"))?;
-        let value = format!("x = {}", v.trim())
-            .parse::<toml::Table>()
-            .map(|t| t["x"].clone())
-            .unwrap_or_else(|_| toml::Value::String(v.trim().to_string()));
-        spec.base.insert(k.trim().to_string(), value);
+        let (k, v) = parse_assignment("--set", s)?;
+        spec.base.insert(k, v);
     }
     for g in &a.grid {
         spec.add_grid(g)?;
@@ -321,7 +340,10 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     }
     let jobs = spec.jobs()?;
     let shard = a.shard.or(slurm_shard()?);
-    let workers = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    let workers = match a.jobs {
+        Some(n) => check_threads("--jobs", n)?,
+        None => cores(),
+    };
     let mine = jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).count();
     let todo = steps_to_run(&jobs, &a.out, shard);
     eprintln!(
@@ -346,6 +368,21 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     bar.finish();
     for path in write_tables(&a.out, &summaries)? {
         println!("{}", path.display());
+    }
+    let stopped: Vec<String> = summaries
+        .iter()
+        .filter_map(|s| match &s.status {
+            RunStatus::Stopped(why) => Some(format!("  {}: {}", s.name, why.lines().next().unwrap_or(""))),
+            _ => None,
+        })
+        .collect();
+    if !stopped.is_empty() {
+        return Err(format!(
+            "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \
+             same command again: they continue from their checkpoints",
+            stopped.len(),
+            stopped.join("\n")
+        ));
     }
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
@@ -373,6 +410,12 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
 }
 
 fn bench(a: &BenchArgs) -> Result<(), String> {
+    if a.threads.is_empty() {
+        return Err("--threads: give at least one count".into());
+    }
+    for &n in &a.threads {
+        check_threads("--threads", n)?;
+    }
     let mut overrides = vec![format!("zeta={}", a.zeta)];
     overrides.extend(a.set.iter().cloned());
     let params = load_params(None, &overrides)?;

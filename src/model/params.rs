@@ -184,6 +184,9 @@ impl Default for Params {
     }
 }
 
+/// The most steps of either phase of the protocol.
+pub const MAX_STEPS: u64 = 1_000_000_000;
+
 /// A parameter outside its allowed range, named as in the config file.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("parameter `{name}` = {value}: {allowed}")]
@@ -312,6 +315,13 @@ impl Params {
             self.friction_max_iterations,
             "must be in [1, 100000]",
         )?;
+        // patch_margin first: relax_patch_size's range is computed from it.
+        check(
+            self.patch_margin >= 2 && self.patch_margin <= 32,
+            "patch_margin",
+            self.patch_margin,
+            "must be in [2, 32]",
+        )?;
         let min_patch = (2.0 * self.radius).ceil() as usize + 2 * self.patch_margin;
         check(
             self.relax_patch_size >= min_patch && self.relax_patch_size < self.box_size,
@@ -319,15 +329,13 @@ impl Params {
             self.relax_patch_size,
             format!("must be in [{min_patch}, {}): at least 2R + 2·patch_margin and below the box", self.box_size),
         )?;
-        check(
-            self.patch_margin >= 2 && self.patch_margin <= 32,
-            "patch_margin",
-            self.patch_margin,
-            "must be in [2, 32]",
-        )?;
         check(self.phi_min < 0.0 && self.phi_min.is_finite(), "phi_min", self.phi_min, "must be a finite number < 0")?;
         check(self.phi_max > 1.0 && self.phi_max.is_finite(), "phi_max", self.phi_max, "must be a finite number > 1")?;
         positive("xi_relax", self.xi_relax)?;
+        // A billion steps is months of computing; the bound keeps their sum far from overflow.
+        for (name, steps) in [("relax_steps", self.relax_steps), ("active_steps", self.active_steps)] {
+            check(steps <= MAX_STEPS, name, steps, "must be in [0, 1000000000]")?;
+        }
         check(
             self.initial_radius_fraction > 0.0 && self.initial_radius_fraction <= 1.0,
             "initial_radius_fraction",
@@ -398,6 +406,13 @@ mod tests {
 
         let p = Params { relax_patch_size: 10, ..Params::default() };
         assert_eq!(p.validate().unwrap_err().name, "relax_patch_size");
+
+        let p = Params { patch_margin: 1000, ..Params::default() };
+        let e = p.validate().unwrap_err();
+        assert!(e.name == "patch_margin" && e.to_string().contains("[2, 32]"), "{e}");
+
+        let p = Params { active_steps: u64::MAX, ..Params::default() };
+        assert_eq!(p.validate().unwrap_err().name, "active_steps");
 
         let p = Params { initial_gap: 6.0, ..Params::default() };
         let e = p.validate().unwrap_err();
