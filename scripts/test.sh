@@ -17,8 +17,8 @@ step "lints and build (wasm32-unknown-unknown, the browser's core)"
 cargo clippy --target wasm32-unknown-unknown --lib --no-default-features -- -D warnings
 cargo build --target wasm32-unknown-unknown --lib --no-default-features --release
 
-step "tests (release: the integration tests run the paper's full size)"
-cargo test --release
+step "tests (release; --include-ignored adds the integration tests at the paper's full size)"
+cargo test --release -- --include-ignored
 
 step "browser demo (headless Chromium: WebGPU on SwiftShader, then the WebGL2 fallback)"
 # Debian's chromium and the npm packages of tests/browser; .ci/run installs both. No browser

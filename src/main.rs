@@ -1,6 +1,5 @@
 //! `monolayer`: run the paper's protocol at full size, continue a run, measure speed.
 
-use std::fs;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -8,8 +7,9 @@ use std::time::Instant;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use monolayer::analysis::Analysis;
-use monolayer::run::files::{frame_path, load_params, write_frame, RunRecord};
+use monolayer::run::bench::BenchOptions;
+use monolayer::run::config::{load_params, parse_assignment};
+use monolayer::run::files::RunStatus;
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
 use monolayer::run::runner::{Event, RunDir};
@@ -189,8 +189,13 @@ struct RunArgs {
     /// Worker threads (results do not depend on it); default: all cores.
     #[arg(long)]
     threads: Option<usize>,
-    /// Continue the run in this directory from its last checkpoint (ignores parameter options).
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["out", "seed"])]
+    /// Continue the run in this directory from its last checkpoint (with its own parameters,
+    /// seed and frame interval, which no option changes).
+    #[arg(
+        long,
+        value_name = "DIR",
+        conflicts_with_all = ["out", "seed", "frame_interval", "config", "set", "chi", "zeta", "steps", "relax_steps"]
+    )]
     resume: Option<PathBuf>,
     /// No progress bar (for batch jobs); a line per frame instead.
     #[arg(long)]
@@ -251,12 +256,25 @@ struct BenchArgs {
     blocks: u64,
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Friction ratios χ = ξ_s/ξ_cell timed in turn.
+    #[arg(long, value_delimiter = ',', default_value = "0.1,0.001")]
+    chi: Vec<f64>,
+    /// Activity of the timed steps.
+    #[arg(long, default_value_t = 0.5)]
+    zeta: f64,
+    /// Any other parameter, e.g. --set friction_weights=subdomain (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run(a) => with_threads(a.threads, || run(&a)),
+        Command::Run(a) => a
+            .threads
+            .map(|n| check_threads("--threads", n))
+            .transpose()
+            .and_then(|threads| with_threads(threads, || run(&a))),
         Command::Bench(a) => bench(&a),
         Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| e.to_string()),
         Command::Fingerprint(a) => fingerprint(&a),
@@ -273,10 +291,23 @@ fn main() -> ExitCode {
     }
 }
 
+fn cores() -> usize {
+    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+}
+
+/// A count of threads or simulations at a time: at least 1, and at most 4 per core (results do
+/// not depend on it, and past the cores more only share them).
+fn check_threads(flag: &str, n: usize) -> Result<usize, String> {
+    let max = 4 * cores();
+    if n == 0 || n > max {
+        return Err(format!("{flag} {n}: must be in [1, {max}] (4 × the {} cores here)", cores()));
+    }
+    Ok(n)
+}
+
 fn with_threads(threads: Option<usize>, f: impl FnOnce() -> Result<(), String> + Send) -> Result<(), String> {
     match threads {
         None => f(),
-        Some(0) => Err("--threads 0: must be ≥ 1".into()),
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build()
@@ -347,12 +378,8 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
         None => SweepSpec { seeds: vec![1], frame_interval: 1000, ..SweepSpec::default() },
     };
     for s in &a.set {
-        let (k, v) = s.split_once('=').ok_or_else(|| format!("--set {s}: expected key=value"))?;
-        let value = format!("x = {}", v.trim())
-            .parse::<toml::Table>()
-            .map(|t| t["x"].clone())
-            .unwrap_or_else(|_| toml::Value::String(v.trim().to_string()));
-        spec.base.insert(k.trim().to_string(), value);
+        let (k, v) = parse_assignment("--set", s)?;
+        spec.base.insert(k, v);
     }
     for g in &a.grid {
         spec.add_grid(g)?;
@@ -365,7 +392,10 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     }
     let jobs = spec.jobs()?;
     let shard = a.shard.or(slurm_shard()?);
-    let workers = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    let workers = match a.jobs {
+        Some(n) => check_threads("--jobs", n)?,
+        None => cores(),
+    };
     let mine = jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).count();
     let todo = steps_to_run(&jobs, &a.out, shard);
     eprintln!(
@@ -390,6 +420,21 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     bar.finish();
     for path in write_tables(&a.out, &summaries)? {
         println!("{}", path.display());
+    }
+    let stopped: Vec<String> = summaries
+        .iter()
+        .filter_map(|s| match &s.status {
+            RunStatus::Stopped(why) => Some(format!("  {}: {}", s.name, why.lines().next().unwrap_or(""))),
+            _ => None,
+        })
+        .collect();
+    if !stopped.is_empty() {
+        return Err(format!(
+            "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \
+             same command again: they continue from their checkpoints",
+            stopped.len(),
+            stopped.join("\n")
+        ));
     }
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
@@ -438,110 +483,31 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
 }
 
 fn bench(a: &BenchArgs) -> Result<(), String> {
-    if a.threads.is_empty() || a.threads.contains(&0) {
-        return Err(format!("--threads {:?}: every count must be ≥ 1", a.threads));
+    if a.threads.is_empty() {
+        return Err("--threads: give at least one count".into());
     }
-    if a.blocks == 0 || a.blocks > a.steps {
-        return Err(format!("--blocks {}: must be in [1, --steps = {}]", a.blocks, a.steps));
+    for &n in &a.threads {
+        check_threads("--threads", n)?;
     }
-    let pools = a
-        .threads
-        .iter()
-        .map(|&n| rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| format!("--threads {n}: {e}")))
-        .collect::<Result<Vec<_>, _>>()?;
-    println!(
-        "full size (N = 100, L = 140), {} relaxation steps then {} timed active steps in {} blocks, thread(s): {:?}",
-        a.relax_steps, a.steps, a.blocks, a.threads
-    );
-    // The issue's benchmark point: ζ = 0.5 at χ = 0.1 and χ = 0.001.
-    let base = Params { relax_steps: a.relax_steps, zeta: 0.5, ..Params::default() };
-    let mut relaxed = Monolayer::new(base.clone(), a.seed).map_err(|e| e.to_string())?;
-    let t = Instant::now();
-    pools[0].install(|| relaxed.advance(a.relax_steps)).map_err(|e| e.to_string())?;
-    println!(
-        "relaxation, {} thread(s): {:.3} ms/step\n{}",
-        a.threads[0],
-        1e3 * t.elapsed().as_secs_f64() / a.relax_steps.max(1) as f64,
-        relaxed.counters().report()
-    );
-    for chi in [0.1, 0.001] {
-        let mut p = base.clone();
-        p.set_chi(chi);
-        // One copy per thread count; they follow the same trajectory (the bits do not depend on
-        // the thread count), so block k costs each the same work.
-        let mut runs = Vec::new();
-        for pool in &pools {
-            let mut m = relaxed.clone();
-            m.set_params(p.clone()).map_err(|e| e.to_string())?;
-            // The first solve starts from rest; time the steady state.
-            pool.install(|| m.advance(5)).map_err(|e| e.to_string())?;
-            m.counters_mut().reset();
-            runs.push(m);
-        }
-        let mut block_ms = vec![Vec::new(); pools.len()];
-        let mut seconds = vec![0.0; pools.len()];
-        let mut stopped = None;
-        'blocks: for k in 0..a.blocks {
-            let steps = a.steps * (k + 1) / a.blocks - a.steps * k / a.blocks;
-            for (((m, pool), times), total) in runs.iter_mut().zip(&pools).zip(&mut block_ms).zip(&mut seconds) {
-                let t = Instant::now();
-                let r = pool.install(|| m.advance(steps));
-                *total += t.elapsed().as_secs_f64();
-                if let Err(e) = r {
-                    stopped = Some(e.to_string());
-                    break 'blocks;
-                }
-                times.push(1e3 * t.elapsed().as_secs_f64() / steps as f64);
-            }
-        }
-        for (((m, times), threads), total) in runs.iter().zip(&block_ms).zip(&a.threads).zip(&seconds) {
-            let c = m.counters();
-            println!(
-                "χ = {chi}, ζ = {}, {threads} thread(s): {:.3} ms/step over {} steps; blocks: median {:.3}, best {:.3}\n{}",
-                m.params().zeta,
-                1e3 * total / c.steps.max(1) as f64,
-                c.steps,
-                median(times),
-                times.iter().copied().fold(f64::INFINITY, f64::min),
-                c.report()
-            );
-        }
-        for (times, threads) in block_ms.iter().zip(&a.threads).skip(1) {
-            let ratios: Vec<f64> = block_ms[0].iter().zip(times).map(|(t0, t)| t0 / t).collect();
-            let best = |t: &[f64]| t.iter().copied().fold(f64::INFINITY, f64::min);
-            println!(
-                "  speed-up of {threads} over {} thread(s): median block {:.2}×, best blocks {:.2}×",
-                a.threads[0],
-                median(&ratios),
-                best(&block_ms[0]) / best(times)
-            );
-        }
-        if let Some(e) = stopped {
-            return Err(format!("χ = {chi}: stopped: {e}"));
-        }
-    }
-    Ok(())
-}
-
-/// The median of a few timings (the mean of the middle two for an even count).
-fn median(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut v = v.to_vec();
-    v.sort_by(f64::total_cmp);
-    let h = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[h]
-    } else {
-        0.5 * (v[h - 1] + v[h])
-    }
+    let mut overrides = vec![format!("zeta={}", a.zeta)];
+    overrides.extend(a.set.iter().cloned());
+    let params = load_params(None, &overrides)?;
+    let options = BenchOptions {
+        params,
+        chis: a.chi.clone(),
+        steps: a.steps,
+        relax_steps: a.relax_steps,
+        threads: a.threads.clone(),
+        blocks: a.blocks,
+        seed: a.seed,
+    };
+    monolayer::run::bench::bench(&options)
 }
 
 /// `analyze DIR`, or with --bench the timings of the measurements at full size.
 fn analyze(a: &AnalyzeArgs) -> Result<(), String> {
     if a.bench {
-        return bench_analysis(a.bench_frames);
+        return monolayer::run::bench::bench_analysis(a.bench_frames);
     }
     let dir = a.dir.as_deref().expect("clap requires DIR without --bench");
     let written = analyze_run(dir, a.out.as_deref(), a.snapshot, a.field)?;
@@ -549,43 +515,4 @@ fn analyze(a: &AnalyzeArgs) -> Result<(), String> {
         println!("{}", path.display());
     }
     Ok(())
-}
-
-/// Times [`Analysis::measure`] on a full-size active state, and `analyze` over `frames` frames
-/// of it written to a temporary run directory (removed afterwards).
-fn bench_analysis(frames: u64) -> Result<(), String> {
-    let p = Params { relax_steps: 3000, zeta: 0.5, ..Params::default() };
-    let mut m = Monolayer::new(p.clone(), 1).map_err(|e| e.to_string())?;
-    m.advance(p.relax_steps + 20).map_err(|e| e.to_string())?;
-    m.evaluate_now().map_err(|e| e.to_string())?;
-    let mut analysis = Analysis::new(m.params());
-    analysis.measure(&m);
-    let reps = 200;
-    let t = Instant::now();
-    for _ in 0..reps {
-        analysis.measure(&m);
-    }
-    let ms = 1e3 * t.elapsed().as_secs_f64() / reps as f64;
-    println!("measurements of one full-size frame (N = {}, L = {}): {ms:.2} ms", p.n_cells, p.box_size);
-    let dir = std::env::temp_dir().join(format!("monolayer-analysis-bench-{}", std::process::id()));
-    let result = (|| {
-        fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
-        RunRecord::new(m.params().clone(), 1, 10).save(&dir)?;
-        for _ in 0..frames {
-            m.advance(10).map_err(|e| e.to_string())?;
-            m.evaluate_now().map_err(|e| e.to_string())?;
-            let path = frame_path(&dir, m.step_count());
-            write_frame(&mut m, &path)?;
-        }
-        let t = Instant::now();
-        let written = analyze_run(&dir, None, None, Background::StrainRate)?;
-        println!(
-            "analyze over {frames} full-size frames: {:.2} s ({} files written)",
-            t.elapsed().as_secs_f64(),
-            written.len()
-        );
-        Ok(())
-    })();
-    let _ = fs::remove_dir_all(&dir);
-    result
 }

@@ -1,17 +1,13 @@
 //! `monolayer analyze` and `run --analyze` as a user drives them: the tables and plots of a run,
 //! and the refusals (with nothing written) of what is not a complete run of this program.
 
+mod common;
+
 use std::fs;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn monolayer(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{lines, monolayer, stderr};
 
 /// A small, quick run: 18 cells on a 60×60 box, frames every 10 steps from step 300 (the end of
 /// relaxation); with 30 active steps, 4 frames.
@@ -36,10 +32,6 @@ fn small_run(out: &Path, steps: &str, extra: &[&str]) -> Output {
     ];
     args.extend_from_slice(extra);
     monolayer(&args)
-}
-
-fn lines(path: &Path) -> Vec<String> {
-    fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).lines().map(String::from).collect()
 }
 
 /// The tables have a row per frame (and per hole), the plots are real PNG and SVG files, and

@@ -1,15 +1,10 @@
 //! The command line as a user drives it: errors, frames, resume, and a run that blows up.
 
+mod common;
+
 use std::path::Path;
-use std::process::{Command, Output};
 
-fn monolayer(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{monolayer, stderr};
 
 /// A small, quick version of the protocol.
 const SMALL: [&str; 10] =

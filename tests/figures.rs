@@ -102,6 +102,7 @@ fn read_csvs(dir: &Path) -> BTreeMap<String, String> {
 }
 
 #[test]
+#[ignore = "28 small runs, 1–2 minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn the_smoke_scale_draws_every_figure_and_resumes_without_running_again() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("smoke");

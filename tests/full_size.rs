@@ -16,6 +16,7 @@ use monolayer::{Monolayer, Params};
 /// lost cell would show is a cell far below its peers: none may be 10 % below the mean area, and
 /// the mean must stay above 80 % of πR².
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn relaxation_reaches_confluence() {
     let mut m = relaxed_full_size().clone();
     let p = m.params().clone();
@@ -41,6 +42,7 @@ fn relaxation_reaches_confluence() {
 /// A few hundred active steps at χ = 0.001 stay finite, and the velocity field is correlated
 /// over a longer range than at χ = 1 from the same relaxed state.
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn low_friction_runs_and_correlates_velocities_further() {
     let mut lengths = Vec::new();
     for chi in [1.0, 0.001] {
@@ -82,6 +84,7 @@ fn velocity_correlation_length(m: &mut Monolayer) -> f64 {
 /// 100 steps. The φ-weighted friction sum opens holes here within 2,000 steps; so would anything
 /// that strengthened activity or weakened the passive response or the cell–cell friction.
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn calibration_guard_no_hole_at_high_friction() {
     let mut m = active_copy_at(0.1, 0.5);
     let (l, r) = (m.params().box_size, m.params().radius);
@@ -102,6 +105,7 @@ fn calibration_guard_no_hole_at_high_friction() {
 /// finite through 500 active steps, and the flows it carries are collective: the velocity
 /// correlation length exceeds one cell radius (at χ = 1 it is below; see the test above).
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn calibration_guard_low_friction_flows_are_collective_and_finite() {
     let mut m = active_copy_at(0.001, 0.5);
     m.advance(500).unwrap_or_else(|e| panic!("χ = 0.001, ζ = 0.5: {e}"));
@@ -113,6 +117,7 @@ fn calibration_guard_low_friction_flows_are_collective_and_finite() {
 
 /// The same state stepped on one thread and on two gives the same bits.
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn bits_do_not_depend_on_thread_count() {
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
@@ -130,6 +135,7 @@ fn bits_do_not_depend_on_thread_count() {
 
 /// Stopping at a checkpoint and continuing from the file gives the same bits as running on.
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn resume_from_checkpoint_is_bit_identical() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("checkpoint.npz");
@@ -148,6 +154,7 @@ fn resume_from_checkpoint_is_bit_identical() {
 
 /// The same seed gives the same bits through the whole protocol; another seed does not.
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn same_seed_same_bits() {
     let p = Params { box_size: 60, n_cells: 18, relax_steps: 400, xi_substrate: 0.01, ..Params::default() };
     let run = |seed| {
@@ -162,6 +169,7 @@ fn same_seed_same_bits() {
 /// Writing a frame (an evaluation outside the stepping) does not change the trajectory: runs
 /// with different frame intervals stay bit-identical.
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn evaluating_for_a_frame_does_not_change_the_trajectory() {
     let mut plain = active_copy(0.01);
     let mut observed = plain.clone();
@@ -176,6 +184,7 @@ fn evaluating_for_a_frame_does_not_change_the_trajectory() {
 /// relaxation, where the area constraint inflates the small disks, stay stable (a placement
 /// that let disks touch blew up 8 seeds of 20 within 70 steps).
 #[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn every_seed_relaxes_without_blowing_up() {
     for seed in 1..=16 {
         let p = Params { relax_steps: 150, active_steps: 0, ..Params::default() };

@@ -6,7 +6,7 @@ mod common;
 use common::{ellipse, with_cells};
 use monolayer::model::friction::{FrictionProblem, FrictionSolver};
 use monolayer::model::lattice::Patch;
-use monolayer::model::params::PassiveForce;
+use monolayer::model::params::{FrictionWeights, PassiveForce};
 use monolayer::{Monolayer, Params};
 use num_complex::Complex64 as C64;
 use rustfft::FftPlanner;
@@ -250,18 +250,32 @@ fn bad_parameters_name_themselves() {
 
 /// Eq. 2 cell by cell: every cell's velocity, as the stepping computes it, satisfies
 ///   ξ_s v_i(x) + ξ_c Σ_{x′∈N8(x)} Σ_j w_j(x′) [v_i(x) − v_j(x′)] = f_i(x)
-/// at every site of its patch, with w_j the presence weights, summed here directly over the
-/// cells (not through the lattice fields the solver uses). A wrong factor in the mobility
-/// 1/(ξ_s + ξ_c N) or in the pull ξ_c S, or a sign, breaks it.
+/// at every site of its patch, for each reading of "j at x′" (φ-weighted, present, subdomain),
+/// with w_j computed here from its definition and summed directly over the cells (not through
+/// the lattice fields the solver uses). A wrong factor in the mobility 1/(ξ_s + ξ_c N) or in the
+/// pull ξ_c S, a sign, or a weight of the wrong reading breaks it.
 #[test]
 fn every_cell_velocity_satisfies_the_friction_balance() {
+    for weights in [FrictionWeights::Phi, FrictionWeights::Presence, FrictionWeights::Subdomain] {
+        friction_balance_holds(weights);
+    }
+}
+
+fn friction_balance_holds(weights: FrictionWeights) {
     let (l, w, h) = (64, 30, 30);
     let cells = vec![
         (Patch { x0: 10, y0: 10, w, h }, ellipse(w, h, 8.0, 6.0, 0.3)),
         (Patch { x0: 22, y0: 15, w, h }, ellipse(w, h, 7.0, 6.0, -0.5)),
     ];
     let (xi_s, xi_c) = (0.05, 0.7);
-    let p = Params { xi_substrate: xi_s, xi_cell: xi_c, zeta: 0.4, friction_tolerance: 1e-11, ..small(2, l) };
+    let p = Params {
+        xi_substrate: xi_s,
+        xi_cell: xi_c,
+        zeta: 0.4,
+        friction_tolerance: 1e-11,
+        friction_weights: weights,
+        ..small(2, l)
+    };
     let threshold = p.presence_threshold;
     let mut m = with_cells(p, cells, 0);
     m.evaluate_now().unwrap();
@@ -275,7 +289,12 @@ fn every_cell_velocity_satisfies_the_friction_balance() {
             for b in 0..pt.h {
                 for a in 0..pt.w {
                     let x = (pt.y0 + b) * l + pt.x0 + a;
-                    wgt[x] = if phi.at(a, b) > threshold { 1.0 } else { 0.0 };
+                    let phi = phi.at(a, b);
+                    wgt[x] = match weights {
+                        FrictionWeights::Phi => phi.clamp(0.0, 1.0),
+                        FrictionWeights::Presence => f64::from(u8::from(phi > threshold)),
+                        FrictionWeights::Subdomain => 1.0,
+                    };
                     vel[x] = [vx.at(a, b), vy.at(a, b)];
                 }
             }
@@ -305,7 +324,7 @@ fn every_cell_velocity_satisfies_the_friction_balance() {
         }
     }
     assert!(scale > 1e-3, "the cells must carry forces: {scale}");
-    assert!(worst < 1e-7 * scale, "Eq. 2 misses by {worst} (largest force {scale})");
+    assert!(worst < 1e-7 * scale, "{weights:?}: Eq. 2 misses by {worst} (largest force {scale})");
 }
 
 /// Heun's predictor–corrector is second order: halving Δt cuts the error at a fixed time about

@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use monolayer::run::files::{frame_path, write_checkpoint, RunRecord};
+use monolayer::run::files::{checkpoint_path, frame_path, write_checkpoint, RunRecord, RunStatus};
 use monolayer::run::sweep::{run_sweep, steps_to_run, write_tables, SweepSpec};
 use monolayer::Monolayer;
 
@@ -40,7 +40,7 @@ fn a_sweep_runs_every_point_once_and_resumes() {
     assert_eq!(first.len(), 4);
     assert!(steps >= 4 * 200, "{steps} steps for 4 runs of 250 (the watcher sees every 100th)");
     for s in &first {
-        assert_eq!(s.status, "finished", "{}", s.name);
+        assert_eq!(s.status, RunStatus::Finished, "{}", s.name);
         assert_eq!(s.steps, 250);
         assert!(s.mean_speed > 0.0 && s.mean_speed < 1.0, "{}: speed {}", s.name, s.mean_speed);
         assert!(s.velocity_correlation_length.is_some());
@@ -61,22 +61,22 @@ fn a_sweep_runs_every_point_once_and_resumes() {
     // A run killed at step 150: its checkpoint and frames up to there, its record still
     // "running". The sweep resumes it from the checkpoint to the same bits.
     let victim = out.join("runs").join("chi0.01_zeta0.4_seed1");
-    let final_checkpoint = std::fs::read(victim.join("checkpoint.npz")).unwrap();
+    let final_checkpoint = std::fs::read(checkpoint_path(&victim)).unwrap();
     let mut record = RunRecord::load(&victim).unwrap();
     let mut m = Monolayer::new(record.params.clone(), record.seed).unwrap();
     m.advance(150).unwrap();
-    write_checkpoint(&m, &victim.join("checkpoint.npz")).unwrap();
+    write_checkpoint(&m, &checkpoint_path(&victim)).unwrap();
     for step in [200, 250] {
         std::fs::remove_file(frame_path(&victim, step)).unwrap();
     }
-    record.status = "running".into();
+    record.status = RunStatus::Running;
     record.last_frame_step = Some(150);
     record.save(&victim).unwrap();
     let spec: SweepSpec = toml::from_str(SPEC).unwrap();
     assert_eq!(steps_to_run(&spec.jobs().unwrap(), out, None), 100);
     let (redone, steps) = sweep(out);
     assert!((100..200).contains(&steps), "resumed at 150, not restarted ({steps} steps)");
-    assert_eq!(std::fs::read(victim.join("checkpoint.npz")).unwrap(), final_checkpoint, "not bit-identical");
+    assert_eq!(std::fs::read(checkpoint_path(&victim)).unwrap(), final_checkpoint, "not bit-identical");
     assert_eq!(monolayer::run::sweep::tables(&redone), monolayer::run::sweep::tables(&first));
 }
 

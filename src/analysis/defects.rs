@@ -1,4 +1,4 @@
-//! ±½ topological defects of the (smoothed) nematic field (paper Sec. A, model-notes §6).
+//! ±½ topological defects of the (smoothed) nematic field (paper Sec. A, docs/reading.md §6).
 //!
 //! The director angle θ = ½ atan2(Q_xy, Q_xx) turns by ±π around a ±½ defect. The paper flags
 //! the sites whose 8-neighbour ring winds; the sites that flag one defect are the corners of the

@@ -1,4 +1,4 @@
-//! Holes in the monolayer (paper Sec. A and Fig. 3, model-notes §6).
+//! Holes in the monolayer (paper Sec. A and Fig. 3, docs/reading.md §6).
 //!
 //! A site is void where Σ_i φ_i < 0.01. Void sites that touch (4-connected, across the periodic
 //! edges) form a region. A hole nucleates when a region exceeds πR²/4 sites (a quarter of a cell)

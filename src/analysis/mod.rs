@@ -1,4 +1,4 @@
-//! The paper's measurements of the monolayer (Sec. A–D, model-notes §6), apart from the dynamics:
+//! The paper's measurements of the monolayer (Sec. A–D, docs/reading.md §6), apart from the dynamics:
 //! the same code measures the running simulation (live, in the browser) and a run's frames
 //! (offline, `monolayer analyze`).
 //!
@@ -6,6 +6,7 @@
 //!   their periodic sliding-window mean, the strain rate ε̇ = ∇·v/2, ∇·f^a;
 //! - [`defects`]: ±½ defects of the smoothed nematic field, +½ orientation (Vromans & Giomi);
 //! - [`spirals`]: spiral cores, +1 points of the smoothed velocity with ∇·v > 0;
+//! - [`elongation`]: each cell's aspect ratio from its shape tensor;
 //! - [`holes`]: void regions, the packing fraction, and holes followed from frame to frame;
 //! - [`correlations`]: C_v(r), C_Q(r) of the unsmoothed fields by FFT, correlation lengths;
 //! - [`nucleation`]: P(hole | ε̇), the probability that a site opens into a new hole;
@@ -20,6 +21,7 @@
 
 pub mod correlations;
 pub mod defects;
+pub mod elongation;
 pub mod fields;
 pub mod holes;
 pub mod nucleation;
@@ -35,6 +37,7 @@ use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
 use correlations::{correlation_length, Correlator};
 use defects::{Defect, DefectFinder};
+use elongation::{cell_aspect_ratio, mean_and_p90};
 use fields::{divergence, strain_rate, CoarseFields};
 use holes::{nucleation_area, VoidRegions};
 use spirals::{PlusOne, SpiralFinder};
@@ -60,6 +63,11 @@ pub struct FrameSummary {
     /// First crossings of 1/e by C_v and C_Q (None: not within L/2).
     pub velocity_correlation_length: Option<f64>,
     pub nematic_correlation_length: Option<f64>,
+    /// Mean and 90th percentile of the cells' aspect ratios ([`elongation`]).
+    pub aspect_ratio_mean: Option<f64>,
+    pub aspect_ratio_p90: Option<f64>,
+    /// Σ_x |Σ_i φ_i v_i| / Σ_x Σ_i φ_i: the tissue's mean speed, in sites per time unit.
+    pub mean_speed: f64,
 }
 
 /// Every measurement of one frame, with the buffers it needs (allocated once per lattice size).
@@ -86,6 +94,8 @@ pub struct Analysis {
     pub plus_ones: Vec<PlusOne>,
     /// Void regions and packing fraction of Σφ.
     pub voids: VoidRegions,
+    /// Each cell's aspect ratio, in cell order ([`elongation::cell_aspect_ratio`]).
+    pub aspect_ratios: Vec<f64>,
     /// C_v(r), C_Q(r) for r = 0..=L/2 (unsmoothed fields).
     pub velocity_correlation: Vec<f64>,
     pub nematic_correlation: Vec<f64>,
@@ -116,6 +126,7 @@ impl Analysis {
             defects: Vec::new(),
             plus_ones: Vec::new(),
             voids: VoidRegions::default(),
+            aspect_ratios: Vec::new(),
             velocity_correlation: Vec::new(),
             nematic_correlation: Vec::new(),
             divergence_scale: 0.0,
@@ -134,9 +145,11 @@ impl Analysis {
         assert_eq!(m.params().box_size, self.l, "analysis built for another lattice size");
         self.zeta = m.params().zeta;
         self.raw.clear();
+        self.aspect_ratios.clear();
         for c in m.cells() {
             let (vx, vy) = c.velocity();
             self.raw.add_cell(c.patch(), c.phi().data, c.q_hat(), self.zeta, Some((vx.data, vy.data)));
+            self.aspect_ratios.extend(cell_aspect_ratio(c.patch(), c.phi().data));
         }
         self.derive();
     }
@@ -146,8 +159,10 @@ impl Analysis {
     pub fn measure_cells<'a>(&mut self, cells: impl Iterator<Item = (Patch, &'a [f64], [f64; 2])>, velocity: &[C64]) {
         assert_eq!(velocity.len(), self.l * self.l, "velocity field of another lattice size");
         self.raw.clear();
+        self.aspect_ratios.clear();
         for (patch, phi, q_hat) in cells {
             self.raw.add_cell(patch, phi, q_hat, self.zeta, None);
+            self.aspect_ratios.extend(cell_aspect_ratio(patch, phi));
         }
         self.raw.set_velocity(velocity);
         self.derive();
@@ -182,6 +197,10 @@ impl Analysis {
     /// The scalar measurements of the last frame measured.
     pub fn summary(&self) -> FrameSummary {
         let v = &self.voids;
+        let mut ratios = self.aspect_ratios.clone();
+        let aspect = mean_and_p90(&mut ratios);
+        let mass: f64 = self.raw.phi_sum.iter().sum();
+        let flux: f64 = self.raw.vx.iter().zip(&self.raw.vy).map(|(x, y)| x.hypot(*y)).sum();
         FrameSummary {
             packing_fraction: v.packing_fraction,
             void_fraction: v.void_fraction,
@@ -194,6 +213,9 @@ impl Analysis {
             max_strain_rate: self.strain_rate.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             velocity_correlation_length: correlation_length(&self.velocity_correlation),
             nematic_correlation_length: correlation_length(&self.nematic_correlation),
+            aspect_ratio_mean: aspect.map(|a| a.0),
+            aspect_ratio_p90: aspect.map(|a| a.1),
+            mean_speed: if mass > 0.0 { flux / mass } else { 0.0 },
         }
     }
 }

@@ -1,5 +1,5 @@
 //! The conditional probability of a hole given the local strain rate, P(hole | ε̇) (paper Fig. 2,
-//! model-notes §6): for every site of every frame, in bins of ε̇ of width Δε̇ = 0.000125, how many
+//! docs/reading.md §6): for every site of every frame, in bins of ε̇ of width Δε̇ = 0.000125, how many
 //! sites there were (N_ε̇) and how many of them lie in a hole that nucleates in the next frame
 //! (N_hole,ε̇); P = N_hole,ε̇ / N_ε̇. A frame is not counted while a hole larger than half a cell
 //! (πR²/2) is open: the box holds one hole at a time, so such a frame cannot nucleate another.

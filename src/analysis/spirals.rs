@@ -1,4 +1,4 @@
-//! Spiral cores of the (smoothed) velocity field (paper Fig. 1b, model-notes §6): the +1 points of
+//! Spiral cores of the (smoothed) velocity field (paper Fig. 1b, docs/reading.md §6): the +1 points of
 //! the field (its angle winds once around them) where the divergence is positive, i.e. flows
 //! that spiral outwards and stretch the tissue. A vortex (∇·v = 0) or an inward spiral (a sink)
 //! is a +1 point but not a spiral core.

@@ -1,5 +1,5 @@
 //! The free energy F = F_CH + F_area + F_rep (Supplementary Eqs. S1–S3) and its functional
-//! derivative μ_i = δF/δφ_i (model-notes §2):
+//! derivative μ_i = δF/δφ_i (docs/reading.md §2):
 //!
 //!   μ_i = (γ/λ)·8 φ_i(1−φ_i)(1−2φ_i) − 2γλ ∇²φ_i − (4μ/πR²)(1 − A_i/πR²) φ_i
 //!         + (c κ/λ) φ_i Σ_{j≠i} φ_j²,

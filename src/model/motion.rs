@@ -12,7 +12,7 @@ use num_complex::Complex64 as C64;
 use crate::model::lattice::{Neighbourhood, Patch};
 use crate::model::params::{Advection, FrictionWeights};
 
-/// The weight w_j(x) with which cell j counts in the friction sum of Eq. 2 (model-notes §4).
+/// The weight w_j(x) with which cell j counts in the friction sum of Eq. 2 (docs/reading.md §4).
 #[inline(always)]
 pub fn friction_weight(kind: FrictionWeights, phi: f64, threshold: f64) -> f64 {
     match kind {
@@ -26,6 +26,8 @@ pub fn friction_weight(kind: FrictionWeights, phi: f64, threshold: f64) -> f64 {
                 0.0
             }
         }
+        // Called only on the sites of the cell's patch: there it is defined, so it counts.
+        FrictionWeights::Subdomain => 1.0,
     }
 }
 
@@ -119,5 +121,7 @@ mod tests {
         assert_eq!(friction_weight(FrictionWeights::Phi, 0.3, 0.01), 0.3);
         assert_eq!(friction_weight(FrictionWeights::Presence, 0.02, 0.01), 1.0);
         assert_eq!(friction_weight(FrictionWeights::Presence, 0.005, 0.01), 0.0);
+        assert_eq!(friction_weight(FrictionWeights::Subdomain, 0.0, 0.01), 1.0);
+        assert_eq!(friction_weight(FrictionWeights::Subdomain, -0.02, 0.01), 1.0);
     }
 }

@@ -5,7 +5,7 @@
 //! factor 2–3 across the tissue, as it does when every present cell counts in the friction sum,
 //! no diagonal scaling of a constant-coefficient (FFT) inverse maps both the local stiffness and
 //! the soft rigid-translation mode right, and CG needed 70 iterations per solve at χ = 0.001.
-//! Multigrid sees n at every scale: each level aggregates 2×2 sites of the one below
+//! (docs/performance.md has the history.) Multigrid sees n at every scale: each level aggregates 2×2 sites of the one below
 //! (periodic; an odd side leaves a one-site-wide last block), its operator is the Galerkin
 //! product Pᵀ A P with P piecewise constant — so a uniform translation is represented exactly on
 //! every level and holes stay holes — and the coarsest level (side ≤ 6) is solved by Cholesky.
@@ -24,9 +24,8 @@
 //! product and vectors stay f64, so the solution meets the stated residual all the same. f32
 //! halves the memory the cycle streams and doubles its SIMD lanes.
 //!
-//! Threads: the hierarchy is built once per solve, on one thread (0.24 ms at full size; split
-//! into row bands it took 0.29 ms on two threads, as waking the second worker costs more than
-//! the share it takes, see `par`); it is then read-only, and the cycles of the two velocity
+//! Threads: the hierarchy is built once per solve, on one thread (it is too short a pass to
+//! pay for waking a second worker, see `par`); it is then read-only, and the cycles of the two velocity
 //! components run side by side, each with its own [`CycleWork`].
 
 use std::ops::{Add, Mul, Sub};
@@ -92,27 +91,21 @@ const COARSEST_SIDE: usize = 6;
 /// Factor on every coarse correction. Piecewise-constant interpolation stores too much energy
 /// in the coarse vectors, so a plain correction falls short; over-correcting makes up for it
 /// (Vaněk's classic remedy for unsmoothed aggregation). Any value in (0, 2) keeps the cycle
-/// symmetric positive definite. Measured at full size with the V-cycle, iterations per solve at
-/// χ = 0.1 and χ = 0.001: 1.0 → 7.1 and 18.7; 1.4 → 6.7 and 11.6; 1.5 → 7.3 and 10.7; 1.8 → 9.2
-/// and 10.2. With the W-cycle at χ = 0.001 (over 100 steps): 1.3 → 8.9, 1.5 → 8.3, 1.7 → 8.0; but with three
-/// corrections per level 1.7 diverges, so 1.5 keeps a margin.
+/// symmetric positive definite; 1.5 is the measured optimum with a margin
+/// (docs/performance.md, "Multigrid: what was measured").
 const OVER_CORRECTION: f64 = 1.5;
 
 /// Coarse corrections per visit of every level but the finest: 1 is a V-cycle, 2 a W-cycle.
 /// Unsmoothed aggregation loses accuracy level by level; visiting the coarse levels twice makes
-/// up for it at little cost (they hold a third of the sites). Measured at full size, χ = 0.001:
-/// 10.7 iterations per warm-started solve with the V-cycle, 8.6 with the W-cycle (18 → 12 from a
-/// cold start); three corrections gain no more. Also measured and left: Notay's K-cycle (two
-/// Krylov steps per coarse level, flexible CG outside) converges in 8 instead of 12 iterations
-/// from a cold start but costs 1.5× as much per iteration; W-cycles on the top levels only, or an
-/// additive correction on the finest, take 18–43 iterations.
+/// up for it at little cost, since they hold a third of the sites (the cycles compared are in
+/// docs/performance.md).
 const COARSE_CORRECTIONS: usize = 2;
 
 /// Damped Jacobi weight: the operators are weakly diagonally dominant M-matrices on every
 /// level (Galerkin aggregation keeps that), so D⁻¹A has its spectrum in [0, 2) and 2/3 keeps the
 /// smoother convergent while damping the highest modes. One sweep before and one after each
-/// coarse correction (equal, so the cycle is symmetric): measured at full size with presence
-/// weights, 2 sweeps saved 17 % of the iterations at χ = 0.001 but cost 24 % more time.
+/// coarse correction, equal so that the cycle is symmetric (a second sweep saves iterations but
+/// costs more time than it saves: docs/performance.md).
 const OMEGA: f64 = 2.0 / 3.0;
 
 #[inline]

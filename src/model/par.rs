@@ -5,12 +5,11 @@
 //! depend on how many threads run. Without the `parallel` feature (the wasm build) the same loops
 //! run sequentially.
 //!
-//! What is worth a parallel loop: starting one wakes the other workers, which costs 30–40 µs on
-//! this project's 2-core virtual machine (measured: two 20 µs tasks joined after 20–500 µs of
-//! serial work finish 35–45 µs late). Passes over the lattice that take tens of microseconds
-//! (neighbour sums, the friction solve's element-wise passes, the multigrid setup) therefore run
-//! on one thread; the per-cell stages, the gathers onto the lattice and the two components of
-//! the friction solve, each 0.1 ms or more, run across threads.
+//! What is worth a parallel loop: starting one wakes the other workers, which costs tens of
+//! microseconds (docs/performance.md has the measurement). Passes over the lattice that take
+//! that long (neighbour sums, the friction solve's element-wise passes, the multigrid setup)
+//! therefore run on one thread; the per-cell stages, the gathers onto the lattice and the two
+//! components of the friction solve, each 0.1 ms or more, run across threads.
 
 /// Runs `f(i, item)` for every item, in parallel where threads are available.
 pub fn for_each_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {

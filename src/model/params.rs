@@ -1,7 +1,7 @@
 //! Every knob of the model in one struct, with the paper's values as defaults.
 //!
 //! Field names follow the paper's symbols (see the table in the README). The conventions the
-//! paper leaves open (`../shared/model-notes.md` §7) are named fields here, not constants buried
+//! paper leaves open (docs/reading.md §7) are named fields here, not constants buried
 //! in the kernels, so that the calibration can compare them run against run.
 
 use serde::{Deserialize, Serialize};
@@ -21,12 +21,18 @@ pub enum PassiveForce {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FrictionWeights {
-    /// Each cell j at x' weighs φ_j(x'), clamped to [0, 1] (model-notes §4).
+    /// Each cell j at x' weighs φ_j(x'), clamped to [0, 1] (docs/reading.md §4).
     Phi,
     /// Each cell with φ_j(x') > `presence_threshold` weighs 1: "j ∈ x'" read as every cell
     /// present at x', with the paper's own threshold; a stronger friction at cell edges. The
     /// calibrated default (docs/calibration.md).
     Presence,
+    /// Every cell whose subdomain (patch) covers x' weighs 1, whatever φ_j(x') is: in the
+    /// paper's code each phase field lives on its own subdomain (its SI Sec. A), so "all phase
+    /// fields at the lattice site x'" may be every field defined there. The patch rule
+    /// (`relax_patch_size`, then `patch_margin` beyond φ > `presence_threshold`) then becomes
+    /// part of the model. The strongest of the three readings (n ≈ 4.5 per site at full size).
+    Subdomain,
 }
 
 /// The discrete Laplacian used in the chemical potential.
@@ -132,10 +138,10 @@ pub struct Params {
     pub initial_gap: f64,
 
     // --- units (reporting only; the dynamics never read them) ---------------------------------
-    /// Seconds per simulation time unit, for speeds in µm/h (Δx ≈ 1 µm). The paper writes
-    /// "Δt ∼ 5 s" beside Δx ∼ 1 µm; model-notes §5 reads it as one time unit ≈ 5 s (the
-    /// default), while the paper's own Δt is the time step of 0.1, which reads as 50 s per time
-    /// unit. docs/calibration.md compares the two.
+    /// Seconds per simulation time unit, for speeds in µm/h (Δx ≈ 1 µm); it changes no
+    /// dynamics. The paper settles it itself: its persistence threshold τ_t > 0.5 t_total is
+    /// 5,000 time units, which it calls "∼ 5 h", so one time unit ≈ 3.6 s (the default); its
+    /// "Δt ∼ 5 s" is the same estimate rounded (docs/units.md).
     pub time_unit_seconds: f64,
 }
 
@@ -173,10 +179,13 @@ impl Default for Params {
             active_steps: 100_000,
             initial_radius_fraction: 0.5,
             initial_gap: 2.0,
-            time_unit_seconds: 5.0,
+            time_unit_seconds: 3.6,
         }
     }
 }
+
+/// The most steps of either phase of the protocol.
+pub const MAX_STEPS: u64 = 1_000_000_000;
 
 /// A parameter outside its allowed range, named as in the config file.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -306,6 +315,13 @@ impl Params {
             self.friction_max_iterations,
             "must be in [1, 100000]",
         )?;
+        // patch_margin first: relax_patch_size's range is computed from it.
+        check(
+            self.patch_margin >= 2 && self.patch_margin <= 32,
+            "patch_margin",
+            self.patch_margin,
+            "must be in [2, 32]",
+        )?;
         let min_patch = (2.0 * self.radius).ceil() as usize + 2 * self.patch_margin;
         check(
             self.relax_patch_size >= min_patch && self.relax_patch_size < self.box_size,
@@ -313,15 +329,13 @@ impl Params {
             self.relax_patch_size,
             format!("must be in [{min_patch}, {}): at least 2R + 2·patch_margin and below the box", self.box_size),
         )?;
-        check(
-            self.patch_margin >= 2 && self.patch_margin <= 32,
-            "patch_margin",
-            self.patch_margin,
-            "must be in [2, 32]",
-        )?;
         check(self.phi_min < 0.0 && self.phi_min.is_finite(), "phi_min", self.phi_min, "must be a finite number < 0")?;
         check(self.phi_max > 1.0 && self.phi_max.is_finite(), "phi_max", self.phi_max, "must be a finite number > 1")?;
         positive("xi_relax", self.xi_relax)?;
+        // A billion steps is months of computing; the bound keeps their sum far from overflow.
+        for (name, steps) in [("relax_steps", self.relax_steps), ("active_steps", self.active_steps)] {
+            check(steps <= MAX_STEPS, name, steps, "must be in [0, 1000000000]")?;
+        }
         check(
             self.initial_radius_fraction > 0.0 && self.initial_radius_fraction <= 1.0,
             "initial_radius_fraction",
@@ -370,9 +384,9 @@ mod tests {
         // The conventions the calibration chose (docs/calibration.md).
         assert_eq!((p.passive_force, p.friction_weights), (PassiveForce::PhiGradMu, FrictionWeights::Presence));
         assert_eq!(p.q_magnitude, 0.5);
-        // One site per time unit is 720 µm/h at 5 s per time unit, 72 µm/h at 50 s.
-        assert_eq!(p.microns_per_hour(), 720.0);
-        assert_eq!(Params { time_unit_seconds: 50.0, ..p }.microns_per_hour(), 72.0);
+        // One site per time unit is 1,000 µm/h at 3.6 s per time unit, 720 µm/h at 5 s.
+        assert_eq!(p.microns_per_hour(), 1000.0);
+        assert_eq!(Params { time_unit_seconds: 5.0, ..p }.microns_per_hour(), 720.0);
     }
 
     #[test]
@@ -392,6 +406,13 @@ mod tests {
 
         let p = Params { relax_patch_size: 10, ..Params::default() };
         assert_eq!(p.validate().unwrap_err().name, "relax_patch_size");
+
+        let p = Params { patch_margin: 1000, ..Params::default() };
+        let e = p.validate().unwrap_err();
+        assert!(e.name == "patch_margin" && e.to_string().contains("[2, 32]"), "{e}");
+
+        let p = Params { active_steps: u64::MAX, ..Params::default() };
+        assert_eq!(p.validate().unwrap_err().name, "active_steps");
 
         let p = Params { initial_gap: 6.0, ..Params::default() };
         let e = p.validate().unwrap_err();

@@ -23,7 +23,7 @@ use std::time::Instant;
 
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
-use crate::run::files::load_params;
+use crate::run::config::load_params;
 use crate::run::sweep::{steps_to_run, Job};
 
 /// How many runs, how long, how large.

@@ -4,8 +4,9 @@
 //! file; every read error names the file and the array that is wrong.
 
 use std::fs::{self, File};
-use std::io::{BufReader, BufWriter, Write};
+use std::io::{BufReader, BufWriter, Cursor, Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use ndarray::{arr0, Array0, Array1, Array2, Array3};
 use ndarray_npy::{NpzReader, NpzWriter};
@@ -26,11 +27,24 @@ fn err(path: &Path, e: impl std::fmt::Display) -> String {
     format!("{}: {e}", path.display())
 }
 
-/// Writes `path` through a temporary file in the same directory and a rename.
+/// The exact state a run continues from (`--resume`), in the run's directory.
+pub const CHECKPOINT: &str = "checkpoint.npz";
+/// The state before the step that made a run unstable.
+pub const LAST_GOOD_STATE: &str = "last_good_state.npz";
+
+pub fn checkpoint_path(dir: &Path) -> PathBuf {
+    dir.join(CHECKPOINT)
+}
+
+/// Writes `path` through a temporary file in the same directory and a rename. The temporary
+/// name is this process's and this call's own, so that two writers of one file (`analyze`
+/// beside `run --analyze`) never rename each other's half-written files.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoResult<()>) -> IoResult<()> {
+    static CALLS: AtomicU64 = AtomicU64::new(0);
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path.file_name().ok_or_else(|| err(path, "not a file name"))?.to_string_lossy();
-    let tmp = dir.join(format!(".{name}.tmp"));
+    let call = CALLS.fetch_add(1, Ordering::Relaxed);
+    let tmp = dir.join(format!(".{name}.{}.{call}.tmp", std::process::id()));
     let file = File::create(&tmp).map_err(|e| err(&tmp, e))?;
     let mut w = BufWriter::new(file);
     let result = write(&mut w).and_then(|_| {
@@ -41,7 +55,133 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
         let _ = fs::remove_file(&tmp);
         return Err(e);
     }
-    fs::rename(&tmp, path).map_err(|e| err(path, e))
+    fs::rename(&tmp, path).map_err(|e| {
+        let _ = fs::remove_file(&tmp);
+        err(path, e)
+    })
+}
+
+/// Removes the temporary files a killed writer left in `dir` (call it holding the directory's
+/// [`RunLock`], so that no live writer's file is taken).
+pub fn remove_stale_temporaries(dir: &Path) {
+    let Ok(entries) = fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with('.') && name.ends_with(".tmp") {
+            let _ = fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// The one writer of a run directory: an OS lock on `DIR/.lock`, held while this value lives and
+/// released by the OS when the process ends however it ends (a stale file locks nothing). The
+/// holder's process id is written into the file, for the error the next writer gets.
+#[derive(Debug)]
+pub struct RunLock {
+    _file: File,
+}
+
+impl RunLock {
+    pub const FILE: &'static str = ".lock";
+
+    /// Takes the lock of `dir` (which must exist), or says which process holds it.
+    pub fn acquire(dir: &Path) -> IoResult<Self> {
+        let path = dir.join(Self::FILE);
+        let mut file = fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(|e| err(&path, e))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(fs::TryLockError::WouldBlock) => {
+                let mut holder = String::new();
+                let _ = file.read_to_string(&mut holder);
+                let who = match holder.trim().parse::<u32>() {
+                    Ok(pid) => format!("process {pid}"),
+                    Err(_) => "another process".to_string(),
+                };
+                return Err(format!(
+                    "{}: {who} is writing this run directory (one writer per directory): wait for it to end, or \
+                     stop it, then try again",
+                    dir.display()
+                ));
+            }
+            Err(fs::TryLockError::Error(e)) => return Err(err(&path, e)),
+        }
+        file.set_len(0).map_err(|e| err(&path, e))?;
+        writeln!(file, "{}", std::process::id()).map_err(|e| err(&path, e))?;
+        Ok(RunLock { _file: file })
+    }
+}
+
+/// How a run stands, as `run.json` records it: `"running"`, `"finished"`, `"failed: …"` or
+/// `"stopped: …"` with the reason.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum RunStatus {
+    /// Started and not ended (or killed).
+    #[default]
+    Running,
+    Finished,
+    /// The simulation itself failed (unstable, the friction solve did not converge): a result,
+    /// the same on every rerun, so it is kept and not retried.
+    Failed(String),
+    /// The machine stopped it (a full disk, another IO error): the run itself is sound and
+    /// continues from its checkpoint when run again.
+    Stopped(String),
+}
+
+impl RunStatus {
+    /// Ended for good: nothing more will run.
+    pub fn is_complete(&self) -> bool {
+        matches!(self, RunStatus::Finished | RunStatus::Failed(_))
+    }
+
+    pub fn blew_up(&self) -> bool {
+        matches!(self, RunStatus::Failed(_))
+    }
+}
+
+impl std::fmt::Display for RunStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunStatus::Running => f.write_str("running"),
+            RunStatus::Finished => f.write_str("finished"),
+            RunStatus::Failed(why) => write!(f, "failed: {why}"),
+            RunStatus::Stopped(why) => write!(f, "stopped: {why}"),
+        }
+    }
+}
+
+impl std::str::FromStr for RunStatus {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "running" => Ok(RunStatus::Running),
+            "finished" => Ok(RunStatus::Finished),
+            // Records written before `stopped` existed called an IO error `failed` too; an IO
+            // error's text ends in its OS error code, which no simulation error has.
+            _ if s.starts_with("failed: ") && s.contains("(os error ") => Ok(RunStatus::Stopped(s[8..].into())),
+            _ if s.starts_with("failed: ") => Ok(RunStatus::Failed(s[8..].into())),
+            _ if s.starts_with("stopped: ") => Ok(RunStatus::Stopped(s[9..].into())),
+            _ => Err(format!("unknown status \"{s}\" (running, finished, failed: …, stopped: …)")),
+        }
+    }
+}
+
+impl Serialize for RunStatus {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for RunStatus {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        String::deserialize(d)?.parse().map_err(serde::de::Error::custom)
+    }
 }
 
 /// What `run.json` records: enough to reproduce the run and to continue it.
@@ -54,8 +194,7 @@ pub struct RunRecord {
     pub seed: u64,
     /// Steps between frames in the active phase.
     pub frame_interval: u64,
-    /// "running", "finished", or "failed: …" with the reason.
-    pub status: String,
+    pub status: RunStatus,
     /// Last step with a frame (None before the first).
     pub last_frame_step: Option<u64>,
     pub params: Params,
@@ -69,7 +208,7 @@ impl RunRecord {
             version: env!("CARGO_PKG_VERSION").into(),
             seed,
             frame_interval,
-            status: "running".into(),
+            status: RunStatus::Running,
             last_frame_step: None,
             params,
         }
@@ -105,6 +244,9 @@ impl RunRecord {
         }
         let record: RunRecord = serde_json::from_value(value).map_err(|e| err(&path, e))?;
         record.params.validate().map_err(|e| err(&path, e))?;
+        if record.frame_interval == 0 {
+            return Err(err(&path, "`frame_interval` = 0: must be ≥ 1"));
+        }
         Ok(record)
     }
 }
@@ -116,6 +258,28 @@ pub fn frame_path(dir: &Path, step: u64) -> PathBuf {
 
 fn npz_err(path: &Path) -> impl Fn(ndarray_npy::WriteNpzError) -> String + '_ {
     move |e| err(path, e)
+}
+
+/// Refuses NaN and infinities: no file this program writes holds one, so a file that does is
+/// damaged, and the tables measured from it would fill with them.
+fn finite<'a>(path: &Path, name: &str, values: impl Iterator<Item = &'a f64>) -> IoResult<()> {
+    match values.enumerate().find(|(_, v)| !v.is_finite()) {
+        Some((k, v)) => Err(err(path, format!("array `{name}` holds {v} at index {k}: a damaged file"))),
+        None => Ok(()),
+    }
+}
+
+type Npz = NpzWriter<Cursor<Vec<u8>>>;
+
+/// Writes an `.npz` built in memory. The archive is finished before a byte reaches the disk, so a
+/// full disk fails in one plain write (a zip writer dropped unfinished on an IO error would try
+/// again and print "ZipWriter drop failed" to stderr).
+fn write_npz(path: &Path, build: impl FnOnce(&mut Npz) -> Result<(), ndarray_npy::WriteNpzError>) -> IoResult<()> {
+    let e = npz_err(path);
+    let mut z = NpzWriter::new_compressed(Cursor::new(Vec::new()));
+    build(&mut z).map_err(&e)?;
+    let bytes = z.finish().map_err(&e)?.into_inner();
+    write_atomic(path, |w| w.write_all(&bytes).map_err(|x| err(path, x)))
 }
 
 /// Per-cell arrays of a frame or checkpoint: patches (x0, y0, w, h) and the concatenated fields.
@@ -158,22 +322,18 @@ pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
     }
     let step = m.step_count();
     let time = step as f64 * m.params().dt;
-    write_atomic(path, |w| {
-        let mut z = NpzWriter::new_compressed(w);
-        let e = npz_err(path);
-        z.add_array("step", &arr0(step as i64)).map_err(&e)?;
-        z.add_array("time", &arr0(time)).map_err(&e)?;
-        z.add_array("centres", &centres).map_err(&e)?;
-        z.add_array("areas", &areas).map_err(&e)?;
-        z.add_array("q_hat", &q_hat).map_err(&e)?;
-        z.add_array("shape_tensor", &shape).map_err(&e)?;
-        z.add_array("patches", &patches).map_err(&e)?;
-        z.add_array("phi", &Array1::from(phi)).map_err(&e)?;
-        z.add_array("phi_offsets", &Array1::from(offsets)).map_err(&e)?;
-        z.add_array("phi_sum", &phi_sum).map_err(&e)?;
-        z.add_array("velocity", &velocity).map_err(&e)?;
-        z.finish().map_err(&e)?;
-        Ok(())
+    write_npz(path, |z| {
+        z.add_array("step", &arr0(step as i64))?;
+        z.add_array("time", &arr0(time))?;
+        z.add_array("centres", &centres)?;
+        z.add_array("areas", &areas)?;
+        z.add_array("q_hat", &q_hat)?;
+        z.add_array("shape_tensor", &shape)?;
+        z.add_array("patches", &patches)?;
+        z.add_array("phi", &Array1::from(phi))?;
+        z.add_array("phi_offsets", &Array1::from(offsets))?;
+        z.add_array("phi_sum", &phi_sum)?;
+        z.add_array("velocity", &velocity)
     })
 }
 
@@ -191,17 +351,13 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     }
     let warm = complex_field(&s.warm_start, l);
     let substrate = Array2::from_shape_vec((l, l), s.substrate.clone()).expect("L×L");
-    write_atomic(path, |w| {
-        let mut z = NpzWriter::new_compressed(w);
-        let e = npz_err(path);
-        z.add_array("step", &arr0(s.step as i64)).map_err(&e)?;
-        z.add_array("patches", &patches).map_err(&e)?;
-        z.add_array("phi_padded", &Array1::from(phi)).map_err(&e)?;
-        z.add_array("phi_offsets", &Array1::from(offsets)).map_err(&e)?;
-        z.add_array("warm_start", &warm).map_err(&e)?;
-        z.add_array("substrate", &substrate).map_err(&e)?;
-        z.finish().map_err(&e)?;
-        Ok(())
+    write_npz(path, |z| {
+        z.add_array("step", &arr0(s.step as i64))?;
+        z.add_array("patches", &patches)?;
+        z.add_array("phi_padded", &Array1::from(phi))?;
+        z.add_array("phi_offsets", &Array1::from(offsets))?;
+        z.add_array("warm_start", &warm)?;
+        z.add_array("substrate", &substrate)
     })
 }
 
@@ -226,53 +382,32 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     if offsets.len() != n + 1 || patches.ncols() != 4 {
         return Err(err(path, "patch table and offsets disagree"));
     }
+    let step = step.into_scalar();
+    if step < 0 {
+        return Err(err(path, format!("array `step` = {step}: a step is ≥ 0")));
+    }
+    finite(path, "phi_padded", phi.iter())?;
+    finite(path, "warm_start", warm.iter())?;
+    finite(path, "substrate", substrate.iter())?;
     let mut cells = Vec::with_capacity(n);
     for i in 0..n {
-        let (a, b) = (offsets[i] as usize, offsets[i + 1] as usize);
-        if a > b || b > phi.len() {
+        let (a, b) = (offsets[i], offsets[i + 1]);
+        if a < 0 || a > b || b as usize > phi.len() {
             return Err(err(path, format!("cell {i}: offsets out of range")));
         }
-        let p = Patch {
-            x0: patches[[i, 0]] as usize,
-            y0: patches[[i, 1]] as usize,
-            w: patches[[i, 2]] as usize,
-            h: patches[[i, 3]] as usize,
-        };
+        let (a, b) = (a as usize, b as usize);
+        let [x0, y0, w, h] = [0, 1, 2, 3].map(|k| patches[[i, k]]);
+        if [x0, y0, w, h].iter().any(|&v| v < 0 || v as usize >= l) {
+            return Err(err(path, format!("cell {i}: patch ({x0}, {y0}, {w}, {h}) does not fit the {l}×{l} lattice")));
+        }
+        let p = Patch { x0: x0 as usize, y0: y0 as usize, w: w as usize, h: h as usize };
         cells.push((p, phi.slice(ndarray::s![a..b]).to_vec()));
     }
     let complex = |a: &Array3<f64>| (0..l * l).map(|k| C64::new(a[[k / l, k % l, 0]], a[[k / l, k % l, 1]])).collect();
-    Ok(State {
-        step: step.into_scalar() as u64,
-        cells,
-        warm_start: complex(&warm),
-        substrate: substrate.iter().copied().collect(),
-    })
+    Ok(State { step: step as u64, cells, warm_start: complex(&warm), substrate: substrate.iter().copied().collect() })
 }
 
-/// Parameters from an optional TOML file and `key=value` overrides (values in TOML syntax).
-pub fn load_params(config: Option<&Path>, overrides: &[String]) -> IoResult<Params> {
-    let mut table = match config {
-        Some(path) => {
-            let text = fs::read_to_string(path).map_err(|e| err(path, e))?;
-            text.parse::<toml::Table>().map_err(|e| err(path, e))?
-        }
-        None => toml::Table::new(),
-    };
-    for o in overrides {
-        let (k, v) = o.split_once('=').ok_or_else(|| format!("--set {o}: expected key=value, e.g. --set zeta=0.4"))?;
-        let snippet = format!("{} = {}", k.trim(), v.trim());
-        let parsed = snippet
-            .parse::<toml::Table>()
-            .or_else(|_| format!("{} = \"{}\"", k.trim(), v.trim()).parse::<toml::Table>())
-            .map_err(|e| format!("--set {o}: {e}"))?;
-        table.extend(parsed);
-    }
-    let params: Params = table.try_into().map_err(|e: toml::de::Error| {
-        let origin = config.map(|p| p.display().to_string()).unwrap_or_else(|| "--set".into());
-        format!("{origin}: {}", e.message())
-    })?;
-    Ok(params)
-}
+pub use super::config::load_params;
 
 // ---- Reading frames (offline analysis) ----
 
@@ -320,6 +455,9 @@ impl RunFrames {
         for entry in entries {
             let entry = entry.map_err(|e| format!("{}: {e}", frames_dir.display()))?;
             let name = entry.file_name().to_string_lossy().into_owned();
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                continue;
+            }
             if let Some(step) = name.strip_prefix("frame_").and_then(|s| s.strip_suffix(".npz")) {
                 let step: u64 = step
                     .parse()
@@ -336,6 +474,15 @@ impl RunFrames {
             ));
         }
         frames.sort();
+        if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
+            return Err(format!(
+                "{} and {} both hold step {}: remove the one this run did not write ({})",
+                w[0].1.display(),
+                w[1].1.display(),
+                w[0].0,
+                frame_path(dir, w[0].0).display()
+            ));
+        }
         Ok(RunFrames { dir: dir.to_path_buf(), record, frames })
     }
 }
@@ -368,6 +515,15 @@ pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
         ));
     }
     let phi = phi.as_slice().ok_or_else(|| err(path, "array `phi` is not contiguous"))?;
+    let step = step.into_scalar();
+    if step < 0 {
+        return Err(err(path, format!("array `step` = {step}: a step is ≥ 0")));
+    }
+    let time = time.into_scalar();
+    finite(path, "time", [time].iter())?;
+    finite(path, "phi", phi.iter())?;
+    finite(path, "q_hat", q_hat.iter())?;
+    finite(path, "velocity", velocity.iter())?;
     let mut cells = Vec::with_capacity(n);
     for i in 0..n {
         let [x0, y0, w, h] = [0, 1, 2, 3].map(|k| patches[[i, k]]);
@@ -384,7 +540,7 @@ pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
         }
         let p = Patch { x0: x0 as usize, y0: y0 as usize, w: w as usize, h: h as usize };
         let (a, b) = (offsets[i], offsets[i + 1]);
-        if a < 0 || b as usize > phi.len() || b - a != (p.w * p.h) as i64 {
+        if a < 0 || b < a || b as usize > phi.len() || b - a != (p.w * p.h) as i64 {
             return Err(err(path, format!("cell {i}: `phi_offsets` [{a}, {b}) do not hold its {}×{} patch", p.w, p.h)));
         }
         let mut padded = vec![0.0; p.padded_len()];
@@ -397,28 +553,33 @@ pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
     let v = velocity.as_slice().ok_or_else(|| err(path, "array `velocity` is not contiguous"))?;
     Ok(Frame {
         path: path.to_path_buf(),
-        step: step.into_scalar() as u64,
-        time: time.into_scalar(),
+        step: step as u64,
+        time,
         cells,
         q_hat: q_hat.rows().into_iter().map(|r| [r[0], r[1]]).collect(),
         velocity: v.chunks_exact(2).map(|c| C64::new(c[0], c[1])).collect(),
     })
 }
 
+/// Checks a frame read from a run against the run's record: a frame with cells missing would be
+/// measured as holes where the cells are.
+pub fn check_frame(frame: &Frame, params: &Params) -> IoResult<()> {
+    if frame.cells.len() != params.n_cells {
+        return Err(err(
+            &frame.path,
+            format!(
+                "holds {} cells, the run has n_cells = {}: not a frame of this run",
+                frame.cells.len(),
+                params.n_cells
+            ),
+        ));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn overrides_and_unknown_keys() {
-        let p = load_params(None, &["zeta=0.3".into(), "passive_force=grad_mu".into()]).unwrap();
-        assert_eq!(p.zeta, 0.3);
-        assert_eq!(p.passive_force, crate::model::params::PassiveForce::GradMu);
-        let e = load_params(None, &["zeta_typo=0.3".into()]).unwrap_err();
-        assert!(e.contains("zeta_typo"), "{e}");
-        let e = load_params(None, &["zeta".into()]).unwrap_err();
-        assert!(e.contains("key=value"), "{e}");
-    }
 
     #[test]
     fn atomic_write_leaves_nothing_on_failure() {

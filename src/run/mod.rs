@@ -1,5 +1,7 @@
 //! Native only (feature `cli`): everything that touches files, clocks and the terminal.
 //!
+//! - [`bench`]: `monolayer bench`, stage by stage, and the two-thread ceiling;
+//! - [`config`]: parameters from config files, `--set` and `--grid`, the one KEY=VALUE parser;
 //! - [`files`]: frames, checkpoints and `run.json`, the writer and the reader of each together;
 //! - [`runner`]: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume);
 //! - [`sweep`]: a grid of runs, one per core, resumable, its summary and regime map;
@@ -8,6 +10,8 @@
 //!
 //! Uses `model` and `analysis`; nothing below it uses this layer.
 
+pub mod bench;
+pub mod config;
 pub mod figures;
 pub mod files;
 pub mod offline;

@@ -9,7 +9,7 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::files::{read_frame, Frame, RunFrames};
+use super::files::{check_frame, read_frame, Frame, RunFrames};
 use super::plots::{self, Background};
 use crate::analysis::correlations::correlation_length;
 use crate::analysis::holes::HoleTracker;
@@ -105,13 +105,14 @@ impl RunAnalysis {
         let time = |t: f64| (t * 1e9).round() / 1e9;
         let mut frames = String::from(
             "step,time,packing_fraction,void_fraction,void_regions,holes_open,largest_void_area,plus_half_defects,\
-             minus_half_defects,spiral_cores,max_strain_rate,velocity_correlation_length,nematic_correlation_length\n",
+             minus_half_defects,spiral_cores,max_strain_rate,velocity_correlation_length,nematic_correlation_length,\
+             mean_speed,aspect_ratio_mean,aspect_ratio_p90\n",
         );
         for f in &self.frames {
             let s = &f.summary;
             let _ = writeln!(
                 frames,
-                "{},{},{:.6},{:.6},{},{},{},{},{},{},{:.6e},{},{}",
+                "{},{},{:.6},{:.6},{},{},{},{},{},{},{:.6e},{},{},{:.6},{},{}",
                 f.step,
                 time(f.time),
                 s.packing_fraction,
@@ -124,7 +125,10 @@ impl RunAnalysis {
                 s.spiral_cores,
                 s.max_strain_rate,
                 opt(s.velocity_correlation_length),
-                opt(s.nematic_correlation_length)
+                opt(s.nematic_correlation_length),
+                s.mean_speed,
+                opt(s.aspect_ratio_mean),
+                opt(s.aspect_ratio_p90)
             );
         }
         let mut holes = String::from(
@@ -215,8 +219,10 @@ impl RunAnalysis {
         (cv, cq)
     }
 
-    /// Writes the tables and plots into `out` (created), each file atomically. `snapshot` is the
-    /// frame to draw over `field`, measured afresh.
+    /// Writes the tables and plots into `out` (created) as one set: all of them are written into
+    /// a hidden directory in `out` first and moved in only when every one is complete, so that a
+    /// full disk leaves the previous set, not a mix. `snapshot` is the frame to draw over
+    /// `field`, measured afresh.
     pub fn write(
         &self,
         out: &Path,
@@ -224,7 +230,32 @@ impl RunAnalysis {
         field: Background,
         params: &Params,
     ) -> Result<Vec<PathBuf>, String> {
-        fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+        static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let stage = out.join(format!(".staging.{}.{call}", std::process::id()));
+        let staged = fs::create_dir_all(&stage)
+            .map_err(|e| format!("{}: {e}", stage.display()))
+            .and_then(|_| self.write_into(&stage, snapshot, field, params));
+        let moved = staged.and_then(|files| {
+            files
+                .iter()
+                .map(|f| {
+                    let to = out.join(f.file_name().expect("a file"));
+                    fs::rename(f, &to).map(|_| to.clone()).map_err(|e| format!("{}: {e}", to.display()))
+                })
+                .collect::<Result<Vec<_>, _>>()
+        });
+        let _ = fs::remove_dir_all(&stage);
+        moved
+    }
+
+    fn write_into(
+        &self,
+        out: &Path,
+        snapshot: Option<&Frame>,
+        field: Background,
+        params: &Params,
+    ) -> Result<Vec<PathBuf>, String> {
         let mut written = Vec::new();
         for (name, text) in self.tables() {
             let path = out.join(name);
@@ -257,7 +288,7 @@ pub fn analyze_run(
     let run = RunFrames::open(dir)?;
     let params = &run.record.params;
     let mut ra = RunAnalysis::new(params);
-    let kept = measure_frames(&mut ra, &run.frames, params.box_size, snapshot_step)?;
+    let kept = measure_frames(&mut ra, &run.frames, params, snapshot_step)?;
     let chosen = match snapshot_step {
         Some(s) => {
             kept.ok_or_else(|| format!("--snapshot {s}: no frame of that step in {}", dir.join("frames").display()))?
@@ -272,12 +303,13 @@ pub fn analyze_run(
 fn measure_frames(
     ra: &mut RunAnalysis,
     frames: &[(u64, PathBuf)],
-    l: usize,
+    params: &Params,
     keep: Option<u64>,
 ) -> Result<Option<Frame>, String> {
     let mut kept = None;
     for (step, path) in frames {
-        let frame = read_frame(path, l)?;
+        let frame = read_frame(path, params.box_size)?;
+        check_frame(&frame, params)?;
         if frame.step != *step {
             return Err(format!("{}: holds step {}, its name says {step}", path.display(), frame.step));
         }
@@ -305,15 +337,18 @@ pub struct LiveRun {
 }
 
 impl LiveRun {
-    /// Starts on the run in `dir`, measuring the frames it already has (a resumed run).
-    pub fn start(dir: &Path, params: &Params) -> Result<Self, String> {
+    /// Starts on the run in `dir` at step `step`, measuring the frames it already has up to
+    /// there (a resumed run). Frames after `step` were written before a kill that came before
+    /// their checkpoint: the run writes them again, and measures them then.
+    pub fn start(dir: &Path, params: &Params, step: u64) -> Result<Self, String> {
         let mut ra = RunAnalysis::new(params);
-        let frames = match RunFrames::open(dir) {
+        let mut frames = match RunFrames::open(dir) {
             Ok(run) => run.frames,
             Err(_) if !dir.join("frames").read_dir().is_ok_and(|mut d| d.next().is_some()) => Vec::new(),
             Err(e) => return Err(e),
         };
-        measure_frames(&mut ra, &frames, params.box_size, None)?;
+        frames.retain(|(s, _)| *s <= step);
+        measure_frames(&mut ra, &frames, params, None)?;
         // A resumed `run --analyze` wrote the snapshot of this step last.
         let snapshot = ra.snapshot_step();
         Ok(LiveRun { ra, dir: dir.to_path_buf(), params: params.clone(), snapshot })

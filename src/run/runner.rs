@@ -7,7 +7,10 @@ use std::path::{Path, PathBuf};
 
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
-use crate::run::files::{frame_path, read_checkpoint, write_checkpoint, write_frame, RunRecord};
+use crate::run::files::{
+    checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint, write_frame, RunLock,
+    RunRecord, RunStatus, LAST_GOOD_STATE,
+};
 use crate::run::offline::LiveRun;
 
 /// What the protocol reports to whoever watches it (a progress bar, a sweep).
@@ -22,11 +25,67 @@ pub enum Event {
     AnalysisFailed(String),
 }
 
-/// A run directory with its record and the simulation it holds.
+/// Why the protocol stopped early.
+enum Stop {
+    /// The simulation failed: a result of the run.
+    Simulation(String),
+    /// Writing its files failed: the machine's problem, and the run can go on from its checkpoint.
+    Io(String),
+}
+
+/// Bytes a run of `params` needs at most, roughly (within about 1.5× of the peak measured): the
+/// lattice fields and the friction solver's hierarchy per site, and each cell's fields on its
+/// patch, the relaxation patch or a cell stretched to 1.5 diameters, whichever is larger.
+pub fn memory_estimate(params: &Params) -> u64 {
+    // Measured: about 340 bytes per site at L = 128 and 512 (peak RSS of `fingerprint`).
+    const BYTES_PER_SITE: u64 = 400;
+    const FIELDS_PER_CELL_SITE: u64 = 11;
+    let sites = (params.box_size * params.box_size) as u64;
+    let stretched = (3.0 * params.radius).ceil() as u64 + 2 * params.patch_margin as u64;
+    let side = (params.relax_patch_size as u64).max(stretched) + 2;
+    sites * BYTES_PER_SITE + params.n_cells as u64 * side * side * FIELDS_PER_CELL_SITE * 8 + (16 << 20)
+}
+
+/// The memory a run may use: `MONOLAYER_MEMORY_LIMIT_MB` if set, else what the system says is
+/// available (Linux's MemAvailable); None where neither is known.
+fn memory_limit() -> Option<(u64, &'static str)> {
+    if let Some(mb) = std::env::var("MONOLAYER_MEMORY_LIMIT_MB").ok().and_then(|v| v.trim().parse::<u64>().ok()) {
+        return Some((mb << 20, "MONOLAYER_MEMORY_LIMIT_MB"));
+    }
+    let info = fs::read_to_string("/proc/meminfo").ok()?;
+    let kb: u64 = info
+        .lines()
+        .find_map(|l| l.strip_prefix("MemAvailable:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some((kb << 10, "the memory available"))
+}
+
+/// Refuses a run that would not fit in memory, before it starts, with what it would need.
+pub fn check_memory(params: &Params) -> Result<(), String> {
+    let need = memory_estimate(params);
+    match memory_limit() {
+        Some((limit, what)) if need > limit => Err(format!(
+            "box_size = {}, n_cells = {} need about {} MB, more than {what} ({} MB): lower box_size or n_cells",
+            params.box_size,
+            params.n_cells,
+            need >> 20,
+            limit >> 20
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// A run directory with its record and the simulation it holds, and the directory's lock: one
+/// writer per directory, for as long as this value lives.
 pub struct RunDir {
     pub dir: PathBuf,
     pub record: RunRecord,
     pub monolayer: Monolayer,
+    _lock: RunLock,
 }
 
 impl RunDir {
@@ -36,83 +95,160 @@ impl RunDir {
             return Err("frame interval 0: must be ≥ 1".into());
         }
         params.validate().map_err(|e| e.to_string())?;
+        check_memory(&params)?;
         if RunRecord::path(dir).exists() {
-            return Err(format!(
-                "{} already holds a run: continue it with --resume {0}, or choose another --out",
-                dir.display()
-            ));
+            return Err(already_a_run(dir));
         }
-        let monolayer = Monolayer::new(params.clone(), seed).map_err(|e| e.to_string())?;
+        let monolayer = Monolayer::new(params, seed).map_err(|e| e.to_string())?;
         fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
-        let record = RunRecord::new(params, seed, frame_interval);
+        let lock = RunLock::acquire(dir)?;
+        Self::create_locked(lock, dir, monolayer, frame_interval)
+    }
+
+    /// [`RunDir::create`] in a directory whose lock the caller holds.
+    pub fn create_locked(lock: RunLock, dir: &Path, monolayer: Monolayer, frame_interval: u64) -> Result<Self, String> {
+        // Checked again under the lock: another writer may have started here meanwhile.
+        if RunRecord::path(dir).exists() {
+            return Err(already_a_run(dir));
+        }
+        fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
+        remove_stale_temporaries(dir);
+        remove_stale_temporaries(&dir.join("frames"));
+        // A checkpoint of the start, before the record: a run killed at any point after its
+        // record exists can be resumed.
+        write_checkpoint(&monolayer, &checkpoint_path(dir))?;
+        let record = RunRecord::new(monolayer.params().clone(), monolayer.seed(), frame_interval);
         record.save(dir)?;
-        Ok(RunDir { dir: dir.to_path_buf(), record, monolayer })
+        Ok(RunDir { dir: dir.to_path_buf(), record, monolayer, _lock: lock })
     }
 
     /// Opens the run in `dir` at its last checkpoint.
     pub fn resume(dir: &Path) -> Result<Self, String> {
-        let record = RunRecord::load(dir)?;
-        let checkpoint = dir.join("checkpoint.npz");
+        // Refuse what is not a run before putting a lock file into it.
+        RunRecord::load(dir)?;
+        let lock = RunLock::acquire(dir)?;
+        Self::resume_locked(lock, dir)
+    }
+
+    /// [`RunDir::resume`] in a directory whose lock the caller holds.
+    pub fn resume_locked(lock: RunLock, dir: &Path) -> Result<Self, String> {
+        let mut record = RunRecord::load(dir)?;
+        let checkpoint = checkpoint_path(dir);
         if !checkpoint.exists() {
-            return Err(format!("{}: no checkpoint yet; start the run again", checkpoint.display()));
+            return Err(format!(
+                "{}: no checkpoint: the run stopped before it wrote one, so there is nothing to continue; delete \
+                 {} and start the run again with --out",
+                checkpoint.display(),
+                dir.display()
+            ));
         }
         let state = read_checkpoint(&checkpoint, record.params.box_size)?;
+        let (p, fi, step) = (&record.params, record.frame_interval, state.step);
+        let scheduled =
+            step == 0 || step == p.relax_steps || (step > p.relax_steps && (step - p.relax_steps).is_multiple_of(fi));
+        if step > p.total_steps() || !scheduled {
+            return Err(format!(
+                "{}: step {step} is not a step this run writes a checkpoint at (0, then relax_steps = {}, then every \
+                 {fi} to {}): not this run's checkpoint",
+                checkpoint.display(),
+                p.relax_steps,
+                p.total_steps()
+            ));
+        }
+        if let Some(last) = record.last_frame_step.filter(|&last| step < last) {
+            return Err(format!(
+                "{}: step {step} is before the run's last frame (step {last} in run.json): not this run's checkpoint",
+                checkpoint.display()
+            ));
+        }
+        // A frame is written before the checkpoint of its step: a kill between that checkpoint
+        // and run.json leaves the record's last frame behind.
+        if step >= p.relax_steps && frame_path(dir, step).exists() {
+            record.last_frame_step = Some(step);
+        }
         let monolayer = Monolayer::from_state(record.params.clone(), record.seed, state).map_err(|e| e.to_string())?;
         fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
-        Ok(RunDir { dir: dir.to_path_buf(), record, monolayer })
+        remove_stale_temporaries(dir);
+        remove_stale_temporaries(&dir.join("frames"));
+        Ok(RunDir { dir: dir.to_path_buf(), record, monolayer, _lock: lock })
     }
 
     /// Steps to the end of the protocol, writing a frame and a checkpoint every frame interval
     /// of the active phase (and a checkpoint when relaxation ends), then records how it ended.
     /// With `analyze`, `DIR/analysis` is brought up to date at every frame.
     pub fn execute(&mut self, analyze: bool, watch: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), String> {
-        let mut live = if analyze { Some(LiveRun::start(&self.dir, self.monolayer.params())?) } else { None };
+        let mut live = match analyze {
+            true => Some(LiveRun::start(&self.dir, self.monolayer.params(), self.monolayer.step_count())?),
+            false => None,
+        };
         let outcome = self.protocol(live.as_mut(), watch);
         self.record.status = match &outcome {
-            Ok(()) => "finished".into(),
-            Err(e) => format!("failed: {e}"),
+            Ok(()) => RunStatus::Finished,
+            Err(Stop::Simulation(e)) => RunStatus::Failed(e.clone()),
+            Err(Stop::Io(e)) => RunStatus::Stopped(e.clone()),
         };
-        self.record.save(&self.dir)?;
-        outcome
+        let saved = self.record.save(&self.dir);
+        match outcome {
+            Ok(()) => saved,
+            Err(Stop::Simulation(e)) => Err(e),
+            Err(Stop::Io(e)) => Err(format!(
+                "{e}\n  the run itself is sound: once this is fixed, `run --resume {}` (or the same sweep again) \
+                 continues it from its last checkpoint",
+                self.dir.display()
+            )),
+        }
     }
 
     fn protocol(
         &mut self,
         mut live: Option<&mut LiveRun>,
         watch: &mut dyn FnMut(&Monolayer, &Event),
-    ) -> Result<(), String> {
+    ) -> Result<(), Stop> {
         let p = self.monolayer.params().clone();
         let total = p.total_steps();
-        let checkpoint = self.dir.join("checkpoint.npz");
+        let checkpoint = checkpoint_path(&self.dir);
         let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
         while m.step_count() < total {
             if let Err(e) = m.step() {
-                let last_good = dir.join("last_good_state.npz");
-                write_checkpoint(m, &last_good)?;
-                return Err(format!(
-                    "{e}\n  the last good state is in {} (the last periodic one in checkpoint.npz)",
-                    last_good.display()
-                ));
+                let last_good = dir.join(LAST_GOOD_STATE);
+                write_checkpoint(m, &last_good).map_err(Stop::Io)?;
+                return Err(Stop::Simulation(format!(
+                    "{e}\n  the last good state is in {} (the last periodic one in {})",
+                    last_good.display(),
+                    checkpoint.display()
+                )));
             }
             watch(m, &Event::Step);
             let s = m.step_count();
-            let frame = s >= p.relax_steps && (s - p.relax_steps) % record.frame_interval == 0;
+            let frame = s >= p.relax_steps && (s - p.relax_steps).is_multiple_of(record.frame_interval);
             if frame {
-                m.evaluate_now().map_err(|e| e.to_string())?;
-                write_frame(m, &frame_path(dir, s))?;
+                m.evaluate_now().map_err(|e| Stop::Simulation(e.to_string()))?;
+                write_frame(m, &frame_path(dir, s)).map_err(Stop::Io)?;
                 record.last_frame_step = Some(s);
                 if let Some(Err(e)) = live.as_deref_mut().map(|live| live.frame(m)) {
                     watch(m, &Event::AnalysisFailed(e));
                 }
             }
             if frame || s == p.relax_steps {
-                write_checkpoint(m, &checkpoint)?;
-                record.save(dir)?;
+                write_checkpoint(m, &checkpoint).map_err(Stop::Io)?;
+                record.save(dir).map_err(Stop::Io)?;
                 if frame {
                     watch(m, &Event::Frame);
                 }
             }
         }
         Ok(())
+    }
+}
+
+fn already_a_run(dir: &Path) -> String {
+    if checkpoint_path(dir).exists() {
+        format!("{} already holds a run: continue it with --resume {0}, or choose another --out", dir.display())
+    } else {
+        format!(
+            "{} already holds a run that stopped before its first checkpoint: delete it to start again, or choose \
+             another --out",
+            dir.display()
+        )
     }
 }

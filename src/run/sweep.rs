@@ -23,8 +23,9 @@ use serde::Deserialize;
 
 use crate::analysis::regime::{classify, fitted_lifetime, Regime};
 use crate::model::params::Params;
-use crate::run::files::{read_frame, RunFrames};
-use crate::run::files::{write_atomic, RunRecord};
+use crate::run::config::{number, params_from_table, parse_list};
+use crate::run::files::{check_frame, read_frame, RunFrames};
+use crate::run::files::{checkpoint_path, write_atomic, RunLock, RunRecord, RunStatus};
 use crate::run::offline::RunAnalysis;
 use crate::run::runner::{Event, RunDir};
 
@@ -77,18 +78,8 @@ impl SweepSpec {
     /// `KEY=V1,V2,…` from the command line into the grid (values in TOML syntax; bare words
     /// are strings).
     pub fn add_grid(&mut self, arg: &str) -> Result<(), String> {
-        let (k, vs) = arg.split_once('=').ok_or_else(|| format!("--grid {arg}: expected KEY=V1,V2,…"))?;
-        let values = vs
-            .split(',')
-            .map(|v| {
-                let v = v.trim();
-                format!("x = {v}")
-                    .parse::<toml::Table>()
-                    .map(|t| t["x"].clone())
-                    .or_else(|_| Ok::<_, String>(toml::Value::String(v.to_string())))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        self.grid.insert(k.trim().to_string(), toml::Value::Array(values));
+        let (k, values) = parse_list("--grid", arg)?;
+        self.grid.insert(k, toml::Value::Array(values));
         Ok(())
     }
 
@@ -101,6 +92,10 @@ impl SweepSpec {
         if self.frame_interval == 0 {
             return Err("sweep: `frame_interval` must be ≥ 1".into());
         }
+        // Two jobs of one name would share a directory, and the tables would count them twice.
+        if let Some(seed) = self.seeds.iter().enumerate().find_map(|(i, s)| self.seeds[..i].contains(s).then_some(s)) {
+            return Err(format!("sweep: `seeds` lists {seed} twice"));
+        }
         let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
         for (k, v) in &self.grid {
             let values = match v {
@@ -108,6 +103,10 @@ impl SweepSpec {
                 toml::Value::Array(_) => return Err(format!("sweep: grid `{k}` is an empty list")),
                 other => vec![other.clone()],
             };
+            let texts: Vec<String> = values.iter().map(value_text).collect();
+            if let Some(t) = texts.iter().enumerate().find_map(|(i, t)| texts[..i].contains(t).then_some(t)) {
+                return Err(format!("sweep: grid `{k}` lists {t} twice"));
+            }
             axes.push((k.clone(), values));
         }
         let mut points: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
@@ -143,20 +142,22 @@ impl SweepSpec {
                     s.join(", ")
                 }
             };
-            let mut params: Params =
-                table.try_into().map_err(|e: toml::de::Error| format!("sweep, run {}: {}", describe(), e.message()))?;
+            let origin = format!("sweep, run {}", describe());
+            let mut params = params_from_table(&table, &origin)?;
             if let Some(c) = chi {
-                let c = c
-                    .as_float()
-                    .or_else(|| c.as_integer().map(|i| i as f64))
-                    .ok_or_else(|| format!("sweep, run {}: `chi` = {c} must be a number", describe()))?;
-                params.set_chi(c);
+                params.set_chi(number("chi", &c).map_err(|e| format!("{origin}: {e}"))?);
             }
             params.validate().map_err(|e| format!("sweep, run {}: {e}", describe()))?;
             for &seed in &self.seeds {
                 let mut name: String = label.iter().map(|(k, v)| format!("{k}{v}_")).collect();
                 name = name.replace(['/', ' ', '"'], "");
                 name.push_str(&format!("seed{seed}"));
+                if let Some(other) = jobs.iter().find(|j: &&Job| j.name == name) {
+                    return Err(format!(
+                        "sweep: runs {:?} and {:?} would share the directory {name}",
+                        other.values, label
+                    ));
+                }
                 jobs.push(Job { name, values: label.clone(), params: params.clone(), seed });
             }
         }
@@ -191,8 +192,9 @@ pub struct RunSummary {
     pub name: String,
     pub values: Vec<(String, String)>,
     pub seed: u64,
-    /// "finished", "failed: …", or "running" (a shard that did not get to it).
-    pub status: String,
+    /// Finished, failed (blew up), stopped by an IO error (retried when the sweep runs again),
+    /// or running (a shard that did not get to it).
+    pub status: RunStatus,
     pub steps: u64,
     /// Time units of the active phase the frames cover (first to last frame).
     pub active_time: f64,
@@ -208,13 +210,20 @@ pub struct RunSummary {
     pub nematic_correlation_length: Option<f64>,
     /// Minimum packing fraction over the frames with no hole open.
     pub min_packing_without_hole: Option<f64>,
+    /// Cells' aspect ratio (shape tensor): the per-frame mean and 90th percentile, averaged
+    /// over the frames.
+    pub aspect_ratio_mean: Option<f64>,
+    pub aspect_ratio_p90: Option<f64>,
+    /// The most holes open in one frame, and the share of frames with more than one open.
+    pub max_holes_open: usize,
+    pub fraction_multiple_holes: f64,
     /// Wall time of the run in this invocation of the sweep (0 when it was done already).
     pub run_seconds: f64,
 }
 
 impl RunSummary {
     pub fn blew_up(&self) -> bool {
-        self.status.starts_with("failed")
+        self.status.blew_up()
     }
 }
 
@@ -237,14 +246,10 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
     let p = &record.params;
     s.microns_per_hour = p.microns_per_hour();
     let mut ra = RunAnalysis::new(p);
-    let mut speeds = Vec::new();
     for (_, path) in &run.frames {
         let frame = read_frame(path, p.box_size)?;
+        check_frame(&frame, p)?;
         ra.push_frame(&frame);
-        // Σ_x |Σ_i φ_i v_i| / Σ_x Σ_i φ_i: the mean speed of the tissue, weighted by φ.
-        let mass: f64 = frame.cells.iter().flat_map(|(_, phi)| phi.iter()).sum();
-        let flux: f64 = frame.velocity.iter().map(|v| v.norm()).sum();
-        speeds.push(flux / mass.max(1e-300));
         s.steps = frame.step;
     }
     let first = ra.frames.first().map(|f| f.time).unwrap_or(0.0);
@@ -265,7 +270,12 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
             None => (last - h.nucleated, false),
         })
         .collect();
-    s.mean_speed = mean(speeds.into_iter()).unwrap_or(0.0);
+    s.mean_speed = mean(ra.frames.iter().map(|f| f.summary.mean_speed)).unwrap_or(0.0);
+    s.aspect_ratio_mean = mean(ra.frames.iter().filter_map(|f| f.summary.aspect_ratio_mean));
+    s.aspect_ratio_p90 = mean(ra.frames.iter().filter_map(|f| f.summary.aspect_ratio_p90));
+    s.max_holes_open = ra.frames.iter().map(|f| f.open_holes).max().unwrap_or(0);
+    let multiple = ra.frames.iter().filter(|f| f.open_holes > 1).count() as f64;
+    s.fraction_multiple_holes = multiple / ra.frames.len().max(1) as f64;
     s.velocity_correlation_length = mean(ra.frames.iter().filter_map(|f| f.summary.velocity_correlation_length));
     s.nematic_correlation_length = mean(ra.frames.iter().filter_map(|f| f.summary.nematic_correlation_length));
     s.min_packing_without_hole = ra
@@ -285,8 +295,8 @@ enum Start {
 }
 
 /// The run's record if `dir` holds one, checked against the job: a sweep never continues a run
-/// made with other parameters.
-fn existing_record(job: &Job, dir: &Path) -> Result<Option<RunRecord>, String> {
+/// made with other parameters, seed or frame interval.
+fn existing_record(job: &Job, dir: &Path, frame_interval: u64) -> Result<Option<RunRecord>, String> {
     if !RunRecord::path(dir).exists() {
         return Ok(None);
     }
@@ -297,30 +307,47 @@ fn existing_record(job: &Job, dir: &Path) -> Result<Option<RunRecord>, String> {
             dir.display()
         ));
     }
+    if record.frame_interval != frame_interval {
+        return Err(format!(
+            "{} was run with a frame interval of {}, this sweep asks for {frame_interval}: use the same \
+             --frame-interval, or another --out",
+            dir.display(),
+            record.frame_interval
+        ));
+    }
     Ok(Some(record))
 }
 
-fn start_of(job: &Job, dir: &Path) -> Result<Start, String> {
-    let Some(record) = existing_record(job, dir)? else { return Ok(Start::Fresh) };
-    if record.status == "finished" || record.status.starts_with("failed") {
+fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, String> {
+    let Some(record) = existing_record(job, dir, frame_interval)? else { return Ok(Start::Fresh) };
+    if record.status.is_complete() {
         Ok(Start::Done)
-    } else if dir.join("checkpoint.npz").exists() {
+    } else if checkpoint_path(dir).exists() {
         Ok(Start::Resume)
     } else {
-        // Killed before its first checkpoint: nothing to keep.
-        fs::remove_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        // Killed before its first checkpoint (runs of earlier versions): nothing to keep.
+        fs::remove_file(RunRecord::path(dir)).map_err(|e| format!("{}: {e}", dir.display()))?;
         Ok(Start::Fresh)
     }
 }
 
-/// Runs (or resumes, or skips when done) one job in `OUT/runs/NAME`, single-threaded.
+/// Runs (or resumes, or skips when done) one job in `OUT/runs/NAME`, single-threaded, holding
+/// the directory's lock from before it looks at the directory.
 fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() + Sync)) -> Result<(), String> {
-    let mut run = match start_of(job, dir)? {
+    fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let lock = RunLock::acquire(dir)?;
+    let mut run = match start_of(job, dir, frame_interval)? {
         Start::Done => return Ok(()),
-        Start::Resume => RunDir::resume(dir)?,
-        Start::Fresh => RunDir::create(dir, job.params.clone(), job.seed, frame_interval)?,
+        Start::Resume => RunDir::resume_locked(lock, dir)?,
+        Start::Fresh => {
+            job.params.validate().map_err(|e| e.to_string())?;
+            crate::run::runner::check_memory(&job.params)?;
+            let m = crate::model::monolayer::Monolayer::new(job.params.clone(), job.seed).map_err(|e| e.to_string())?;
+            RunDir::create_locked(lock, dir, m, frame_interval)?
+        }
     };
-    // A failed simulation is a result of the sweep (it blew up), recorded in its run.json.
+    // A failed simulation is a result of the sweep (it blew up), and a stopped one is retried
+    // when the sweep runs again: both are in its run.json, and the summary reports them.
     let _ = run.execute(false, &mut |_, e| {
         if *e == Event::Step {
             on_step()
@@ -332,7 +359,7 @@ fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() +
 /// Steps still to run for `job` in `dir` (0 when done).
 fn remaining_steps(job: &Job, dir: &Path) -> u64 {
     match RunRecord::load(dir) {
-        Ok(r) if r.status == "finished" || r.status.starts_with("failed") => 0,
+        Ok(r) if r.status.is_complete() => 0,
         Ok(r) => job.params.total_steps().saturating_sub(r.last_frame_step.unwrap_or(0)),
         Err(_) => job.params.total_steps(),
     }
@@ -352,7 +379,7 @@ pub fn run_sweep(
     fs::create_dir_all(&runs_dir).map_err(|e| format!("{}: {e}", runs_dir.display()))?;
     // Check every existing directory against its job before any work starts.
     for job in jobs {
-        existing_record(job, &runs_dir.join(&job.name))?;
+        existing_record(job, &runs_dir.join(&job.name), frame_interval)?;
     }
     let mine: Vec<&Job> =
         jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).map(|(_, j)| j).collect();
@@ -372,7 +399,7 @@ pub fn run_sweep(
                     let dir = runs_dir.join(&job.name);
                     let on_step = || {
                         let s = steps.fetch_add(1, Ordering::Relaxed) as u64 + 1;
-                        if s % 100 == 0 {
+                        if s.is_multiple_of(100) {
                             progress(s, done.load(Ordering::Relaxed), total);
                         }
                     };
@@ -429,7 +456,9 @@ pub struct RegimePoint {
 pub fn regime_map(summaries: &[RunSummary]) -> Vec<RegimePoint> {
     let mut points: Vec<RegimePoint> = Vec::new();
     let mut pooled: Vec<Vec<(f64, bool)>> = Vec::new();
-    for s in summaries {
+    // Only runs that ended count: a run stopped by the machine, or not yet run, says nothing of
+    // the regime.
+    for s in summaries.iter().filter(|s| s.status.is_complete()) {
         let k = match points.iter().position(|p| p.values == s.values) {
             Some(k) => k,
             None => {
@@ -473,19 +502,20 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
         runs += &format!("{k},");
     }
     runs += "seed,status,blew_up,steps,active_time,holes_nucleated,max_hole_area,time_with_hole_open,\
-             hole_lifetimes,mean_speed,mean_speed_um_per_h,velocity_correlation_length,\
-             nematic_correlation_length,min_packing_fraction_without_hole\n";
+             hole_lifetimes,max_holes_open,fraction_multiple_holes,mean_speed,mean_speed_um_per_h,\
+             mean_speed_um_per_h_at_3.6s,mean_speed_um_per_h_at_5s,velocity_correlation_length,\
+             nematic_correlation_length,min_packing_fraction_without_hole,aspect_ratio_mean,aspect_ratio_p90\n";
     for s in summaries {
         let lifetimes: Vec<String> =
             s.lifetimes.iter().map(|(t, closed)| format!("{t:.1}{}", if *closed { "" } else { "+" })).collect();
-        let status = s.status.lines().next().unwrap_or("").replace(',', ";");
+        let status = s.status.to_string().lines().next().unwrap_or("").replace(',', ";");
         let _ = write!(runs, "{},", s.name);
         for (_, v) in &s.values {
             let _ = write!(runs, "{v},");
         }
         let _ = writeln!(
             runs,
-            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{:.6},{:.3},{},{},{}",
+            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{},{:.4},{:.6},{:.3},{:.3},{:.3},{},{},{},{},{}",
             s.seed,
             status,
             s.blew_up(),
@@ -495,11 +525,17 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
             s.max_hole_area,
             s.time_with_hole_open,
             lifetimes.join(";"),
+            s.max_holes_open,
+            s.fraction_multiple_holes,
             s.mean_speed,
             s.mean_speed * s.microns_per_hour,
+            s.mean_speed * 3600.0 / 3.6,
+            s.mean_speed * 3600.0 / 5.0,
             opt(s.velocity_correlation_length),
             opt(s.nematic_correlation_length),
-            opt(s.min_packing_without_hole)
+            opt(s.min_packing_without_hole),
+            opt(s.aspect_ratio_mean),
+            opt(s.aspect_ratio_p90)
         );
     }
     let mut regimes = String::new();

@@ -60,3 +60,28 @@ pub fn ellipse(w: usize, h: usize, a: f64, b: f64, theta: f64) -> Vec<f64> {
 pub fn phi_bits(m: &Monolayer) -> Vec<u64> {
     m.cells().iter().flat_map(|c| c.phi().data.iter().map(|v| v.to_bits())).collect()
 }
+
+// ---- The command line as a user drives it ----
+
+/// Runs the `monolayer` binary with `args`.
+pub fn monolayer(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
+}
+
+pub fn stderr(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A path as an argument.
+pub fn arg(p: &std::path::Path) -> &str {
+    p.to_str().expect("a UTF-8 path")
+}
+
+/// The lines of a text file, naming the file if it cannot be read.
+pub fn lines(path: &std::path::Path) -> Vec<String> {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .map(String::from)
+        .collect()
+}

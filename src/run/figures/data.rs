@@ -15,7 +15,7 @@ use super::{Figure, Friction, Plan, Point, CHI_FIG2, CHI_FIG3AB, CHI_FIG3C, CHI_
 use crate::analysis::correlations::correlation_length;
 use crate::analysis::precursors::{Precursor, DEPTH};
 use crate::analysis::regime::{classify, fitted_lifetime, Regime};
-use crate::run::files::{read_frame, write_atomic, RunFrames, RunRecord};
+use crate::run::files::{read_frame, write_atomic, RunFrames, RunRecord, RunStatus};
 use crate::run::offline::RunAnalysis;
 
 /// One hole of a run: its duration (its lifetime, or how long it was seen when still open at the
@@ -30,7 +30,7 @@ pub struct HoleData {
 /// What the figures need of one run.
 #[derive(Clone, Debug)]
 pub struct RunData {
-    pub status: String,
+    pub status: RunStatus,
     pub frames: usize,
     /// Time from the first to the last frame (the run's t_total, as in the sweep's regime map).
     pub active_time: f64,
@@ -45,7 +45,7 @@ pub struct RunData {
 
 impl RunData {
     pub fn failed(&self) -> bool {
-        self.status.starts_with("failed")
+        self.status.blew_up()
     }
 }
 
@@ -57,7 +57,7 @@ pub fn measure_runs(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<RunDa
     for job in &plan.jobs {
         let dir = runs_dir.join(&job.name);
         match RunRecord::load(&dir) {
-            Ok(r) if r.status == "finished" || r.status.starts_with("failed") => {
+            Ok(r) if r.status.is_complete() => {
                 if r.params != job.params || r.seed != job.seed {
                     return Err(format!(
                         "{} was run with other parameters or seed than this plan gives it (another scale or --set?): use another --out",

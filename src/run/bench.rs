@@ -1,0 +1,264 @@
+//! `monolayer bench` and `monolayer analyze --bench`: where the time goes at full size.
+//!
+//! This machine's speed drifts by up to 1.4× from one minute to the next, so every comparison is
+//! made inside one run, block by block in turn on the same trajectory: each thread count on its
+//! own copy of the state, and two independent one-thread simulations side by side, which is the
+//! most two threads can give on this machine (they share its caches and memory bandwidth). The
+//! two-thread speed-up is reported as a fraction of that ceiling.
+
+use std::fs;
+use std::path::Path;
+use std::time::Instant;
+
+use crate::analysis::Analysis;
+use crate::model::monolayer::Monolayer;
+use crate::model::params::Params;
+use crate::run::files::{frame_path, write_frame, RunRecord};
+use crate::run::offline::analyze_run;
+use crate::run::plots::Background;
+
+/// What `bench` times.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    /// The parameters of the timed active steps (box, cells, conventions); χ is set per entry of
+    /// `chis`.
+    pub params: Params,
+    pub chis: Vec<f64>,
+    pub steps: u64,
+    pub relax_steps: u64,
+    pub threads: Vec<usize>,
+    pub blocks: u64,
+    pub seed: u64,
+}
+
+fn pool(n: usize) -> Result<rayon::ThreadPool, String> {
+    rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| format!("--threads {n}: {e}"))
+}
+
+/// The median of a few timings (the mean of the middle two for an even count).
+pub fn median(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let h = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[h]
+    } else {
+        0.5 * (v[h - 1] + v[h])
+    }
+}
+
+fn best(v: &[f64]) -> f64 {
+    v.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+/// Times the relaxation, then for every χ the active steps on each thread count, and (when the
+/// thread counts include 1 and 2) the ceiling of two independent one-thread simulations.
+pub fn bench(o: &BenchOptions) -> Result<(), String> {
+    if o.threads.is_empty() || o.threads.contains(&0) {
+        return Err(format!("--threads {:?}: every count must be ≥ 1", o.threads));
+    }
+    if o.blocks == 0 || o.blocks > o.steps {
+        return Err(format!("--blocks {}: must be in [1, --steps = {}]", o.blocks, o.steps));
+    }
+    if o.chis.is_empty() {
+        return Err("--chi: give at least one value".into());
+    }
+    let pools = o.threads.iter().map(|&n| pool(n)).collect::<Result<Vec<_>, _>>()?;
+    let ceiling = o.threads.contains(&1) && o.threads.contains(&2);
+    let p = &o.params;
+    println!(
+        "N = {}, L = {}, friction weights {:?}, |Q̂| = {}, ζ = {}: {} relaxation steps, then {} timed active steps in {} blocks, thread(s): {:?}{}",
+        p.n_cells,
+        p.box_size,
+        p.friction_weights,
+        p.q_magnitude,
+        p.zeta,
+        o.relax_steps,
+        o.steps,
+        o.blocks,
+        o.threads,
+        if ceiling { ", and two one-thread simulations side by side (the ceiling)" } else { "" }
+    );
+    let base = Params { relax_steps: o.relax_steps, ..p.clone() };
+    let mut relaxed = Monolayer::new(base.clone(), o.seed).map_err(|e| e.to_string())?;
+    let t = Instant::now();
+    pools[0].install(|| relaxed.advance(o.relax_steps)).map_err(|e| e.to_string())?;
+    println!(
+        "relaxation, {} thread(s): {:.3} ms/step\n{}",
+        o.threads[0],
+        1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64,
+        relaxed.counters().report()
+    );
+    for &chi in &o.chis {
+        let mut p = base.clone();
+        p.set_chi(chi);
+        let start = |pool: &rayon::ThreadPool| -> Result<Monolayer, String> {
+            let mut m = relaxed.clone();
+            m.set_params(p.clone()).map_err(|e| e.to_string())?;
+            // The first solve starts from rest; time the steady state.
+            pool.install(|| m.advance(5)).map_err(|e| e.to_string())?;
+            m.counters_mut().reset();
+            Ok(m)
+        };
+        // One copy per thread count; they follow the same trajectory (the bits do not depend on
+        // the thread count), so block k costs each the same work.
+        let mut runs = pools.iter().map(start).collect::<Result<Vec<_>, _>>()?;
+        let one = pool(1)?;
+        let mut pair = if ceiling { vec![start(&one)?, start(&one)?] } else { Vec::new() };
+        let mut block_ms = vec![Vec::new(); pools.len()];
+        let mut pair_ms = Vec::new();
+        let mut seconds = vec![0.0; pools.len()];
+        let mut stopped = None;
+        'blocks: for k in 0..o.blocks {
+            let steps = o.steps * (k + 1) / o.blocks - o.steps * k / o.blocks;
+            for (((m, pool), times), total) in runs.iter_mut().zip(&pools).zip(&mut block_ms).zip(&mut seconds) {
+                let t = Instant::now();
+                let r = pool.install(|| m.advance(steps));
+                *total += t.elapsed().as_secs_f64();
+                if let Err(e) = r {
+                    stopped = Some(e.to_string());
+                    break 'blocks;
+                }
+                times.push(1e3 * t.elapsed().as_secs_f64() / steps as f64);
+            }
+            if ceiling {
+                let t = Instant::now();
+                let results: Vec<Result<(), String>> = std::thread::scope(|s| {
+                    let handles: Vec<_> = pair
+                        .iter_mut()
+                        .map(|m| {
+                            s.spawn(move || {
+                                let one = pool(1)?;
+                                one.install(|| m.advance(steps)).map_err(|e| e.to_string())
+                            })
+                        })
+                        .collect();
+                    handles.into_iter().map(|h| h.join().unwrap_or_else(|_| Err("panicked".into()))).collect()
+                });
+                if let Some(Err(e)) = results.into_iter().find(|r| r.is_err()) {
+                    stopped = Some(e);
+                    break 'blocks;
+                }
+                pair_ms.push(1e3 * t.elapsed().as_secs_f64() / steps as f64);
+            }
+        }
+        for (((m, times), threads), total) in runs.iter().zip(&block_ms).zip(&o.threads).zip(&seconds) {
+            let c = m.counters();
+            println!(
+                "χ = {chi}, ζ = {}, {threads} thread(s): {:.3} ms/step over {} steps; blocks: median {:.3}, best {:.3}\n{}",
+                m.params().zeta,
+                1e3 * total / c.steps.max(1) as f64,
+                c.steps,
+                median(times),
+                best(times),
+                c.report()
+            );
+        }
+        for (times, threads) in block_ms.iter().zip(&o.threads).skip(1) {
+            let ratios: Vec<f64> = block_ms[0].iter().zip(times).map(|(t0, t)| t0 / t).collect();
+            println!(
+                "  speed-up of {threads} over {} thread(s): median block {:.2}×, best blocks {:.2}×",
+                o.threads[0],
+                median(&ratios),
+                best(&block_ms[0]) / best(times)
+            );
+        }
+        if ceiling && pair_ms.len() == block_ms[0].len() {
+            let i1 = o.threads.iter().position(|&n| n == 1).expect("checked");
+            let i2 = o.threads.iter().position(|&n| n == 2).expect("checked");
+            // Two simulations side by side make two steps in one pair block: their throughput
+            // over one simulation alone is the most any split of one simulation could reach.
+            let ceilings: Vec<f64> = block_ms[i1].iter().zip(&pair_ms).map(|(t1, tp)| 2.0 * t1 / tp).collect();
+            let speedups: Vec<f64> = block_ms[i1].iter().zip(&block_ms[i2]).map(|(t1, t2)| t1 / t2).collect();
+            let fractions: Vec<f64> = speedups.iter().zip(&ceilings).map(|(s, c)| s / c).collect();
+            println!(
+                "  ceiling (two one-thread simulations side by side): median block {:.2}×; two threads reach {:.2} of it (median block)",
+                median(&ceilings),
+                median(&fractions)
+            );
+        }
+        if let Some(e) = stopped {
+            return Err(format!("χ = {chi}: stopped: {e}"));
+        }
+    }
+    Ok(())
+}
+
+/// Times [`Analysis::measure`] on a full-size active state, and `analyze` over `frames` frames
+/// of it written to a temporary run directory (removed afterwards).
+pub fn bench_analysis(frames: u64) -> Result<(), String> {
+    let p = Params { relax_steps: 3000, zeta: 0.5, ..Params::default() };
+    let mut m = Monolayer::new(p.clone(), 1).map_err(|e| e.to_string())?;
+    m.advance(p.relax_steps + 20).map_err(|e| e.to_string())?;
+    m.evaluate_now().map_err(|e| e.to_string())?;
+    let mut analysis = Analysis::new(m.params());
+    analysis.measure(&m);
+    let reps = 200;
+    let t = Instant::now();
+    for _ in 0..reps {
+        analysis.measure(&m);
+    }
+    let ms = 1e3 * t.elapsed().as_secs_f64() / reps as f64;
+    println!("measurements of one full-size frame (N = {}, L = {}): {ms:.2} ms", p.n_cells, p.box_size);
+    let dir = std::env::temp_dir().join(format!("monolayer-analysis-bench-{}", std::process::id()));
+    let result = write_and_analyze(&mut m, &dir, frames);
+    let _ = fs::remove_dir_all(&dir);
+    result
+}
+
+fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), String> {
+    fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
+    RunRecord::new(m.params().clone(), 1, 10).save(dir)?;
+    for _ in 0..frames {
+        m.advance(10).map_err(|e| e.to_string())?;
+        m.evaluate_now().map_err(|e| e.to_string())?;
+        let path = frame_path(dir, m.step_count());
+        write_frame(m, &path)?;
+    }
+    let t = Instant::now();
+    let written = analyze_run(dir, None, None, Background::StrainRate)?;
+    println!(
+        "analyze over {frames} full-size frames: {:.2} s ({} files written)",
+        t.elapsed().as_secs_f64(),
+        written.len()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_of_odd_and_even_counts() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(&[]).is_nan());
+    }
+
+    /// A tiny bench runs through every branch (thread counts, the ceiling) and refuses bad
+    /// options by name.
+    #[test]
+    fn a_small_bench_runs_and_bad_options_are_refused() {
+        let params = Params { box_size: 40, n_cells: 4, zeta: 0.5, ..Params::default() };
+        let o = BenchOptions {
+            params,
+            chis: vec![0.01],
+            steps: 4,
+            relax_steps: 20,
+            threads: vec![1, 2],
+            blocks: 2,
+            seed: 1,
+        };
+        bench(&o).unwrap();
+        let e = bench(&BenchOptions { blocks: 9, ..o.clone() }).unwrap_err();
+        assert!(e.contains("--blocks"), "{e}");
+        let e = bench(&BenchOptions { threads: vec![0], ..o.clone() }).unwrap_err();
+        assert!(e.contains("--threads"), "{e}");
+        let e = bench(&BenchOptions { chis: vec![], ..o }).unwrap_err();
+        assert!(e.contains("--chi"), "{e}");
+    }
+}

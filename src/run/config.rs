@@ -1,0 +1,185 @@
+//! Parameters from the user's text: config files, `--set KEY=VALUE`, `--grid KEY=V1,V2`. The one
+//! KEY=VALUE parser of the program, and the one place that turns a table of values into
+//! [`Params`] with errors that name the parameter, what it got and what it takes.
+
+use std::fs;
+use std::path::Path;
+
+use crate::model::params::Params;
+
+/// A value typed on the command line: TOML syntax (`0.3`, `true`, `"x"`), and where that fails a
+/// number as Rust reads it (`.5`, `1e999`, `NaN`: the checks below then say what is wrong with
+/// it), else a bare word as a string (`passive_force=grad_mu`).
+pub fn parse_value(text: &str) -> toml::Value {
+    let text = text.trim();
+    if let Ok(mut t) = format!("x = {text}").parse::<toml::Table>() {
+        if let Some(v) = t.remove("x") {
+            return v;
+        }
+    }
+    match text.parse::<f64>() {
+        Ok(x) => toml::Value::Float(x),
+        Err(_) => toml::Value::String(text.to_string()),
+    }
+}
+
+/// `KEY=VALUE` as given to `flag` (e.g. `--set`).
+pub fn parse_assignment(flag: &str, arg: &str) -> Result<(String, toml::Value), String> {
+    let (k, v) = split(flag, arg, "VALUE")?;
+    Ok((k, parse_value(v)))
+}
+
+/// `KEY=V1,V2,…` as given to `flag` (e.g. `--grid`).
+pub fn parse_list(flag: &str, arg: &str) -> Result<(String, Vec<toml::Value>), String> {
+    let (k, vs) = split(flag, arg, "V1,V2,…")?;
+    Ok((k, vs.split(',').map(parse_value).collect()))
+}
+
+fn split<'a>(flag: &str, arg: &'a str, what: &str) -> Result<(String, &'a str), String> {
+    match arg.split_once('=') {
+        Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v)),
+        _ => Err(format!("{flag} {arg}: expected KEY={what}, e.g. {flag} zeta=0.4")),
+    }
+}
+
+fn show(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => format!("\"{s}\""),
+        toml::Value::Float(x) => format!("{x}"),
+        other => other.to_string(),
+    }
+}
+
+/// The value of one parameter brought to the type its default has, or an error naming it. Whole
+/// numbers are taken where reals are wanted and reals with no fraction where counts are wanted
+/// (`active_steps = 1e5`); anything that is not a finite number is refused where a number is.
+fn coerce(key: &str, v: &toml::Value, default: &toml::Value) -> Result<toml::Value, String> {
+    use toml::Value as V;
+    let bad = |what: String| Err(format!("parameter `{key}` = {}: {what}", show(v)));
+    match (default, v) {
+        (V::Float(_), V::Float(x)) if x.is_finite() => Ok(V::Float(*x)),
+        (V::Float(_), V::Integer(i)) => Ok(V::Float(*i as f64)),
+        (V::Float(_), _) => bad("must be a finite number".into()),
+        (V::Integer(_), V::Integer(i)) if *i >= 0 => Ok(V::Integer(*i)),
+        (V::Integer(_), V::Float(x)) if x.is_finite() && *x >= 0.0 && x.fract() == 0.0 && *x < 9.2e18 => {
+            Ok(V::Integer(*x as i64))
+        }
+        (V::Integer(_), _) => bad("must be a whole number ≥ 0".into()),
+        (V::String(_), V::String(_)) => Ok(v.clone()),
+        (V::String(_), _) => {
+            // The variant names are in serde's message for a string that is none of them.
+            let e = single(key, V::String(String::new())).unwrap_err();
+            bad(e.rsplit_once("expected ").map(|(_, names)| format!("expected {names}")).unwrap_or(e))
+        }
+        _ => Ok(v.clone()),
+    }
+}
+
+/// Deserialises a table holding only `key` (the others default), so that serde's message is
+/// about that key.
+fn single(key: &str, v: toml::Value) -> Result<Params, String> {
+    let mut t = toml::Table::new();
+    t.insert(key.to_string(), v);
+    t.try_into().map_err(|e: toml::de::Error| e.message().trim().to_string())
+}
+
+/// [`Params`] from a table of values by parameter name (defaults fill the rest), checked one
+/// key at a time; `origin` prefixes every error (the file, `--set`, or the run of a sweep). The
+/// ranges are left to [`Params::validate`], once the caller has applied its own options.
+pub fn params_from_table(table: &toml::Table, origin: &str) -> Result<Params, String> {
+    let defaults = toml::Table::try_from(Params::default()).expect("the defaults serialise");
+    let mut checked = toml::Table::new();
+    for (k, v) in table {
+        let Some(d) = defaults.get(k) else {
+            let names: Vec<&str> = defaults.keys().map(String::as_str).collect();
+            return Err(format!("{origin}: unknown parameter `{k}` (the parameters: {})", names.join(", ")));
+        };
+        let v = coerce(k, v, d).map_err(|e| format!("{origin}: {e}"))?;
+        single(k, v.clone()).map_err(|e| format!("{origin}: parameter `{k}` = {}: {e}", show(&v)))?;
+        checked.insert(k.clone(), v);
+    }
+    checked.try_into().map_err(|e: toml::de::Error| format!("{origin}: {}", e.message()))
+}
+
+/// A finite real number for a key that is not a parameter itself (a sweep's `chi`).
+pub fn number(key: &str, v: &toml::Value) -> Result<f64, String> {
+    match coerce(key, v, &toml::Value::Float(0.0))? {
+        toml::Value::Float(x) => Ok(x),
+        _ => unreachable!("coerce brings a number to the default's type"),
+    }
+}
+
+/// Parameters from an optional TOML file and `KEY=VALUE` overrides (later ones win).
+pub fn load_params(config: Option<&Path>, overrides: &[String]) -> Result<Params, String> {
+    let (mut table, origin) = match config {
+        Some(path) => {
+            let text = fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+            let table =
+                text.parse::<toml::Table>().map_err(|e| format!("{}: {}", path.display(), e.message().trim()))?;
+            (table, path.display().to_string())
+        }
+        None => (toml::Table::new(), "--set".to_string()),
+    };
+    for o in overrides {
+        let (k, v) = parse_assignment("--set", o)?;
+        table.insert(k, v);
+    }
+    let origin = if config.is_some() && !overrides.is_empty() { format!("{origin} and --set") } else { origin };
+    params_from_table(&table, &origin)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set(args: &[&str]) -> Result<Params, String> {
+        load_params(None, &args.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+    }
+
+    #[test]
+    fn overrides_and_unknown_keys() {
+        let p = set(&["zeta=0.3", "passive_force=grad_mu"]).unwrap();
+        assert_eq!(p.zeta, 0.3);
+        assert_eq!(p.passive_force, crate::model::params::PassiveForce::GradMu);
+        let e = set(&["zeta_typo=0.3"]).unwrap_err();
+        assert!(e.contains("zeta_typo"), "{e}");
+        let e = set(&["zeta"]).unwrap_err();
+        assert!(e.contains("KEY=VALUE"), "{e}");
+    }
+
+    /// Every wrong value names its parameter, and no number is reported as a string.
+    #[test]
+    fn bad_values_name_the_parameter() {
+        for (arg, expect) in [
+            ("zeta=abc", "parameter `zeta` = \"abc\": must be a finite number"),
+            ("zeta=1e999", "parameter `zeta` = inf: must be a finite number"),
+            ("zeta=NaN", "parameter `zeta` = NaN: must be a finite number"),
+            ("zeta=nan", "parameter `zeta` = NaN: must be a finite number"),
+            ("active_steps=-3", "parameter `active_steps` = -3: must be a whole number ≥ 0"),
+            ("active_steps=2.5", "parameter `active_steps` = 2.5: must be a whole number ≥ 0"),
+            ("active_steps=18446744073709551615", "parameter `active_steps`"),
+            ("passive_force=3", "parameter `passive_force` = 3: expected `grad_mu` or `phi_grad_mu`"),
+            ("passive_force=grad", "parameter `passive_force` = \"grad\": unknown variant `grad`"),
+        ] {
+            let e = set(&[arg]).unwrap_err();
+            assert!(e.contains(expect), "{arg}: {e}");
+        }
+        assert_eq!(set(&["zeta=.5"]).unwrap().zeta, 0.5);
+        assert_eq!(set(&["active_steps=1e3"]).unwrap().active_steps, 1000);
+        assert_eq!(set(&["radius=9"]).unwrap().radius, 9.0);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.toml");
+        fs::write(&path, "zeta = \"abc\"\n").unwrap();
+        let e = load_params(Some(&path), &[]).unwrap_err();
+        assert!(e.contains("c.toml") && e.contains("parameter `zeta` = \"abc\""), "{e}");
+    }
+
+    #[test]
+    fn lists_and_assignments() {
+        let (k, v) = parse_list("--grid", "zeta=0.3, 0.5,grad_mu").unwrap();
+        assert_eq!(k, "zeta");
+        assert_eq!(v, vec![toml::Value::Float(0.3), toml::Value::Float(0.5), toml::Value::String("grad_mu".into())]);
+        assert!(parse_assignment("--set", "=3").is_err());
+        assert_eq!(parse_assignment("--set", "seed = 3").unwrap(), ("seed".into(), toml::Value::Integer(3)));
+    }
+}

@@ -1,0 +1,135 @@
+//! Property tests of everything that reads the user's text or the disk: parameters from
+//! `--set` and config files, and frames and checkpoints cut short or with a bit flipped. None may
+//! panic; a damaged file is refused or reads as exactly what was written. A few dozen cases
+//! each, so that the suite stays quick.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use monolayer::run::config::load_params;
+use monolayer::run::files::{read_checkpoint, read_frame, write_checkpoint, write_frame, RunRecord};
+use monolayer::{Monolayer, Params};
+use proptest::prelude::*;
+
+const NAMES: [&str; 8] =
+    ["zeta", "box_size", "n_cells", "passive_force", "active_steps", "dt", "patch_margin", "no_such_parameter"];
+
+fn config() -> ProptestConfig {
+    ProptestConfig { cases: 48, failure_persistence: None, ..ProptestConfig::default() }
+}
+
+/// A value as a user might type it: numbers in every spelling, words, TOML, junk.
+fn value() -> impl Strategy<Value = String> {
+    prop_oneof![
+        any::<f64>().prop_map(|x| x.to_string()),
+        any::<i64>().prop_map(|x| x.to_string()),
+        Just("1e999".to_string()),
+        Just(".5".to_string()),
+        Just("NaN".to_string()),
+        Just("-inf".to_string()),
+        Just("grad_mu".to_string()),
+        Just("[1, 2]".to_string()),
+        Just("{ a = 1 }".to_string()),
+        "[ -~]{0,12}",
+    ]
+}
+
+/// A small lattice, so that a case is quick.
+fn small() -> Params {
+    Params { box_size: 40, n_cells: 4, ..Params::default() }
+}
+
+/// One frame and one checkpoint of a small monolayer, written once.
+fn files() -> &'static (tempfile::TempDir, PathBuf, PathBuf) {
+    static FILES: OnceLock<(tempfile::TempDir, PathBuf, PathBuf)> = OnceLock::new();
+    FILES.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let mut m = Monolayer::new(small(), 1).unwrap();
+        m.advance(3).unwrap();
+        m.evaluate_now().unwrap();
+        let (frame, checkpoint) = (dir.path().join("frame.npz"), dir.path().join("checkpoint.npz"));
+        write_frame(&mut m, &frame).unwrap();
+        write_checkpoint(&m, &checkpoint).unwrap();
+        (dir, frame, checkpoint)
+    })
+}
+
+/// The bytes of `original` cut at a fraction `cut` of its length (none past 1) with the bit at
+/// fraction `flip` of its bits flipped.
+fn damaged(original: &Path, cut: f64, flip: Option<f64>, name: &str) -> (tempfile::TempDir, PathBuf) {
+    let mut bytes = fs::read(original).unwrap();
+    bytes.truncate((cut * bytes.len() as f64) as usize);
+    if let Some(bit) = flip.map(|f| (f * 8.0 * bytes.len() as f64) as usize).filter(|b| b / 8 < bytes.len()) {
+        bytes[bit / 8] ^= 1 << (bit % 8);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    fs::write(&path, bytes).unwrap();
+    (dir, path)
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    /// `--set KEY=VALUE` with any value: parameters, or an error that names the key.
+    #[test]
+    fn set_never_panics_and_names_the_key(key in proptest::sample::select(&NAMES[..]), v in value()) {
+        let arg = format!("{key}={v}");
+        match load_params(None, std::slice::from_ref(&arg)) {
+            Ok(p) => { let _ = p.validate(); }
+            Err(e) => prop_assert!(e.contains(key), "{arg}: {e}"),
+        }
+    }
+
+    /// A config file of any text: parameters, or an error that names the file.
+    #[test]
+    fn config_files_never_panic(lines in proptest::collection::vec((proptest::sample::select(&NAMES[..]), value()), 0..4),
+                                junk in "[ -~\n]{0,40}") {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.toml");
+        let text: String = lines.iter().map(|(k, v)| format!("{k} = {v}\n")).collect::<String>() + &junk;
+        fs::write(&path, &text).unwrap();
+        if let Err(e) = load_params(Some(&path), &[]) {
+            prop_assert!(e.contains("c.toml"), "{text:?}: {e}");
+        }
+    }
+
+    /// A run record cut short or with a bit flipped is refused or read, never a panic (every
+    /// command that opens a run reads it first).
+    #[test]
+    fn damaged_run_records_never_panic(cut in 0.0f64..1.3, flip in proptest::option::of(0.0f64..1.0)) {
+        let dir = tempfile::tempdir().unwrap();
+        RunRecord::new(small(), 1, 10).save(dir.path()).unwrap();
+        let (_damaged, path) = damaged(&dir.path().join("run.json"), cut, flip, "run.json");
+        if let Ok(r) = RunRecord::load(path.parent().unwrap()) {
+            prop_assert!(r.frame_interval >= 1 && r.params.validate().is_ok());
+        }
+    }
+
+    /// A frame cut short or with a bit flipped is refused, or reads as the frame written.
+    #[test]
+    fn damaged_frames_are_refused(cut in 0.0f64..1.3, flip in proptest::option::of(0.0f64..1.0)) {
+        let (_, frame, _) = files();
+        let good = read_frame(frame, small().box_size).unwrap();
+        let (_dir, path) = damaged(frame, cut, flip, "frame_0000003.npz");
+        if let Ok(f) = read_frame(&path, small().box_size) {
+            prop_assert_eq!((f.step, f.time.to_bits()), (good.step, good.time.to_bits()));
+            prop_assert!(f.cells == good.cells && f.q_hat == good.q_hat && f.velocity == good.velocity);
+        }
+    }
+
+    /// A checkpoint cut short or with a bit flipped is refused, or reads as the state written
+    /// (and then continues like it).
+    #[test]
+    fn damaged_checkpoints_are_refused(cut in 0.0f64..1.3, flip in proptest::option::of(0.0f64..1.0)) {
+        let (_, _, checkpoint) = files();
+        let good = read_checkpoint(checkpoint, small().box_size).unwrap();
+        let (_dir, path) = damaged(checkpoint, cut, flip, "checkpoint.npz");
+        if let Ok(s) = read_checkpoint(&path, small().box_size) {
+            prop_assert_eq!(s.step, good.step);
+            prop_assert!(s.cells == good.cells && s.warm_start == good.warm_start && s.substrate == good.substrate);
+            prop_assert!(Monolayer::from_state(small(), 1, s).is_ok());
+        }
+    }
+}
