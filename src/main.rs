@@ -40,6 +40,57 @@ enum Command {
     /// Measure a run's frames: holes, defects, spiral cores, strain rate, correlations; tables
     /// and plots to DIR/analysis. With --bench: time the measurements at full size.
     Analyze(AnalyzeArgs),
+    /// The paper's figures (1c, 1d, 2, 3a–d, S1–S3) from one plan of runs, each as PNG and SVG
+    /// beside its CSV, and DIR/figures.md; here (one run per core, resumable) or with --slurm as a
+    /// job array and an aggregation job. See README "Reproduce the paper".
+    Figures(FiguresArgs),
+}
+
+#[derive(Args)]
+struct FiguresArgs {
+    /// Output directory: the runs in DIR/runs/, the figures, plan.csv and figures.md in DIR.
+    #[arg(long)]
+    out: PathBuf,
+    /// smoke (minutes: tiny boxes, proves the pipeline), standard (full size, a few seeds, one
+    /// machine overnight) or paper (the paper's counts: a cluster).
+    #[arg(long, default_value = "smoke")]
+    scale: monolayer::run::figures::Scale,
+    /// Only these figures and their runs: --only 1c,3d,S1 (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3).
+    #[arg(long, value_name = "LIST")]
+    only: Option<String>,
+    /// A parameter for every run, over the scale's: --set q_magnitude=0.4.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Simulations at a time, one per core (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Run the whole `paper` scale on this machine (days of core time: it is refused without
+    /// this; a --shard, as a Slurm array task runs, is not).
+    #[arg(long)]
+    yes: bool,
+    /// all (runs, then figures), runs (only the runs: a Slurm array task), or figures (only the
+    /// figures, from finished runs: the aggregation job).
+    #[arg(long, default_value = "all")]
+    stage: monolayer::run::figures::Stage,
+    /// Run only every N-th run of the plan starting at K (K/N), as a Slurm array task does.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<Shard>,
+    /// No progress bar; a line per finished run.
+    #[arg(long)]
+    quiet: bool,
+    /// Write DIR/slurm/{runs.sbatch, figures.sbatch, submit.sh} and submit them: a job array over
+    /// the runs and the figures job after it (afterok).
+    #[arg(long)]
+    slurm: bool,
+    /// With --slurm: print the scripts; write and submit nothing.
+    #[arg(long, requires = "slurm")]
+    dry_run: bool,
+    /// With --slurm: array tasks running at once (the %N of --array).
+    #[arg(long, default_value_t = 16, requires = "slurm")]
+    throttle: usize,
+    /// With --slurm: the partition to submit to (default: the cluster's).
+    #[arg(long, requires = "slurm")]
+    partition: Option<String>,
 }
 
 #[derive(Args)]
@@ -229,6 +280,7 @@ fn main() -> ExitCode {
         Command::Fingerprint(a) => fingerprint(&a),
         Command::Sweep(a) => sweep(&a),
         Command::Analyze(a) => with_threads(Some(1), || analyze(&a)),
+        Command::Figures(a) => figures(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -391,6 +443,27 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
         run_time / wall.max(1e-9)
     );
     Ok(())
+}
+
+fn figures(a: FiguresArgs) -> Result<(), String> {
+    if a.throttle == 0 {
+        return Err("--throttle 0: must be ≥ 1".into());
+    }
+    monolayer::run::figures::command::figures(&monolayer::run::figures::command::FiguresOptions {
+        out: a.out,
+        scale: a.scale,
+        only: a.only,
+        sets: a.set,
+        jobs: a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)),
+        yes: a.yes,
+        stage: a.stage,
+        shard: a.shard,
+        quiet: a.quiet,
+        slurm: a.slurm,
+        dry_run: a.dry_run,
+        throttle: a.throttle,
+        partition: a.partition,
+    })
 }
 
 /// The shard of a Slurm job array, when run as one.

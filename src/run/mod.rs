@@ -5,12 +5,14 @@
 //! - [`files`]: frames, checkpoints and `run.json`, the writer and the reader of each together;
 //! - [`runner`]: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume);
 //! - [`sweep`]: a grid of runs, one per core, resumable, its summary and regime map;
+//! - [`figures`]: `monolayer figures`, the paper's figures from one plan of runs, here or on Slurm;
 //! - [`offline`]: `monolayer analyze`, the tables of a run's frames; [`plots`]: its figures.
 //!
 //! Uses `model` and `analysis`; nothing below it uses this layer.
 
 pub mod bench;
 pub mod config;
+pub mod figures;
 pub mod files;
 pub mod offline;
 pub mod plots;

@@ -1,0 +1,496 @@
+//! `monolayer figures`: the paper's figures from one plan of runs (README "Reproduce the paper").
+//!
+//! Every figure names the parameter points it needs and how many seeds (the paper's counts at the
+//! `paper` scale); the plan is their union, so a run at χ = 0.001, ζ = 0.3, seed 1 made for Fig. 3d
+//! also serves Figs. 1c, 2, 3c and S3. The runs go through the sweep machinery (`OUT/runs/NAME`,
+//! one per core, resumable, single-threaded so that a Slurm task and a laptop give the same bits);
+//! the figures are drawn afterwards from the runs' frames, each as PNG and SVG beside a CSV of
+//! exactly what is drawn, and `OUT/figures.md` sets each beside what the paper says.
+//!
+//! - [`command`]: the command: plan, estimate, runs, figures;
+//! - [`data`]: one run measured once, and every figure's table from the runs;
+//! - [`draw`]: the plots; [`report`]: `figures.md`; [`slurm`]: the sbatch scripts.
+
+pub mod command;
+pub mod data;
+pub mod draw;
+pub mod report;
+pub mod slurm;
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::model::monolayer::Monolayer;
+use crate::model::params::Params;
+use crate::run::config::load_params;
+use crate::run::sweep::{steps_to_run, Job};
+
+/// How many runs, how long, how large.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Scale {
+    /// Proves the pipeline: tiny boxes, few steps, one seed; minutes on 2 cores.
+    Smoke,
+    /// Full size, a few seeds and half the paper's active steps: one machine overnight.
+    Standard,
+    /// The paper's counts: 10 simulations of 100 frames per point (100 for Figs. 2 and 3c).
+    Paper,
+}
+
+impl Scale {
+    pub const ALL: [Scale; 3] = [Scale::Smoke, Scale::Standard, Scale::Paper];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Scale::Smoke => "smoke",
+            Scale::Standard => "standard",
+            Scale::Paper => "paper",
+        }
+    }
+
+    /// What the scale sets: parameter overrides (before the user's `--set`) and seed counts.
+    pub fn spec(self) -> ScaleSpec {
+        match self {
+            // 10 cells of R = 8 on 48² is the paper's density (N πR² ≈ L²). So small a box cannot
+            // hold a stretched cell for long (it comes to span the box after ~1,000 active steps
+            // at ζ = 0.5), and 200 relaxation steps leave gaps that close under activity: holes
+            // enough to exercise every figure's code, not physics. 50-step frames give the
+            // precursor figures 10 frames of history.
+            Scale::Smoke => ScaleSpec {
+                overrides: &["box_size=48", "n_cells=10", "relax_steps=200", "active_steps=1000"],
+                frame_interval: 50,
+                few: 1,
+                many: 2,
+                correlations: 1,
+                correlation_box: None,
+            },
+            Scale::Standard => ScaleSpec {
+                overrides: &["relax_steps=10000", "active_steps=50000"],
+                frame_interval: 1000,
+                few: 2,
+                many: 4,
+                correlations: 2,
+                correlation_box: Some((120, 73)),
+            },
+            Scale::Paper => ScaleSpec {
+                overrides: &["relax_steps=10000", "active_steps=100000"],
+                frame_interval: 1000,
+                few: 10,
+                many: 100,
+                correlations: 3,
+                // 120² as in Fig. S1, with the paper's density: 100 · (120/140)² ≈ 73 cells.
+                correlation_box: Some((120, 73)),
+            },
+        }
+    }
+}
+
+impl std::str::FromStr for Scale {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Scale::ALL
+            .into_iter()
+            .find(|c| c.name() == s)
+            .ok_or_else(|| format!("--scale {s}: the scale is one of smoke, standard, paper"))
+    }
+}
+
+/// The settings of a scale.
+#[derive(Clone, Debug)]
+pub struct ScaleSpec {
+    pub overrides: &'static [&'static str],
+    pub frame_interval: u64,
+    /// Seeds for Figs. 1c–d, 3a–b, 3d, S2, S3 (the paper: 10).
+    pub few: u64,
+    /// Seeds for Figs. 2 and 3c (the paper: 100).
+    pub many: u64,
+    /// Seeds for Fig. S1 (the paper: 3).
+    pub correlations: u64,
+    /// (L, N) of Fig. S1's runs (the paper: a 120² box); None: the scale's box.
+    pub correlation_box: Option<(usize, usize)>,
+}
+
+/// A figure of the paper.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Figure {
+    Fig1c,
+    Fig1d,
+    Fig2,
+    Fig3ab,
+    Fig3c,
+    Fig3d,
+    FigS1,
+    FigS2,
+    FigS3,
+}
+
+impl Figure {
+    pub const ALL: [Figure; 9] = [
+        Figure::Fig1c,
+        Figure::Fig1d,
+        Figure::Fig2,
+        Figure::Fig3ab,
+        Figure::Fig3c,
+        Figure::Fig3d,
+        Figure::FigS1,
+        Figure::FigS2,
+        Figure::FigS3,
+    ];
+
+    /// Its name on the command line and the stem of its files (`fig1c.png`, `fig1c.csv`).
+    pub fn id(self) -> &'static str {
+        match self {
+            Figure::Fig1c => "1c",
+            Figure::Fig1d => "1d",
+            Figure::Fig2 => "2",
+            Figure::Fig3ab => "3ab",
+            Figure::Fig3c => "3c",
+            Figure::Fig3d => "3d",
+            Figure::FigS1 => "S1",
+            Figure::FigS2 => "S2",
+            Figure::FigS3 => "S3",
+        }
+    }
+
+    pub fn stem(self) -> String {
+        format!("fig{}", self.id())
+    }
+
+    /// `--only 1c,3d,S1` (3a and 3b are one figure of two panels).
+    pub fn parse_list(s: &str) -> Result<Vec<Figure>, String> {
+        let mut out = BTreeSet::new();
+        for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let p = part.trim_start_matches("fig").trim_start_matches("Fig");
+            let f = match p.to_ascii_lowercase().as_str() {
+                "3a" | "3b" | "3a-b" => Some(Figure::Fig3ab),
+                q => Figure::ALL.into_iter().find(|f| f.id().to_ascii_lowercase() == q),
+            };
+            out.insert(f.ok_or_else(|| {
+                format!("--only {part}: not a figure; the figures are 1c, 1d, 2, 3a, 3b (drawn together as 3ab), 3c, 3d, S1, S2, S3")
+            })?);
+        }
+        if out.is_empty() {
+            return Err("--only: name at least one figure (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3)".into());
+        }
+        Ok(out.into_iter().collect())
+    }
+}
+
+/// The friction of a run: a ratio χ = ξ_s/ξ_cell, or the dry limit ξ_cell = 0, ξ_s = 1 (Fig. S1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Friction {
+    Chi(f64),
+    Dry,
+}
+
+impl Friction {
+    pub fn label(self) -> String {
+        match self {
+            Friction::Chi(c) => format!("{c}"),
+            Friction::Dry => "dry".into(),
+        }
+    }
+}
+
+/// A parameter point of the plan; the rest of the parameters are the scale's base.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Point {
+    pub friction: Friction,
+    pub zeta: f64,
+    pub gamma: f64,
+    /// (L, N), or None for the base's.
+    pub size: Option<(usize, usize)>,
+}
+
+/// The χ and ζ the paper's figures name (captions of Figs. 1–3, S1–S3).
+pub const CHI_REGIMES: [f64; 5] = [0.1, 0.05, 0.01, 0.005, 0.001];
+pub const CHI_FIG2: [f64; 3] = [0.01, 0.005, 0.001];
+pub const CHI_FIG3AB: [f64; 3] = [0.1, 0.01, 0.001];
+pub const CHI_FIG3C: [f64; 2] = [0.005, 0.001];
+pub const CHI_S1: [f64; 3] = [0.1, 0.01, 0.001];
+pub const ZETAS: [f64; 3] = [0.3, 0.4, 0.5];
+/// Fig. S3 varies γ at χ = 0.001, ζ = 0.3 without giving the values: the default 0.06 and a
+/// range about it.
+pub const GAMMAS_S3: [f64; 4] = [0.04, 0.06, 0.08, 0.1];
+
+/// The plan: every run once, and which figures use it.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub scale: Scale,
+    pub base: Params,
+    pub frame_interval: u64,
+    pub figures: Vec<Figure>,
+    pub jobs: Vec<Job>,
+    /// Per job, its point and the figures it serves.
+    pub points: Vec<(Point, Vec<Figure>)>,
+    /// The user's `--set` overrides, as given (passed on to Slurm tasks).
+    pub sets: Vec<String>,
+}
+
+impl Plan {
+    /// The runs `figures` need at `scale`, with `sets` (`KEY=VALUE`) over the scale's base.
+    /// Every run's parameters are validated here, before anything runs.
+    pub fn new(scale: Scale, figures: &[Figure], sets: &[String]) -> Result<Plan, String> {
+        let spec = scale.spec();
+        let mut all: Vec<String> = spec.overrides.iter().map(|s| s.to_string()).collect();
+        all.extend(sets.iter().cloned());
+        let base = load_params(None, &all)?;
+        base.validate().map_err(|e| format!("--set: {e}"))?;
+        let zeta0 = base.zeta;
+        let gamma0 = base.gamma;
+        let mut wanted: Vec<(Point, u64, Figure)> = Vec::new();
+        let mut want = |f: Figure, friction: Friction, zeta: f64, gamma: f64, size, seeds| {
+            wanted.push((Point { friction, zeta, gamma, size }, seeds, f));
+        };
+        for &f in figures {
+            match f {
+                // The paper does not state ζ for Figs. 1c–d and S2: the base's (default 0.3).
+                Figure::Fig1c | Figure::Fig1d | Figure::FigS2 => {
+                    for chi in CHI_REGIMES {
+                        want(f, Friction::Chi(chi), zeta0, gamma0, None, spec.few);
+                    }
+                }
+                Figure::Fig2 => {
+                    for chi in CHI_FIG2 {
+                        for zeta in ZETAS {
+                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
+                        }
+                    }
+                }
+                Figure::Fig3ab => {
+                    for chi in CHI_FIG3AB {
+                        for zeta in ZETAS {
+                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
+                        }
+                    }
+                }
+                Figure::Fig3c => {
+                    for chi in CHI_FIG3C {
+                        for zeta in ZETAS {
+                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
+                        }
+                    }
+                }
+                Figure::Fig3d => {
+                    for chi in CHI_REGIMES {
+                        for zeta in ZETAS {
+                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
+                        }
+                    }
+                }
+                Figure::FigS1 => {
+                    for chi in CHI_S1 {
+                        want(f, Friction::Chi(chi), zeta0, gamma0, spec.correlation_box, spec.correlations);
+                    }
+                    want(f, Friction::Dry, zeta0, gamma0, spec.correlation_box, spec.correlations);
+                }
+                Figure::FigS3 => {
+                    for gamma in GAMMAS_S3 {
+                        want(f, Friction::Chi(0.001), 0.3, gamma, None, spec.few);
+                    }
+                }
+            }
+        }
+        let mut jobs: Vec<Job> = Vec::new();
+        let mut points: Vec<(Point, Vec<Figure>)> = Vec::new();
+        for (point, seeds, figure) in wanted {
+            let params = point_params(&base, &point)?;
+            for seed in 1..=seeds {
+                let name = run_name(&point, &params, seed);
+                match jobs.iter().position(|j| j.name == name) {
+                    Some(k) => {
+                        if !points[k].1.contains(&figure) {
+                            points[k].1.push(figure);
+                        }
+                    }
+                    None => {
+                        jobs.push(Job { name, values: point_values(&point, &params), params: params.clone(), seed });
+                        points.push((point, vec![figure]));
+                    }
+                }
+            }
+        }
+        Ok(Plan {
+            scale,
+            base,
+            frame_interval: spec.frame_interval,
+            figures: figures.to_vec(),
+            jobs,
+            points,
+            sets: sets.to_vec(),
+        })
+    }
+
+    /// The runs that serve `figure`, with their points.
+    pub fn runs_of(&self, figure: Figure) -> impl Iterator<Item = (&Job, &Point)> + '_ {
+        self.jobs.iter().zip(&self.points).filter(move |(_, (_, f))| f.contains(&figure)).map(|(j, (p, _))| (j, p))
+    }
+
+    /// `plan.csv`: one row per run, what it is and which figures use it.
+    pub fn table(&self) -> String {
+        let mut s = String::from("run,chi,zeta,gamma,box_size,n_cells,seed,relax_steps,active_steps,figures\n");
+        for (j, (p, figs)) in self.jobs.iter().zip(&self.points) {
+            let f: Vec<&str> = figs.iter().map(|f| f.id()).collect();
+            s += &format!(
+                "{},{},{},{},{},{},{},{},{},{}\n",
+                j.name,
+                p.friction.label(),
+                p.zeta,
+                p.gamma,
+                j.params.box_size,
+                j.params.n_cells,
+                j.seed,
+                j.params.relax_steps,
+                j.params.active_steps,
+                f.join(" ")
+            );
+        }
+        s
+    }
+}
+
+/// The base with a point's values.
+fn point_params(base: &Params, p: &Point) -> Result<Params, String> {
+    let mut q = base.clone();
+    q.zeta = p.zeta;
+    q.gamma = p.gamma;
+    match p.friction {
+        Friction::Chi(c) => q.set_chi(c),
+        Friction::Dry => {
+            // The paper's dry limit (Fig. S1): ξ_cell = 0 with ξ_s = 1.
+            q.xi_cell = 0.0;
+            q.xi_substrate = 1.0;
+        }
+    }
+    if let Some((l, n)) = p.size {
+        q.box_size = l;
+        q.n_cells = n;
+    }
+    q.validate().map_err(|e| format!("figures, run at χ = {}, ζ = {}: {e}", p.friction.label(), p.zeta))?;
+    Ok(q)
+}
+
+fn point_values(p: &Point, params: &Params) -> Vec<(String, String)> {
+    vec![
+        ("chi".into(), p.friction.label()),
+        ("zeta".into(), format!("{}", p.zeta)),
+        ("gamma".into(), format!("{}", p.gamma)),
+        ("box_size".into(), format!("{}", params.box_size)),
+    ]
+}
+
+/// One name per distinct run: the same point and seed in two figures is one directory.
+fn run_name(p: &Point, params: &Params, seed: u64) -> String {
+    let friction = match p.friction {
+        Friction::Chi(c) => format!("chi{c}"),
+        Friction::Dry => "dry".into(),
+    };
+    format!("{friction}_zeta{}_gamma{}_L{}_seed{seed}", p.zeta, p.gamma, params.box_size)
+}
+
+/// Milliseconds per step on one thread, measured on a short run of each lattice size the plan
+/// uses: (L, N) → (relaxation, active).
+#[derive(Clone, Debug)]
+pub struct Speed {
+    pub sizes: Vec<((usize, usize), (f64, f64))>,
+}
+
+impl Speed {
+    /// Times `steps` relaxation and `steps` active steps at each (L, N) of `jobs`, at the plan's
+    /// lowest friction (the costliest solve), after `warm_up` untimed steps of each (the first
+    /// steps from the small initial disks, and the first solves from rest, cost more than the
+    /// rest of a run). The tissue is not yet confluent this early, so this is an estimate, not a
+    /// bound; it is what the machine does now, not what a README says.
+    pub fn measure(jobs: &[&Job], warm_up: u64, steps: u64) -> Result<Speed, String> {
+        let mut sizes: Vec<((usize, usize), (f64, f64))> = Vec::new();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| e.to_string())?;
+        for job in jobs {
+            let key = (job.params.box_size, job.params.n_cells);
+            if sizes.iter().any(|s| s.0 == key) {
+                continue;
+            }
+            let mut p = job.params.clone();
+            p.relax_steps = warm_up + steps;
+            if p.xi_cell == 0.0 {
+                p.xi_cell = 1.0;
+            }
+            p.set_chi(0.001);
+            // Some seeds cannot place their disks at the paper's density: take the first that can.
+            let mut m = (1..=10)
+                .find_map(|seed| Monolayer::new(p.clone(), seed).ok())
+                .ok_or_else(|| format!("timing a run at L = {}, N = {}: no seed of 1–10 starts", key.0, key.1))?;
+            let mut timed = |n: u64| -> Result<f64, String> {
+                let t = Instant::now();
+                pool.install(|| m.advance(n)).map_err(|e| e.to_string())?;
+                Ok(1e3 * t.elapsed().as_secs_f64() / n as f64)
+            };
+            timed(warm_up)?;
+            let relax = timed(steps)?;
+            timed(warm_up.min(10))?;
+            let active = timed(steps)?;
+            sizes.push((key, (relax, active)));
+        }
+        Ok(Speed { sizes })
+    }
+
+    /// Estimated core-seconds of the steps `jobs` still have in `out`.
+    pub fn core_seconds(&self, jobs: &[&Job], out: &Path) -> f64 {
+        jobs.iter()
+            .map(|j| {
+                let left = steps_to_run(std::slice::from_ref(*j), out, None);
+                let done = j.params.total_steps() - left;
+                let relax_left = j.params.relax_steps.saturating_sub(done);
+                let (r, a) = self
+                    .sizes
+                    .iter()
+                    .find(|s| s.0 == (j.params.box_size, j.params.n_cells))
+                    .map(|s| s.1)
+                    .unwrap_or((0.0, 0.0));
+                1e-3 * (relax_left as f64 * r + (left - relax_left) as f64 * a)
+            })
+            .sum()
+    }
+}
+
+/// What `figures` does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// The runs, then the figures.
+    All,
+    /// Only the runs (a Slurm array task).
+    Runs,
+    /// Only the figures, from runs that must all be there (the Slurm aggregation job).
+    Figures,
+}
+
+impl std::str::FromStr for Stage {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "all" => Ok(Stage::All),
+            "runs" => Ok(Stage::Runs),
+            "figures" => Ok(Stage::Figures),
+            _ => Err(format!("--stage {s}: the stage is one of all, runs, figures")),
+        }
+    }
+}
+
+/// Draws every figure of the plan from its runs in `out/runs` into `out`: the figures, their CSVs,
+/// `plan.csv` and `figures.md`. Returns the files written.
+pub fn make_figures(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<PathBuf>, String> {
+    let runs = data::measure_runs(plan, out, workers)?;
+    let mut written = Vec::new();
+    let plan_path = out.join("plan.csv");
+    data::write_text(&plan_path, &plan.table())?;
+    written.push(plan_path);
+    let mut sections = Vec::new();
+    for &figure in &plan.figures {
+        let made = data::figure(plan, figure, &runs, out)?;
+        written.extend(made.files.iter().cloned());
+        sections.push(made);
+    }
+    let md = out.join("figures.md");
+    data::write_text(&md, &report::markdown(plan, &runs, &sections))?;
+    written.push(md);
+    Ok(written)
+}

@@ -1,0 +1,733 @@
+//! Every run of the plan measured once, and each figure's table from those measurements.
+//!
+//! The tables are the figures' data exactly as drawn, written with fixed precision in the plan's
+//! order, so that two executions of the same runs (here and on a cluster) give the same bytes.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use super::draw::{self, Marker, Panel, Series};
+use super::{Figure, Friction, Plan, Point, CHI_FIG2, CHI_FIG3AB, CHI_FIG3C, CHI_REGIMES, CHI_S1, GAMMAS_S3, ZETAS};
+use crate::analysis::correlations::correlation_length;
+use crate::analysis::precursors::{Precursor, DEPTH};
+use crate::analysis::regime::{classify, fitted_lifetime, Regime};
+use crate::run::files::{read_frame, write_atomic, RunFrames, RunRecord, RunStatus};
+use crate::run::offline::RunAnalysis;
+
+/// One hole of a run: its duration (its lifetime, or how long it was seen when still open at the
+/// end), whether it closed, and its largest area in sites.
+#[derive(Clone, Copy, Debug)]
+pub struct HoleData {
+    pub duration: f64,
+    pub closed: bool,
+    pub max_area: usize,
+}
+
+/// What the figures need of one run.
+#[derive(Clone, Debug)]
+pub struct RunData {
+    pub status: RunStatus,
+    pub frames: usize,
+    /// Time from the first to the last frame (the run's t_total, as in the sweep's regime map).
+    pub active_time: f64,
+    pub box_area: f64,
+    pub holes: Vec<HoleData>,
+    pub precursors: Vec<Precursor>,
+    /// Strain-rate bin → (sites, sites opening into a new hole), Fig. 2.
+    pub probability: BTreeMap<i64, (u64, u64)>,
+    /// C_v(r), C_Q(r) of the last frame: the paper's Fig. S1 takes them after the whole run.
+    pub correlations: (Vec<f64>, Vec<f64>),
+}
+
+impl RunData {
+    pub fn failed(&self) -> bool {
+        self.status.blew_up()
+    }
+}
+
+/// Measures every run of the plan, `workers` at a time; refuses, naming them, when runs are
+/// missing or unfinished (the figures would silently be drawn from fewer runs).
+pub fn measure_runs(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<RunData>, String> {
+    let runs_dir = out.join("runs");
+    let mut missing = Vec::new();
+    for job in &plan.jobs {
+        let dir = runs_dir.join(&job.name);
+        match RunRecord::load(&dir) {
+            Ok(r) if r.status.is_complete() => {
+                if r.params != job.params || r.seed != job.seed {
+                    return Err(format!(
+                        "{} was run with other parameters or seed than this plan gives it (another scale or --set?): use another --out",
+                        dir.display()
+                    ));
+                }
+            }
+            Ok(r) => missing.push(format!("{} ({})", job.name, r.status)),
+            Err(_) => missing.push(format!("{} (not started)", job.name)),
+        }
+    }
+    if !missing.is_empty() {
+        let shown: Vec<&str> = missing.iter().take(5).map(String::as_str).collect();
+        return Err(format!(
+            "{} of the plan's {} runs in {} are not finished: {}{}; run them first (`monolayer figures --stage runs` with the same --scale, --only and --set, or the Slurm array)",
+            missing.len(),
+            plan.jobs.len(),
+            runs_dir.display(),
+            shown.join(", "),
+            if missing.len() > shown.len() { ", …" } else { "" }
+        ));
+    }
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(workers.max(1)).build().map_err(|e| e.to_string())?;
+    pool.install(|| plan.jobs.par_iter().map(|job| measure_run(&runs_dir.join(&job.name))).collect())
+}
+
+fn measure_run(dir: &Path) -> Result<RunData, String> {
+    let record = RunRecord::load(dir)?;
+    let p = &record.params;
+    let mut data = RunData {
+        status: record.status.clone(),
+        frames: 0,
+        active_time: 0.0,
+        box_area: (p.box_size * p.box_size) as f64,
+        holes: Vec::new(),
+        precursors: Vec::new(),
+        probability: BTreeMap::new(),
+        correlations: (Vec::new(), Vec::new()),
+    };
+    // A run that failed before its first frame has nothing to measure; it still counts as run.
+    let Ok(run) = RunFrames::open(dir) else { return Ok(data) };
+    let mut ra = RunAnalysis::new(p);
+    for (_, path) in &run.frames {
+        ra.push_frame(&read_frame(path, p.box_size)?);
+    }
+    let (first, last) = (ra.frames.first().map_or(0.0, |f| f.time), ra.frames.last().map_or(0.0, |f| f.time));
+    data.frames = ra.frames.len();
+    data.active_time = last - first;
+    data.holes = ra
+        .tracker
+        .holes
+        .iter()
+        .map(|h| HoleData {
+            duration: h.lifetime().unwrap_or(last - h.nucleated),
+            closed: h.closed.is_some(),
+            max_area: h.max_area(),
+        })
+        .collect();
+    data.precursors = ra.precursors.rows.clone();
+    data.probability = ra.hole_probability.bins.clone();
+    if let Some(f) = ra.frames.last() {
+        data.correlations = (f.velocity_correlation.clone(), f.nematic_correlation.clone());
+    }
+    Ok(data)
+}
+
+/// A figure drawn: its files and what `figures.md` says about it.
+#[derive(Clone, Debug)]
+pub struct Made {
+    pub figure: Figure,
+    pub files: Vec<PathBuf>,
+    /// Runs used and how they were chosen.
+    pub runs: String,
+    /// The numbers measured, one line each.
+    pub measured: Vec<String>,
+}
+
+pub fn write_text(path: &Path, text: &str) -> Result<(), String> {
+    write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| format!("{}: {e}", path.display())))
+}
+
+/// Mean and standard error of the mean (0 for fewer than two values).
+pub fn mean_sem(v: &[f64]) -> (f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    if v.len() < 2 {
+        return (m, 0.0);
+    }
+    let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0);
+    (m, (var / n).sqrt())
+}
+
+fn num(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.6}")
+    } else if x.is_nan() {
+        String::new()
+    } else {
+        "inf".into()
+    }
+}
+
+fn same(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-12 * a.abs().max(b.abs())
+}
+
+fn is_chi(p: &Point, chi: f64) -> bool {
+    matches!(p.friction, Friction::Chi(c) if same(c, chi))
+}
+
+/// The runs of `figure` at a point chosen by `pick`.
+fn select<'a>(
+    plan: &'a Plan,
+    runs: &'a [RunData],
+    figure: Figure,
+    pick: impl Fn(&Point) -> bool + 'a,
+) -> Vec<&'a RunData> {
+    plan.jobs
+        .iter()
+        .zip(&plan.points)
+        .zip(runs)
+        .filter(|((_, (p, figs)), _)| figs.contains(&figure) && pick(p))
+        .map(|(_, r)| r)
+        .collect()
+}
+
+fn seeds_note(plan: &Plan, figure: Figure) -> String {
+    let mut seeds: Vec<u64> = plan.runs_of(figure).map(|(j, _)| j.seed).collect();
+    seeds.sort();
+    seeds.dedup();
+    let runs = plan.runs_of(figure).count();
+    let s = match (seeds.first(), seeds.last()) {
+        (Some(a), Some(b)) if a != b => format!("seeds {a}–{b}"),
+        (Some(a), _) => format!("seed {a}"),
+        _ => "no seeds".into(),
+    };
+    format!("{runs} runs ({s} per point)")
+}
+
+/// Draws one figure and writes its table(s).
+pub fn figure(plan: &Plan, figure: Figure, runs: &[RunData], out: &Path) -> Result<Made, String> {
+    let base = out.join(figure.stem());
+    let mut made = Made { figure, files: Vec::new(), runs: seeds_note(plan, figure), measured: Vec::new() };
+    match figure {
+        Figure::Fig1c | Figure::Fig1d | Figure::FigS2 => precursor_figure(plan, figure, runs, &base, &mut made)?,
+        Figure::Fig2 => fig2(plan, runs, &base, &mut made)?,
+        Figure::Fig3ab => holes_figure(plan, figure, runs, &base, &mut made)?,
+        Figure::Fig3c => fig3c(plan, runs, &base, &mut made)?,
+        Figure::Fig3d => fig3d(plan, runs, &base, &mut made)?,
+        Figure::FigS1 => fig_s1(plan, runs, &base, &mut made)?,
+        Figure::FigS3 => holes_figure(plan, figure, runs, &base, &mut made)?,
+    }
+    Ok(made)
+}
+
+fn csv(base: &Path, suffix: &str, text: &str, made: &mut Made) -> Result<(), String> {
+    let path = PathBuf::from(format!("{}{suffix}.csv", base.display()));
+    write_text(&path, text)?;
+    made.files.push(path);
+    Ok(())
+}
+
+/// Figs. 1c, 1d and S2: a precursor measure against frames before nucleation, one curve per χ,
+/// averaged over every hole of every run at that χ.
+fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+    type Column = fn(&Precursor) -> Option<f64>;
+    let columns: Vec<(&str, &str, Column)> = match figure {
+        Figure::Fig1c => {
+            vec![("spiral_core_distance_over_r", "distance to the nearest spiral core / R", |p| p.spiral_core)]
+        }
+        Figure::Fig1d => vec![("max_strain_rate_within_r_half_over_max", "max ε̇ within R/2 / max ε̇", |p| {
+            Some(p.strain_rate).filter(|v| v.is_finite())
+        })],
+        _ => vec![
+            ("nearest_plus_half_distance_over_r", "distance to the nearest +½ defect / R", |p| p.plus_half[0]),
+            ("second_plus_half_distance_over_r", "distance to the second nearest +½ defect / R", |p| p.plus_half[1]),
+        ],
+    };
+    let mut text = String::from("chi,frames_before,holes");
+    for (name, _, _) in &columns {
+        let _ = write!(text, ",{name}_samples,{name}_mean,{name}_sem");
+    }
+    text.push('\n');
+    let mut panels: Vec<Panel> =
+        columns.iter().map(|(_, desc, _)| Panel::new("", "frames before nucleation (t − t_hole)", desc)).collect();
+    for (k, chi) in CHI_REGIMES.into_iter().enumerate() {
+        let sel = select(plan, runs, figure, |p| is_chi(p, chi));
+        if sel.is_empty() {
+            continue;
+        }
+        let holes: usize = sel.iter().map(|r| r.precursors.iter().filter(|p| p.frames_before == 0).count()).sum();
+        let mut line = Vec::new();
+        for (c, (_, _, column)) in columns.iter().enumerate() {
+            let mut series = Series::new(format!("χ = {chi} ({holes} holes)"), k);
+            series.line = true;
+            for before in 0..=DEPTH {
+                let v: Vec<f64> = sel
+                    .iter()
+                    .flat_map(|r| r.precursors.iter())
+                    .filter(|p| p.frames_before == before)
+                    .filter_map(column)
+                    .collect();
+                let (m, e) = mean_sem(&v);
+                if c == 0 {
+                    line.push(format!("{chi},{before},{holes}"));
+                }
+                let _ = write!(line[before], ",{},{},{}", v.len(), num(m), num(e));
+                // The paper draws a χ without holes at zero.
+                if holes == 0 {
+                    series.push(0.0 - before as f64, 0.0, 0.0);
+                } else if m.is_finite() {
+                    series.push(0.0 - before as f64, m, e);
+                }
+            }
+            if holes == 0 {
+                series.marker = Marker::Empty;
+            }
+            panels[c].series.push(series);
+        }
+        for l in line {
+            text += &l;
+            text.push('\n');
+        }
+        let at0: Vec<String> = columns
+            .iter()
+            .map(|(_, desc, column)| {
+                let v: Vec<f64> = sel
+                    .iter()
+                    .flat_map(|r| r.precursors.iter())
+                    .filter(|p| p.frames_before == 0)
+                    .filter_map(column)
+                    .collect();
+                let far: Vec<f64> = sel
+                    .iter()
+                    .flat_map(|r| r.precursors.iter())
+                    .filter(|p| p.frames_before == DEPTH)
+                    .filter_map(column)
+                    .collect();
+                let (m0, e0) = mean_sem(&v);
+                let (m1, _) = mean_sem(&far);
+                format!("{desc}: {} ± {} at nucleation, {} {DEPTH} frames before", fmt(m0), fmt(e0), fmt(m1))
+            })
+            .collect();
+        made.measured.push(if holes == 0 {
+            format!("χ = {chi}: no hole nucleated in {} runs (drawn at zero, as in the paper)", sel.len())
+        } else {
+            format!("χ = {chi}: {holes} holes in {} runs; {}", sel.len(), at0.join("; "))
+        });
+    }
+    let titles: &[&str] = match figure {
+        Figure::Fig1c => &["Fig. 1c: nearest spiral core before a hole"],
+        Figure::Fig1d => &["Fig. 1d: strain rate at the nucleation site"],
+        _ => &["Fig. S2a: nearest +½ defect", "Fig. S2b: second nearest +½ defect"],
+    };
+    for (p, t) in panels.iter_mut().zip(titles) {
+        // ζ is not in the paper's caption: the one used goes into the title.
+        p.title = format!("{t} (ζ = {})", plan.base.zeta);
+        p.y_from_zero = true;
+        p.x_range = Some((-(DEPTH as f64) - 0.5, 0.5));
+    }
+    csv(base, "", &text, made)?;
+    made.files.extend(draw::panels(base, &panels, None)?);
+    Ok(())
+}
+
+pub fn fmt(x: f64) -> String {
+    if x.is_nan() {
+        "–".into()
+    } else if x.is_infinite() {
+        "∞".into()
+    } else if x != 0.0 && (x.abs() < 1e-2 || x.abs() >= 1e4) {
+        format!("{x:.3e}")
+    } else {
+        format!("{x:.3}")
+    }
+}
+
+/// A weighted least-squares line through (x, ln y) with weights w: (ln A, b) of y = A e^{b x}.
+pub fn exponential_fit(points: &[(f64, f64, f64)]) -> Option<(f64, f64)> {
+    let pts: Vec<&(f64, f64, f64)> = points.iter().filter(|p| p.1 > 0.0 && p.2 > 0.0).collect();
+    if pts.len() < 2 {
+        return None;
+    }
+    let sw: f64 = pts.iter().map(|p| p.2).sum();
+    let mx = pts.iter().map(|p| p.2 * p.0).sum::<f64>() / sw;
+    let my = pts.iter().map(|p| p.2 * p.1.ln()).sum::<f64>() / sw;
+    let sxx: f64 = pts.iter().map(|p| p.2 * (p.0 - mx) * (p.0 - mx)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let sxy: f64 = pts.iter().map(|p| p.2 * (p.0 - mx) * (p.1.ln() - my)).sum();
+    let b = sxy / sxx;
+    Some((my - b * mx, b))
+}
+
+/// Fig. 2: P(hole | ε̇) per (χ, ζ), pooled over runs, with exponential fits; inset: the fitted
+/// coefficient against χ^0.1/ζ.
+fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+    use crate::analysis::nucleation::STRAIN_RATE_BIN;
+    let mut text =
+        String::from("chi,zeta,strain_rate_low,strain_rate_high,sites,sites_opening_into_a_new_hole,probability\n");
+    let mut fits = String::from("chi,zeta,chi_0.1_over_zeta,bins_with_holes,amplitude,coefficient\n");
+    let mut panel = Panel::new("Fig. 2: P(hole | ε̇)", "strain rate ε̇", "P(hole | ε̇)");
+    panel.log_y = true;
+    let mut inset = Panel::new("", "χ^0.1 / ζ", "coefficient");
+    let mut inset_series = Series::new("", 0);
+    for (ci, chi) in CHI_FIG2.into_iter().enumerate() {
+        for (zi, zeta) in ZETAS.into_iter().enumerate() {
+            let sel = select(plan, runs, Figure::Fig2, |p| is_chi(p, chi) && same(p.zeta, zeta));
+            if sel.is_empty() {
+                continue;
+            }
+            let mut bins: BTreeMap<i64, (u64, u64)> = BTreeMap::new();
+            for r in &sel {
+                for (&k, &(n, h)) in &r.probability {
+                    let e = bins.entry(k).or_insert((0, 0));
+                    e.0 += n;
+                    e.1 += h;
+                }
+            }
+            let mut pts = Vec::new();
+            for (&k, &(n, h)) in &bins {
+                let lo = k as f64 * STRAIN_RATE_BIN;
+                let p = h as f64 / n as f64;
+                let _ = writeln!(text, "{chi},{zeta},{lo:.6},{:.6},{n},{h},{p:.6e}", lo + STRAIN_RATE_BIN);
+                pts.push((lo, p, h as f64));
+            }
+            // χ = 0.01 empty, 0.005 faint, 0.001 filled, as in the paper; a colour per ζ.
+            let marker = [Marker::Empty, Marker::Faint, Marker::Filled][ci];
+            let mut s = Series::new(format!("χ = {chi}, ζ = {zeta}"), zi);
+            s.marker = marker;
+            for &(x, p, _) in pts.iter().filter(|p| p.1 > 0.0) {
+                s.push(x, p, 0.0);
+            }
+            panel.series.push(s);
+            let x = chi.powf(0.1) / zeta;
+            let holes = pts.iter().filter(|p| p.2 > 0.0).count();
+            match exponential_fit(&pts) {
+                Some((ln_a, b)) => {
+                    let _ = writeln!(fits, "{chi},{zeta},{x:.6},{holes},{:.6e},{b:.6e}", ln_a.exp());
+                    let xs: Vec<f64> = pts.iter().filter(|p| p.1 > 0.0).map(|p| p.0).collect();
+                    let (x0, x1) =
+                        (xs.iter().copied().fold(f64::MAX, f64::min), xs.iter().copied().fold(f64::MIN, f64::max));
+                    let mut line = Series::new("", zi);
+                    line.marker = Marker::None;
+                    line.line = true;
+                    for t in 0..=20 {
+                        let e = x0 + (x1 - x0) * t as f64 / 20.0;
+                        line.push(e, (ln_a + b * e).exp(), 0.0);
+                    }
+                    panel.series.push(line);
+                    inset_series.push(x, b, 0.0);
+                    made.measured.push(format!(
+                        "χ = {chi}, ζ = {zeta} ({} runs): P = {} · exp({} ε̇) over {holes} bins with holes",
+                        sel.len(),
+                        fmt(ln_a.exp()),
+                        fmt(b)
+                    ));
+                }
+                None => {
+                    let _ = writeln!(fits, "{chi},{zeta},{x:.6},{holes},,");
+                    made.measured.push(format!(
+                        "χ = {chi}, ζ = {zeta} ({} runs): {holes} bins with holes, too few for a fit",
+                        sel.len()
+                    ));
+                }
+            }
+        }
+    }
+    inset.series.push(inset_series);
+    csv(base, "", &text, made)?;
+    csv(base, "_fits", &fits, made)?;
+    made.files.extend(draw::panels(base, &[panel], Some(inset))?);
+    Ok(())
+}
+
+/// Kaplan–Meier survival of (x, closed) with censoring: (x, at risk, closed there, S after).
+pub fn survival(mut d: Vec<(f64, bool)>) -> Vec<(f64, usize, usize, f64)> {
+    d.sort_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)));
+    let mut out = Vec::new();
+    let mut s = 1.0;
+    let mut i = 0;
+    while i < d.len() {
+        let x = d[i].0;
+        let at_risk = d.len() - i;
+        let mut closed = 0;
+        while i < d.len() && d[i].0 == x {
+            closed += d[i].1 as usize;
+            i += 1;
+        }
+        if closed > 0 {
+            s *= 1.0 - closed as f64 / at_risk as f64;
+            out.push((x, at_risk, closed, s));
+        }
+    }
+    out
+}
+
+/// Fig. 3c: the survival of holes against τ/t_total per (χ, ζ), with the exponential of the
+/// fitted lifetime (maximum likelihood, open holes censored: the regime criterion's fit).
+fn fig3c(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+    let mut text = String::from("chi,zeta,tau_over_total,at_risk,closed,survival\n");
+    let mut fits = String::from("chi,zeta,runs,holes,closed,t_total,fitted_lifetime,fitted_lifetime_over_total\n");
+    let mut panel = Panel::new("Fig. 3c: hole survival", "τ_hole / t_total", "survival probability");
+    panel.y_from_zero = true;
+    for (ci, chi) in CHI_FIG3C.into_iter().enumerate() {
+        for (zi, zeta) in ZETAS.into_iter().enumerate() {
+            let sel = select(plan, runs, Figure::Fig3c, |p| is_chi(p, chi) && same(p.zeta, zeta));
+            if sel.is_empty() {
+                continue;
+            }
+            let t_total = sel.iter().map(|r| r.active_time).fold(0.0, f64::max);
+            let lifetimes: Vec<(f64, bool)> =
+                sel.iter().flat_map(|r| r.holes.iter()).map(|h| (h.duration, h.closed)).collect();
+            let scaled: Vec<(f64, bool)> =
+                lifetimes.iter().map(|&(t, c)| (if t_total > 0.0 { t / t_total } else { 0.0 }, c)).collect();
+            let km = survival(scaled);
+            let mut s = Series::new(format!("χ = {chi}, ζ = {zeta}"), zi);
+            s.marker = [Marker::Empty, Marker::Filled][ci];
+            s.push(0.0, 1.0, 0.0);
+            for &(x, n, c, sv) in &km {
+                let _ = writeln!(text, "{chi},{zeta},{x:.6},{n},{c},{sv:.6}");
+                s.push(x, sv, 0.0);
+            }
+            panel.series.push(s);
+            let closed = lifetimes.iter().filter(|l| l.1).count();
+            let tau = fitted_lifetime(&lifetimes);
+            let over = tau.map(|t| if t_total > 0.0 { t / t_total } else { f64::NAN });
+            let _ = writeln!(
+                fits,
+                "{chi},{zeta},{},{},{closed},{t_total:.3},{},{}",
+                sel.len(),
+                lifetimes.len(),
+                tau.map(num).unwrap_or_default(),
+                over.map(num).unwrap_or_default()
+            );
+            if let Some(o) = over.filter(|o| o.is_finite() && *o > 0.0) {
+                let mut line = Series::new("", zi);
+                line.marker = Marker::None;
+                line.line = true;
+                for t in 0..=40 {
+                    let x = t as f64 / 40.0;
+                    line.push(x, (-x / o).exp(), 0.0);
+                }
+                panel.series.push(line);
+            }
+            made.measured.push(format!(
+                "χ = {chi}, ζ = {zeta} ({} runs): {} holes, {closed} closed; fitted lifetime τ_h = {} time units = {} t_total",
+                sel.len(),
+                lifetimes.len(),
+                tau.map(fmt).unwrap_or_else(|| "– (no holes)".into()),
+                over.map(fmt).unwrap_or_else(|| "–".into())
+            ));
+        }
+    }
+    csv(base, "", &text, made)?;
+    csv(base, "_fits", &fits, made)?;
+    made.files.extend(draw::panels(base, &[panel], None)?);
+    Ok(())
+}
+
+/// Fig. 3d: the regime of every (χ, ζ), seeds pooled, by the paper's criterion.
+fn fig3d(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+    let mut text = String::from("chi,zeta,runs,failed,holes,fitted_lifetime,t_total,regime\n");
+    let mut cells = Vec::new();
+    for chi in CHI_REGIMES {
+        for zeta in ZETAS {
+            let sel = select(plan, runs, Figure::Fig3d, |p| is_chi(p, chi) && same(p.zeta, zeta));
+            if sel.is_empty() {
+                continue;
+            }
+            let lifetimes: Vec<(f64, bool)> =
+                sel.iter().flat_map(|r| r.holes.iter()).map(|h| (h.duration, h.closed)).collect();
+            let t_total = sel.iter().map(|r| r.active_time).fold(0.0, f64::max);
+            let regime = classify(&lifetimes, t_total);
+            let failed = sel.iter().filter(|r| r.failed()).count();
+            let tau = fitted_lifetime(&lifetimes);
+            let _ = writeln!(
+                text,
+                "{chi},{zeta},{},{failed},{},{},{t_total:.3},{}",
+                sel.len(),
+                lifetimes.len(),
+                tau.map(num).unwrap_or_default(),
+                regime.name()
+            );
+            cells.push((chi, zeta, regime, failed > 0));
+            made.measured.push(format!(
+                "χ = {chi}, ζ = {zeta}: {} ({} holes in {} runs{}; τ_h = {})",
+                match regime {
+                    Regime::NoHoles => "no holes",
+                    Regime::OnlyShortLived => "only short-lived",
+                    Regime::ShortAndLongLived => "short- and long-lived",
+                },
+                lifetimes.len(),
+                sel.len(),
+                if failed > 0 { format!(", {failed} failed") } else { String::new() },
+                tau.map(fmt).unwrap_or_else(|| "–".into())
+            ));
+        }
+    }
+    csv(base, "", &text, made)?;
+    made.files.extend(draw::regime_map(base, &cells)?);
+    Ok(())
+}
+
+/// Which runs of a figure make one point of a curve.
+type Pick = Box<dyn Fn(&Point) -> bool>;
+
+/// Figs. 3a–b (against ζ, a curve per χ) and S3 (against γ): the largest hole over the box and
+/// the number of holes per run, mean and standard error over runs.
+fn holes_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+    let s3 = figure == Figure::FigS3;
+    let mut text = String::from(if s3 { "gamma" } else { "chi,zeta" });
+    text += ",runs,failed,max_hole_area_over_box_mean,max_hole_area_over_box_sem,holes_mean,holes_sem\n";
+    let (xd, t) = if s3 { ("γ (χ = 0.001, ζ = 0.3)", "Fig. S3") } else { ("ζ", "Fig. 3") };
+    let mut area = Panel::new(&format!("{t}a: largest hole"), xd, "max hole area / L²");
+    let mut count = Panel::new(&format!("{t}b: number of holes"), xd, "holes per run");
+    area.y_from_zero = true;
+    count.y_from_zero = true;
+    let groups: Vec<(String, Vec<(f64, Pick)>)> = if s3 {
+        vec![(
+            "χ = 0.001, ζ = 0.3".into(),
+            GAMMAS_S3.into_iter().map(|g| (g, Box::new(move |p: &Point| same(p.gamma, g)) as Pick)).collect(),
+        )]
+    } else {
+        CHI_FIG3AB
+            .into_iter()
+            .map(|chi| {
+                (
+                    format!("χ = {chi}"),
+                    ZETAS
+                        .into_iter()
+                        .map(|z| (z, Box::new(move |p: &Point| is_chi(p, chi) && same(p.zeta, z)) as Pick))
+                        .collect(),
+                )
+            })
+            .collect()
+    };
+    for (k, (label, xs)) in groups.iter().enumerate() {
+        let mut sa = Series::new(label.clone(), k);
+        let mut sc = Series::new(label.clone(), k);
+        sa.line = true;
+        sc.line = true;
+        let mut line = Vec::new();
+        for (x, pick) in xs {
+            let sel = select(plan, runs, figure, pick);
+            if sel.is_empty() {
+                continue;
+            }
+            let areas: Vec<f64> =
+                sel.iter().map(|r| r.holes.iter().map(|h| h.max_area).max().unwrap_or(0) as f64 / r.box_area).collect();
+            let counts: Vec<f64> = sel.iter().map(|r| r.holes.len() as f64).collect();
+            let (ma, ea) = mean_sem(&areas);
+            let (mc, ec) = mean_sem(&counts);
+            let failed = sel.iter().filter(|r| r.failed()).count();
+            if !s3 {
+                text += &format!("{},", label.trim_start_matches("χ = "));
+            }
+            let _ = writeln!(text, "{x},{},{failed},{},{},{},{}", sel.len(), num(ma), num(ea), num(mc), num(ec));
+            sa.push(*x, ma, ea);
+            sc.push(*x, mc, ec);
+            line.push(format!(
+                "{} = {x}: {} ± {} of the box, {} ± {} holes",
+                if s3 { "γ" } else { "ζ" },
+                fmt(ma),
+                fmt(ea),
+                fmt(mc),
+                fmt(ec)
+            ));
+        }
+        made.measured.push(format!("{label} ({} runs per point): {}", plan_seeds(plan, figure), line.join("; ")));
+        area.series.push(sa);
+        count.series.push(sc);
+    }
+    csv(base, "", &text, made)?;
+    made.files.extend(draw::panels(base, &[area, count], None)?);
+    Ok(())
+}
+
+fn plan_seeds(plan: &Plan, figure: Figure) -> u64 {
+    plan.runs_of(figure).map(|(j, _)| j.seed).max().unwrap_or(0)
+}
+
+/// Fig. S1: C_v(r) and C_Q(r) after the whole run, averaged over seeds, per χ and the dry limit.
+fn fig_s1(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+    let mut text = String::from("chi,r,velocity_correlation,nematic_correlation\n");
+    let mut lengths = String::from("chi,runs,velocity_correlation_length,nematic_correlation_length\n");
+    let size =
+        plan.runs_of(Figure::FigS1).next().map(|(j, _)| (j.params.box_size, j.params.n_cells)).unwrap_or_default();
+    let title = |what: &str| format!("Fig. S1: {what} (ζ = {}, L = {}, N = {})", plan.base.zeta, size.0, size.1);
+    let mut cv_panel = Panel::new(&title("velocity"), "r (sites)", "C_v(r)");
+    let mut cq_panel = Panel::new(&title("nematic"), "r (sites)", "C_Q(r)");
+    cv_panel.hline = Some((-1.0f64).exp());
+    cq_panel.hline = Some((-1.0f64).exp());
+    let frictions: Vec<Friction> = CHI_S1.into_iter().map(Friction::Chi).chain([Friction::Dry]).collect();
+    for (k, fr) in frictions.into_iter().enumerate() {
+        let sel = select(plan, runs, Figure::FigS1, |p| match (p.friction, fr) {
+            (Friction::Chi(a), Friction::Chi(b)) => same(a, b),
+            (Friction::Dry, Friction::Dry) => true,
+            _ => false,
+        });
+        let sel: Vec<&RunData> = sel.into_iter().filter(|r| !r.correlations.0.is_empty()).collect();
+        if sel.is_empty() {
+            continue;
+        }
+        let bins = sel.iter().map(|r| r.correlations.0.len()).min().unwrap_or(0);
+        let n = sel.len() as f64;
+        let mean = |f: fn(&RunData) -> &Vec<f64>| -> Vec<f64> {
+            (0..bins).map(|r| sel.iter().map(|d| f(d)[r]).sum::<f64>() / n).collect()
+        };
+        let cv = mean(|d| &d.correlations.0);
+        let cq = mean(|d| &d.correlations.1);
+        let label = match fr {
+            Friction::Chi(c) => format!("χ = {c}"),
+            Friction::Dry => "dry (ξ_cell = 0, ξ_s = 1)".into(),
+        };
+        for r in 0..bins {
+            let _ = writeln!(text, "{},{r},{:.6},{:.6}", fr.label(), cv[r], cq[r]);
+        }
+        let (lv, lq) = (correlation_length(&cv), correlation_length(&cq));
+        let o = |v: Option<f64>| v.map(num).unwrap_or_default();
+        let _ = writeln!(lengths, "{},{},{},{}", fr.label(), sel.len(), o(lv), o(lq));
+        let shown = |v: Option<f64>| v.map(fmt).unwrap_or_else(|| "> L/2".into());
+        made.measured.push(format!(
+            "{label} ({} runs): correlation lengths (1/e) ℓ_v = {} sites, ℓ_Q = {} sites (R = {})",
+            sel.len(),
+            shown(lv),
+            shown(lq),
+            plan.base.radius
+        ));
+        let mut sv = Series::new(label.clone(), k);
+        let mut sq = Series::new(label, k);
+        sv.line = true;
+        sq.line = true;
+        sv.marker = Marker::None;
+        sq.marker = Marker::None;
+        for r in 0..bins {
+            sv.push(r as f64, cv[r], 0.0);
+            sq.push(r as f64, cq[r], 0.0);
+        }
+        cv_panel.series.push(sv);
+        cq_panel.series.push(sq);
+    }
+    csv(base, "", &text, made)?;
+    csv(base, "_lengths", &lengths, made)?;
+    made.files.extend(draw::panels(base, &[cv_panel, cq_panel], None)?);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn survival_counts_censored_holes_at_risk() {
+        // Closed at 1 and 3, one censored at 2: S = 2/3 after 1, then 0 after 3.
+        let s = survival(vec![(3.0, true), (1.0, true), (2.0, false)]);
+        assert_eq!(s.len(), 2);
+        assert!((s[0].3 - 2.0 / 3.0).abs() < 1e-12 && s[1].3 == 0.0, "{s:?}");
+    }
+
+    #[test]
+    fn exponential_fit_recovers_its_exponential() {
+        let pts: Vec<(f64, f64, f64)> =
+            (0..8).map(|i| (i as f64 * 0.1, 0.02 * (30.0 * i as f64 * 0.1).exp(), 5.0)).collect();
+        let (ln_a, b) = exponential_fit(&pts).unwrap();
+        assert!((ln_a.exp() - 0.02).abs() < 1e-9 && (b - 30.0).abs() < 1e-9);
+        assert!(exponential_fit(&pts[..1]).is_none());
+    }
+}

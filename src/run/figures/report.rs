@@ -1,0 +1,143 @@
+//! `figures.md`: each figure beside what the paper says about it, with the parameters used where
+//! the paper states none, and the numbers measured.
+
+use std::fmt::Write as _;
+
+use super::data::{Made, RunData};
+use super::{Figure, Plan, GAMMAS_S3};
+
+/// (title, the paper's statement, the parameters used here).
+fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
+    let zeta = plan.base.zeta;
+    let s1_box = plan
+        .scale
+        .spec()
+        .correlation_box
+        .map(|(l, n)| format!("L = {l}, N = {n} (the paper's 120² box at its density; N is not stated)"))
+        .unwrap_or_else(|| format!("the scale's box, L = {}, N = {}", plan.base.box_size, plan.base.n_cells));
+    match figure {
+        Figure::Fig1c => (
+            "Fig. 1c: distance from the hole to the nearest spiral core before nucleation",
+            "“just before the hole forms, both the peak strain in the monolayer and the nearest spiral core localise near the nucleation point (within approximately one cell diameter).” Points at zero distance are simulations without holes (χ = 0.1, 0.05); at χ = 0.01 few holes form.",
+            format!("χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta} (the paper states no ζ: the default). Mean ± standard error over every hole of every run at that χ; x is minus the number of frames before the hole's first frame."),
+        ),
+        Figure::Fig1d => (
+            "Fig. 1d: the largest strain rate near the nucleation site before nucleation",
+            "“Normalised maximum strain rate in an area of radius R/2 around the location of hole nucleation … The normalization is per time-frame”; the peak strain localises at the nucleation point just before the hole forms.",
+            format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}; max ε̇ within R/2 of the hole's nucleation centroid over the frame's max ε̇."),
+        ),
+        Figure::Fig2 => (
+            "Fig. 2: P(hole | ε̇) with exponential fits; inset: the coefficients against χ^0.1/ζ",
+            "“P(hole|ε̇), for different activities and substrate frictions, is well fitted by an exponential … the coefficient of the exponential decreases with activity and increases with substrate friction … plotted against χ^0.1/ζ, collapsing the points onto the same curve.” Empty symbols χ = 0.01, faint χ = 0.005, full χ = 0.001.",
+            "χ ∈ {0.01, 0.005, 0.001} × ζ ∈ {0.3, 0.4, 0.5} (Fig. 2 names no ζ values: Fig. 3c's), bins of Δε̇ = 0.000125 pooled over the runs; frames with a hole larger than half a cell open are not counted. Fit P = A·exp(b ε̇) by least squares on ln P weighted by the sites that opened; the coefficient is b.".into(),
+        ),
+        Figure::Fig3ab => (
+            "Fig. 3a–b: largest hole area and number of holes against ζ",
+            "“As either the activity increases or substrate friction decreases, the maximum area of holes increases … the total number of holes integrated over the whole simulation varies non-monotonically with activity and substrate friction.”",
+            "χ ∈ {0.1, 0.01, 0.001} × ζ ∈ {0.3, 0.4, 0.5}; the largest hole of each run over the box area L² (the paper's normalisation is not stated), and its number of holes; mean ± standard error over runs.".into(),
+        ),
+        Figure::Fig3c => (
+            "Fig. 3c: hole survival with exponential fits",
+            "“The survival probabilities … are well fitted by an exponential distribution … above a given value of activity, there are holes that are able to last the entire duration of the simulation.” Empty symbols χ = 0.005, full χ = 0.001.",
+            "χ ∈ {0.005, 0.001} × ζ ∈ {0.3, 0.4, 0.5}; Kaplan–Meier survival of τ_hole/t_total (holes open at the end censored), t_total the time from the first to the last frame; the line is exp(−τ/τ_h) with τ_h the maximum-likelihood lifetime (Σ durations / holes closed), the same fit as the regime criterion.".into(),
+        ),
+        Figure::Fig3d => (
+            "Fig. 3d: the regime map",
+            "“If this time-scale is larger than a given threshold, τ_t > 0.5 t_total … the probability of forming persistent holes is non-negligible.” Red circles: no holes; blue squares: only short-lived; green triangles: short- and long-lived.",
+            "χ ∈ {0.1, 0.05, 0.01, 0.005, 0.001} × ζ ∈ {0.3, 0.4, 0.5}, seeds pooled; a cross marks a point where a run failed (went unstable).".into(),
+        ),
+        Figure::FigS1 => (
+            "Fig. S1: velocity and nematic correlations, with the dry limit",
+            "“in the dry model correlations in the velocity and nematic director decay quickly, with a correlation length of the order of the single cell (r < 8). As we approach the wet model regime, these correlations increase as the substrate friction ξ_s is decreased.” Dry: ξ_cell = 0, ξ_s = 1; a 120² box, 3 samples, after 100,000 steps.",
+            format!("χ ∈ {{0.1, 0.01, 0.001}} and the dry limit, ζ = {zeta} (not stated: the default), {s1_box}; C(r) of each run's last frame, unsmoothed, averaged over the runs; the length is the first crossing of 1/e."),
+        ),
+        Figure::FigS2 => (
+            "Fig. S2: distances to the two nearest +½ defects before nucleation",
+            "“While the hole does not always nucleate precisely between the defects, it remains consistently closer to two defects, with both defects typically located within approximately two cell diameters.” Points at zero distance are simulations without holes (χ = 0.1, 0.05).",
+            format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}; distances over R."),
+        ),
+        Figure::FigS3 => (
+            "Fig. S3: largest hole area and number of holes against γ",
+            "“as γ increases, both the average number and the average maximum area of holes decrease.” χ = 0.001, ζ = 0.3.",
+            format!("γ ∈ {GAMMAS_S3:?} (the paper gives no values: the default 0.06 and a range about it), χ = 0.001, ζ = 0.3; normalised as Fig. 3a."),
+        ),
+    }
+}
+
+/// A parameter's value as `monolayer params` writes it.
+fn name(v: &impl serde::Serialize) -> String {
+    serde_json::to_string(v).unwrap_or_default().trim_matches('"').to_string()
+}
+
+pub fn markdown(plan: &Plan, runs: &[RunData], sections: &[Made]) -> String {
+    let b = &plan.base;
+    let failed: Vec<&str> =
+        plan.jobs.iter().zip(runs).filter(|(_, r)| r.failed()).map(|(j, _)| j.name.as_str()).collect();
+    let mut s = String::new();
+    let _ = writeln!(s, "# The paper's figures, reproduced (scale `{}`)\n", plan.scale.name());
+    let _ = writeln!(
+        s,
+        "Pinto, Rozman & Yeomans, *Spontaneous hole formation in cell monolayers emerges from collective cell motion*, \
+         drawn by `monolayer figures` from {} runs in `runs/` (one per point and seed; a run serves every figure \
+         that needs it: `plan.csv`). Each figure is a PNG and an SVG beside the CSV of what it draws.\n",
+        plan.jobs.len()
+    );
+    let spec = plan.scale.spec();
+    let _ = writeln!(
+        s,
+        "- Scale `{}`: L = {}, N = {}, R = {}, {} relaxation and {} active steps, a frame every {} steps; \
+         {} seed(s) per point for Figs. 1c–d, 3a–b, 3d, S2, S3 (the paper: 10), {} for Figs. 2 and 3c (100), {} for S1 (3).",
+        plan.scale.name(),
+        b.box_size,
+        b.n_cells,
+        b.radius,
+        b.relax_steps,
+        b.active_steps,
+        plan.frame_interval,
+        spec.few,
+        spec.many,
+        spec.correlations
+    );
+    let _ = writeln!(
+        s,
+        "- Parameters not varied are the defaults of `monolayer params` (γ = {}, ζ = {}, ξ_cell = {}, friction weights `{}`, passive force `{}`){}.",
+        b.gamma,
+        b.zeta,
+        b.xi_cell,
+        name(&b.friction_weights),
+        name(&b.passive_force),
+        if plan.sets.is_empty() { String::new() } else { format!(", with --set {}", plan.sets.join(" --set ")) }
+    );
+    if failed.is_empty() {
+        let _ = writeln!(s, "- Every run finished.\n");
+    } else {
+        let _ = writeln!(
+            s,
+            "- {} run(s) went unstable and stopped early; their frames up to then are counted: {}.\n",
+            failed.len(),
+            failed.join(", ")
+        );
+    }
+    for m in sections {
+        let (title, paper, here) = about(m.figure, plan);
+        let stem = m.figure.stem();
+        let _ = writeln!(s, "## {title}\n");
+        let _ = writeln!(s, "![{title}]({stem}.png)\n");
+        let files: Vec<String> = m
+            .files
+            .iter()
+            .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .filter(|n| n.ends_with(".csv") || n.ends_with(".svg"))
+            .map(|n| format!("[{n}]({n})"))
+            .collect();
+        let _ = writeln!(s, "Files: {}.\n", files.join(", "));
+        let _ = writeln!(s, "**The paper:** {paper}\n");
+        let _ = writeln!(s, "**Here:** {here} {}.\n", m.runs);
+        let _ = writeln!(s, "**Measured:**\n");
+        for line in &m.measured {
+            let _ = writeln!(s, "- {line}");
+        }
+        s.push('\n');
+    }
+    s
+}

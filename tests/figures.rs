@@ -1,0 +1,130 @@
+//! `monolayer figures`: the plan (one run per point and seed, shared between figures, the paper's
+//! counts), its refusals, the Slurm scripts, and the `smoke` scale end to end.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Output};
+
+use monolayer::run::figures::{Figure, Plan, Scale};
+
+fn monolayer(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn the_paper_plan_has_the_papers_counts_and_shares_runs() {
+    let plan = Plan::new(Scale::Paper, &Figure::ALL, &[]).unwrap();
+    let count = |f: Figure, pick: &dyn Fn(&monolayer::run::figures::Point) -> bool| {
+        plan.runs_of(f).filter(|(_, p)| pick(p)).count()
+    };
+    let at = |chi: f64, zeta: f64| {
+        move |p: &monolayer::run::figures::Point| {
+            matches!(p.friction, monolayer::run::figures::Friction::Chi(c) if c == chi) && p.zeta == zeta
+        }
+    };
+    // 10 simulations per point for Figs. 1c–d, 3a–b, 3d, S2, S3; 100 for Figs. 2 and 3c; 3 for S1.
+    assert_eq!(count(Figure::Fig3d, &at(0.1, 0.3)), 10);
+    assert_eq!(count(Figure::Fig1c, &at(0.05, 0.3)), 10);
+    assert_eq!(count(Figure::Fig2, &at(0.005, 0.4)), 100);
+    assert_eq!(count(Figure::Fig3c, &at(0.001, 0.5)), 100);
+    assert_eq!(plan.runs_of(Figure::FigS1).count(), 12);
+    assert!(plan.runs_of(Figure::FigS1).all(|(j, _)| j.params.box_size == 120));
+    assert!(plan
+        .runs_of(Figure::FigS3)
+        .all(|(j, _)| j.params.active_steps == 100_000 && j.params.relax_steps == 10_000));
+    // Every run once: the χ = 0.001, ζ = 0.3, seed 1 run serves 1c, 1d, 2, 3ab, 3c, 3d, S2, S3.
+    let mut names: Vec<&str> = plan.jobs.iter().map(|j| j.name.as_str()).collect();
+    names.sort();
+    names.dedup();
+    assert_eq!(names.len(), plan.jobs.len());
+    let k = plan.jobs.iter().position(|j| j.name == "chi0.001_zeta0.3_gamma0.06_L140_seed1").unwrap();
+    assert_eq!(plan.points[k].1.len(), 8, "{:?}", plan.points[k].1);
+    // 9 points × 100 (Figs. 2, 3c) + 6 × 10 (the rest of 3d) + 3 γ × 10 (S3) + 4 × 3 (S1).
+    assert_eq!(plan.jobs.len(), 900 + 60 + 30 + 12);
+    // The dry limit of Fig. S1.
+    let dry = plan.jobs.iter().find(|j| j.name.starts_with("dry")).unwrap();
+    assert_eq!((dry.params.xi_cell, dry.params.xi_substrate), (0.0, 1.0));
+}
+
+#[test]
+fn figures_and_scales_are_checked_before_anything_runs() {
+    assert_eq!(Figure::parse_list("3a,3b, s1").unwrap(), vec![Figure::Fig3ab, Figure::FigS1]);
+    let e = Figure::parse_list("1c,4").unwrap_err();
+    assert!(e.contains("--only 4") && e.contains("S3"), "{e}");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("f");
+    let out = out.to_str().unwrap();
+    let o = monolayer(&["figures", "--out", out, "--scale", "huge"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("smoke, standard, paper"), "{}", stderr(&o));
+    let o = monolayer(&["figures", "--out", out, "--set", "zeta=40"]);
+    assert!(!o.status.success() && stderr(&o).contains("`zeta`"), "{}", stderr(&o));
+    let o = monolayer(&["figures", "--out", out, "--stage", "draw"]);
+    assert!(stderr(&o).contains("all, runs, figures"), "{}", stderr(&o));
+    // The paper's scale is days of core time: refused here without --yes, after the estimate.
+    let o = monolayer(&["figures", "--out", out, "--scale", "paper", "--only", "S1"]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(e.contains("12 runs") && e.contains("core-hours") && e.contains("--yes") && e.contains("ms/step"), "{e}");
+    // Figures without their runs: refused, naming the runs and what to do.
+    let o = monolayer(&["figures", "--out", out, "--stage", "figures", "--only", "3d"]);
+    assert!(stderr(&o).contains("are not finished") && stderr(&o).contains("--stage runs"), "{}", stderr(&o));
+    assert!(!Path::new(out).join("figures.md").exists());
+}
+
+#[test]
+fn slurm_dry_run_prints_an_array_with_a_throttle_and_an_afterok_aggregation() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("f");
+    let o = monolayer(&["figures", "--out", out.to_str().unwrap(), "--slurm", "--dry-run", "--throttle", "3"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let plan = Plan::new(Scale::Smoke, &Figure::ALL, &[]).unwrap();
+    let n = plan.jobs.len();
+    assert!(text.contains(&format!("#SBATCH --array=0-{}%3", n - 1)), "{text}");
+    assert!(text.contains("--output=") && text.contains("run-%A_%a.out"), "{text}");
+    assert!(text.contains(&format!("--stage runs --shard \"${{SLURM_ARRAY_TASK_ID}}/{n}\"")), "{text}");
+    assert!(text.contains("--stage figures") && text.contains("--dependency=afterok:"), "{text}");
+    assert!(!out.exists(), "a dry run writes nothing");
+}
+
+fn read_csvs(dir: &Path) -> BTreeMap<String, String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read_to_string(&p).unwrap()))
+        .collect()
+}
+
+#[test]
+#[ignore = "28 small runs, 1–2 minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
+fn the_smoke_scale_draws_every_figure_and_resumes_without_running_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("smoke");
+    let o = monolayer(&["figures", "--out", out.to_str().unwrap(), "--scale", "smoke", "--quiet", "--jobs", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in Figure::ALL {
+        for ext in ["png", "svg", "csv"] {
+            let p = out.join(format!("{}.{ext}", f.stem()));
+            assert!(p.metadata().is_ok_and(|m| m.len() > 100), "{} missing or empty", p.display());
+        }
+    }
+    let md = std::fs::read_to_string(out.join("figures.md")).unwrap();
+    for f in Figure::ALL {
+        assert!(md.contains(&format!("({}.png)", f.stem())), "figures.md lacks {}", f.stem());
+    }
+    assert!(md.contains("**The paper:**") && md.contains("scale `smoke`"), "{md}");
+    let csvs = read_csvs(&out);
+    assert!(csvs["fig3d.csv"].lines().count() == 16, "{}", csvs["fig3d.csv"]);
+    assert!(csvs["figS1.csv"].contains("dry,"), "the dry limit is in Fig. S1");
+    // Again: every run is done, nothing runs, the same tables.
+    let o = monolayer(&["figures", "--out", out.to_str().unwrap(), "--scale", "smoke", "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("0 to run"), "{}", stderr(&o));
+    assert_eq!(read_csvs(&out), csvs);
+}
