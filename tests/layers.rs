@@ -88,7 +88,8 @@ fn an_upward_import_is_detected() {
     let dir = tempfile::tempdir().unwrap();
     let nested = dir.path().join("sub");
     fs::create_dir(&nested).unwrap();
-    fs::write(nested.join("x.rs"), "use crate::run::files::write_atomic;\n// crate::web in a comment is fine\n").unwrap();
+    fs::write(nested.join("x.rs"), "use crate::run::files::write_atomic;\n// crate::web in a comment is fine\n")
+        .unwrap();
     fs::write(dir.path().join("y.rs"), "fn f() { monolayer::web::start() }\n").unwrap();
     let found = upward_references_in(dir.path(), &["run", "web"]);
     assert_eq!(found.len(), 2, "{found:?}");

@@ -184,7 +184,7 @@ async function runMode(modeName, base, metrics) {
     });
 
     await test(`${modeName}: each field draws with its colour bar`, async () => {
-      const fields = [['2', 'phi'], ['3', 'speed'], ['4', 'director'], ['5', 'strain'], ['6', 'activediv'], ['1', 'tissue']];
+      const fields = [['2', 'phisum'], ['3', 'speed'], ['4', 'director'], ['5', 'strainrate'], ['6', 'forcedivergence'], ['1', 'tissue']];
       for (const [key, f] of fields) {
         await page.keyboard.press(key);
         await page.waitForTimeout(300);
@@ -193,7 +193,7 @@ async function runMode(modeName, base, metrics) {
         const bar = await page.locator('#colorbar-labels').isVisible();
         assert(bar === (f !== 'tissue'), `${f}: colour bar labels visible = ${bar}`);
         assert(new URL(page.url()).searchParams.get('field') === (f === 'tissue' ? null : f), `${f}: URL ${page.url()}`);
-        if (f === 'strain') {
+        if (f === 'strainrate') {
           // The ±½ defects of the smoothed nematic field come with it (analysis::defects).
           const d = await page.evaluate(() => window.demo.sim.defects());
           assert(d.length % 4 === 0, 'defects: 4 numbers each');

@@ -1,4 +1,5 @@
-// The hole-area time series: a small 2D-canvas line chart of void area against active time.
+// The hole-area time series: a small 2D-canvas line chart of void area against active time
+// (time in the core's units; the axis label in seconds, `secondsPerUnit` of them per unit).
 
 export class HoleChart {
   constructor(canvas, capacity = 600) {
@@ -6,6 +7,7 @@ export class HoleChart {
     this.capacity = capacity;
     this.t = [];
     this.area = [];
+    this.secondsPerUnit = 1;
   }
 
   clear() {
@@ -44,7 +46,7 @@ export class HoleChart {
     const t1 = n ? Math.max(this.t[n - 1], t0 + 1) : 1;
     const pad = 4 * dpr;
     g.fillText(`${Math.round(maxA)} µm²`, pad, 11 * dpr);
-    g.fillText(`${Math.round(t1 * 5)} s`, w - 44 * dpr, h - pad);
+    g.fillText(`${Math.round(t1 * this.secondsPerUnit)} s`, w - 44 * dpr, h - pad);
     g.strokeStyle = '#3a4150';
     g.beginPath();
     g.moveTo(pad, h - pad);
