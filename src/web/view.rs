@@ -344,8 +344,8 @@ fn push(out: &mut Vec<Segment>, a: [f64; 2], b: [f64; 2], colour: [f32; 4], widt
     out.push(Segment { a: [a[0] as f32, a[1] as f32], b: [b[0] as f32, b[1] as f32], colour, width, _pad: [0.0; 3] });
 }
 /// How elongated a cell is, in [0, 1]: |Q| of Eq. 5 over ½∫|∇φ|², its largest possible value
-/// (reached when every gradient is parallel). 0 for a disk, → 1 for a needle; about
-/// (a − b)/(a + b) for an ellipse with semi-axes a ≥ b. Q̂ cannot say this: it is normalised.
+/// (reached when every gradient is parallel). 0 for a disk, → 1 for a needle; 0.48 for an
+/// ellipse of aspect ratio 2, 0.79 for 4. Q̂ cannot say this: it is normalised.
 pub fn elongation(patch: crate::model::lattice::Patch, phi: &[f64], shape: [f64; 2]) -> f64 {
     let s = patch.stride();
     let mut norm = 0.0;
@@ -460,7 +460,8 @@ mod tests {
         let keys = keys(&m);
         let mut b = ViewBuilder::default();
         b.build(&mut m, &keys, FieldKind::StrainRate, 1.0);
-        assert_eq!(b.defects, a.defects);
+        // Debug text, not ==: a −½ defect's orientation is NaN.
+        assert_eq!(format!("{:?}", b.defects), format!("{:?}", a.defects));
         let cores: Vec<PlusOne> = a.spiral_cores().copied().collect();
         assert_eq!(b.spiral_cores, cores);
         let marks = 3 * a.defects.iter().filter(|d| d.twice_charge < 0).count()
@@ -480,7 +481,9 @@ mod tests {
         assert_eq!(plain, [FieldKind::Tissue]);
     }
 
-    /// A smooth ellipse with semi-axes (a, b) along θ, centred on its patch.
+    /// A smooth ellipse with semi-axes (a, b) along θ, centred on its patch, with an interface
+    /// of the same width all round (as a cell's): tanh of the distance to the ellipse, to first
+    /// order (r − 1)/|∇r| for the elliptic radius r.
     fn ellipse(a: f64, b: f64, theta: f64) -> (Patch, Vec<f64>) {
         let patch = Patch { x0: 0, y0: 0, w: 48, h: 48 };
         let mut phi = vec![0.0; patch.padded_len()];
@@ -489,8 +492,9 @@ mod tests {
             for i in 0..patch.w {
                 let (dx, dy) = (i as f64 - 24.0, j as f64 - 24.0);
                 let (u, v) = (c * dx + s * dy, -s * dx + c * dy);
-                let r = ((u / a).powi(2) + (v / b).powi(2)).sqrt();
-                phi[patch.idx(i, j)] = 0.5 * (1.0 - ((r - 1.0) * a.min(b) / 2.0).tanh());
+                let r = ((u / a).powi(2) + (v / b).powi(2)).sqrt().max(1e-9);
+                let grad = (u / (a * a)).hypot(v / (b * b)) / r;
+                phi[patch.idx(i, j)] = 0.5 * (1.0 - ((r - 1.0) / grad.max(1e-9) / 2.0).tanh());
             }
         }
         (patch, phi)
@@ -503,9 +507,11 @@ mod tests {
             elongation(p, &phi, shape_tensor(p, &phi))
         };
         assert!(e(10.0, 10.0) < 0.01, "disk: {}", e(10.0, 10.0));
+        // |∮ e^{2iθ} ds| / ∮ ds over a sharp ellipse, θ the normal's angle: 0.480 for an aspect
+        // ratio of 2, 0.785 for 4.
         let (e2, e4) = (e(12.0, 6.0), e(16.0, 4.0));
-        assert!((e2 - 1.0 / 3.0).abs() < 0.08, "aspect ratio 2: {e2}, about 1/3");
-        assert!((e4 - 0.6).abs() < 0.1, "aspect ratio 4: {e4}, about 3/5");
+        assert!((e2 - 0.480).abs() < 0.05, "aspect ratio 2: {e2}, about 0.48");
+        assert!((e4 - 0.785).abs() < 0.05, "aspect ratio 4: {e4}, about 0.79");
     }
 
     #[test]
