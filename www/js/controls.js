@@ -12,7 +12,7 @@ const BRUSH_RADIUS = 6;
 
 export class Controls {
   // actions: setParam(name, v), applyPreset(name), setField(kind), setSeed(v), togglePlay(),
-  // stepOnce(), reset(), screenshot(), brush(x, y, multiplier), ablate(x, y), latticeAt(event).
+  // stepOnce(), reset(), screenshot(), record(), brush(x, y, multiplier), ablate(x, y), latticeAt(event).
   constructor(actions) {
     this.actions = actions;
     this.tool = 'none';
@@ -68,6 +68,7 @@ export class Controls {
     $('step').addEventListener('click', () => this.actions.stepOnce());
     $('reset').addEventListener('click', () => this.actions.reset());
     $('shot').addEventListener('click', () => this.actions.screenshot());
+    $('record').addEventListener('click', () => this.actions.record());
     for (const r of document.querySelectorAll('input[name=tool]')) {
       r.addEventListener('change', () => {
         this.tool = r.value;
@@ -92,6 +93,12 @@ export class Controls {
     $('play').setAttribute('aria-pressed', String(!playing));
   }
 
+  showRecording(on) {
+    $('record').textContent = on ? 'Stop' : 'Record';
+    $('record').setAttribute('aria-pressed', String(on));
+    $('record').classList.toggle('recording', on);
+  }
+
   onKey(e) {
     if (e.target instanceof HTMLInputElement && e.target.type !== 'range' && e.target.type !== 'radio') return;
     if (e.target instanceof HTMLSelectElement || e.ctrlKey || e.metaKey || e.altKey) return;
@@ -101,6 +108,7 @@ export class Controls {
     else if (k === 's') $('step').click();
     else if (k === 'r') $('reset').click();
     else if (k === 'p') $('shot').click();
+    else if (k === 'v') $('record').click();
     else if (k === 'b') {
       const tools = [...document.querySelectorAll('input[name=tool]')];
       const i = tools.findIndex((t) => t.checked);

@@ -1,24 +1,26 @@
-// The page: loads the WebAssembly core, and ties the frame loop (loop.js), the controls
-// (controls.js) and the readouts (readouts.js) to one simulation and one renderer. Every change
-// of state goes through the actions below, which keep the core, the controls and the URL in step.
+// The page: starts the simulation's worker (worker.js, where the WebAssembly core steps) and the
+// renderer (the same core's wgpu drawing, instantiated here), and ties the frame loop (loop.js),
+// the controls (controls.js) and the readouts (readouts.js) to them. Every change of state goes
+// through the actions below, which keep the worker, the controls and the URL in step.
 
-import init, { WebSim, Renderer, FieldKind } from '../pkg/monolayer.js';
-import { PARAMS, MODEL_PARAMS, PRESETS, SIZE, parseUrl, toUrl } from './state.js';
+import init, { Renderer, WebView, FieldKind } from '../pkg/monolayer.js';
+import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZE, parseUrl, toUrl } from './state.js';
 import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
-import { Readouts } from './readouts.js';
+import { Readouts, formatSeconds } from './readouts.js';
+import { Recorder } from './recorder.js';
 
 const $ = (id) => document.getElementById(id);
 const canvas = $('view');
 const message = $('message');
 
-// Everything the tests read lives here too (window.demo).
-const demo = { ready: false, error: null, notices: [], firstHole: null, loadedAt: performance.now() };
+// Everything the tests read lives here too (window.demo); `demo.call` reaches the simulation.
+const demo = { ready: false, error: null, notices: [], firstHole: null, loadedAt: performance.now(), worker: true };
 window.demo = demo;
 
-// The page's one simulation and renderer, its state (what the URL carries), and the pending
-// screenshot.
-const page = { sim: null, renderer: null, state: null, screenshot: false };
+// The renderer, the state (what the URL carries), the pending screenshot, and the last stats
+// the worker sent.
+const page = { renderer: null, state: null, screenshot: false, stats: null };
 
 function showMessage(text, isError = false) {
   message.textContent = text;
@@ -53,59 +55,118 @@ function notify(lines) {
   $('notice').hidden = false;
 }
 
+// --- the simulation's worker ------------------------------------------------------------------------
+const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+const calls = new Map();
+let nextCall = 0;
+let onReady = null;
+
+// Runs one of the worker's CALLS on the simulation; resolves with its value.
+function call(method, ...args) {
+  return new Promise((resolve, reject) => {
+    const id = ++nextCall;
+    calls.set(id, { resolve, reject });
+    worker.postMessage({ type: 'call', id, method, args });
+  });
+}
+demo.call = call;
+
+worker.onerror = (e) => fatal('The simulation worker failed', e.message ?? e);
+worker.onmessage = (e) => {
+  const m = e.data;
+  if (m.type === 'frame') {
+    page.stats = m.stats;
+    loop.receive(m);
+  } else if (m.type === 'result') {
+    const c = calls.get(m.id);
+    calls.delete(m.id);
+    if ('error' in m) c.reject(new Error(m.error));
+    else c.resolve(m.value);
+  } else if (m.type === 'ready') {
+    page.stats = m.stats;
+    readouts.reset(m.stats.timeUnitSeconds);
+    onReady?.();
+  } else if (m.type === 'stopped') {
+    setPlaying(false);
+    const hint = m.active
+      ? 'Activity stretched a cell past the stable range: lower ζ or raise χ, then press Reset.'
+      : 'The random start of this seed placed two cells too close to relax them: try another seed and press Reset.';
+    showMessage(`The simulation stopped: ${m.why}\n\n${hint}`, true);
+    demo.simError = m.why;
+  } else if (m.type === 'fatal') {
+    fatal('The simulation stopped', m.message);
+  }
+};
+
+// --- drawing and readouts ---------------------------------------------------------------------------
 const readouts = new Readouts();
 
 const loop = new FrameLoop(canvas, {
-  maxSteps: () => page.state.spf,
-  step: takeSteps,
-  wantsDraw: () => page.screenshot,
   draw,
+  request: (dpr) => worker.postMessage({ type: 'frame', field: page.state.field, dpr }),
   readouts: updateReadouts,
   fatal: (e) => fatal('The page stopped', e),
 });
 
-// Steps the core; on an error of the model (the core keeps the state before the failing step)
-// stops and says why. A Rust panic traps: the module is then unusable, and the loop's catch
-// shows it.
-function takeSteps(n) {
+function draw(frame, dpr) {
+  const p = frame.parts;
+  const view = new WebView(p.l, p.kind, p.tissue, p.field, p.segments, p.range);
   try {
-    page.sim.step(n);
-    return true;
-  } catch (e) {
-    if (e instanceof WebAssembly.RuntimeError) throw e;
-    setPlaying(false);
-    const why = String(e.message ?? e);
-    const hint = page.sim.active()
-      ? 'Activity stretched a cell past the stable range: lower ζ or raise χ, then press Reset.'
-      : 'The random start of this seed placed two cells too close to relax them: try another seed and press Reset.';
-    showMessage(`The simulation stopped: ${why}\n\n${hint}`, true);
-    demo.simError = why;
-    return false;
-  }
-}
-
-function draw(dpr) {
-  const { sim, renderer, state } = page;
-  const view = sim.view(state.field, dpr);
-  try {
-    renderer.draw(view, dpr, true);
-    if (view.kind() === FieldKind.Tissue) readouts.hideColourBar();
-    else readouts.colourBar(state.field, view.range(), renderer.layout(), dpr);
+    page.renderer.draw(view, dpr, true);
   } finally {
     view.free();
   }
+  if (p.kind === FieldKind.Tissue) readouts.hideColourBar();
+  else readouts.colourBar(p.kind, p.range, page.renderer.layout(), dpr);
+  if (recorder.recording) recorder.frame(caption());
   if (page.screenshot) saveScreenshot();
 }
 
+// What a recording shows burnt in: the time and the parameters.
+function caption() {
+  const s = page.stats;
+  const st = page.state;
+  const t = s.active ? `t = ${s.time.toFixed(0)} (${formatSeconds(s.time * s.timeUnitSeconds)})` : 'relaxing';
+  return [
+    `${t}, step ${s.step.toLocaleString('en')}`,
+    `ζ = ${s.zeta}, χ = ${Number(s.chi.toPrecision(3))}, γ = ${s.gamma}, seed ${st.seed}, L = ${s.l}, N = ${s.cells}`,
+    FIELDS.get(st.field).label,
+  ];
+}
+
+// The record button: starts, or stops and saves the WebM.
+const recorder = new Recorder(canvas);
+async function toggleRecording() {
+  if (!recorder.recording) {
+    if (!Recorder.supported()) {
+      notify(['This browser cannot record WebM video (MediaRecorder).']);
+      return;
+    }
+    recorder.start();
+    loop.dirty = true;
+  } else {
+    const step = page.stats?.step ?? 0;
+    const blob = await recorder.stop();
+    const a = document.createElement('a');
+    a.href = URL.createObjectURL(blob);
+    a.download = `monolayer-seed${page.state.seed}-step${step}.webm`;
+    a.click();
+    setTimeout(() => URL.revokeObjectURL(a.href), 60000);
+    const head = new Uint8Array(await blob.slice(0, 4).arrayBuffer());
+    demo.lastRecording = { size: blob.size, type: blob.type, head: [...head].map((b) => b.toString(16).padStart(2, '0')).join('') };
+  }
+  controls.showRecording(recorder.recording);
+}
+
 function updateReadouts() {
-  const s = readouts.update(page.sim, loop, page.state.spf);
+  const s = page.stats;
+  if (!s) return;
+  readouts.update(s, loop, page.state.spf, isPlaying());
   if (s.active && s.holes > 0 && demo.firstHole === null) {
     demo.firstHole = { seconds: (performance.now() - demo.loadedAt) / 1000, step: s.step };
   }
-  const sim = page.sim;
   demo.stats = {
-    ...s, fingerprint: sim.fingerprint(), playing: loop.playing, zeta: sim.zeta(), chi: sim.chi(),
-    gamma: sim.gamma(), cells: sim.n_cells(), msPerStep: loop.msPerStep, drawMs: loop.drawMs,
+    ...s, sps: loop.rate.sps, fps: loop.rate.fps, playing: isPlaying(), drawMs: loop.drawMs,
     renderScale: loop.renderScale,
   };
 }
@@ -116,34 +177,46 @@ function saveScreenshot() {
   const url = canvas.toDataURL('image/png');
   const a = document.createElement('a');
   a.href = url;
-  a.download = `monolayer-step${page.sim.step_count()}.png`;
+  a.download = `monolayer-step${page.stats.step}.png`;
   a.click();
   demo.lastScreenshot = url;
 }
 
 // --- actions: the only writers of the state -------------------------------------------------------
+const isPlaying = () => !page.state.paused;
+
 function changed() {
-  controls.refresh(page.state, loop.playing);
+  controls.refresh(page.state, isPlaying());
   history.replaceState(null, '', toUrl(page.state));
 }
 
+// A new tissue from the state's parameters and seed; resolves once the worker has it.
 function newSim() {
   const s = page.state;
-  if (page.sim) page.sim.free();
-  page.sim = new WebSim(SIZE.box, SIZE.cells, SIZE.relaxSteps, s.zeta, s.chi, s.gamma, s.seed);
-  readouts.reset(page.sim.time_unit_seconds());
+  const ready = new Promise((resolve) => {
+    onReady = resolve;
+  });
+  worker.postMessage({ type: 'new', size: SIZE, params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed });
+  tellWorkerToPlay();
+  loop.restart();
   demo.firstHole = null;
   demo.loadedAt = performance.now();
   demo.simError = null;
   message.hidden = true;
-  loop.dirty = true;
+  return ready;
 }
 
 function setPlaying(on) {
-  loop.playing = on;
   page.state.paused = !on;
+  tellWorkerToPlay();
   changed();
 }
+
+// A hidden page does not step: a forgotten background tab should not hold a core.
+function tellWorkerToPlay() {
+  worker.postMessage({ type: 'play', on: isPlaying() && !document.hidden });
+}
+document.addEventListener('visibilitychange', tellWorkerToPlay);
 
 // Sets a parameter in the state and, for the model's, in the core (a preset sets them together).
 function setParam(name, value, fromPreset = false) {
@@ -151,35 +224,27 @@ function setParam(name, value, fromPreset = false) {
   state[name] = value;
   if (MODEL_PARAMS.includes(name)) {
     if (!fromPreset) state.preset = null;
-    try {
-      page.sim[`set_${name}`](value);
-    } catch (e) {
-      notify([`${name} = ${value}: ${e.message ?? e}`]);
-    }
+    call('set', name, value).catch((e) => notify([`${name} = ${value}: ${e.message ?? e}`]));
   }
+  if (name === 'spf') worker.postMessage({ type: 'spf', n: value });
   changed();
 }
 
 // Pointer → lattice site, through the layout the renderer drew.
 function latticeAt(ev) {
+  if (!page.stats) return null;
   const rect = canvas.getBoundingClientRect();
   const scale = canvas.width / rect.width; // backing pixels per CSS pixel
   const [x0, y0, side] = page.renderer.layout();
-  const l = page.sim.box_size();
+  const l = page.stats.l;
   const x = (((ev.clientX - rect.left) * scale - x0) / side) * l;
   const y = (((ev.clientY - rect.top) * scale - y0) / side) * l;
+  demo.lastPointer = [x, y];
   return x >= 0 && y >= 0 && x < l && y < l ? [x, y] : null;
 }
 
 // A brush or the laser: an invalid stroke is reported, not fatal.
-function edit(f) {
-  try {
-    f();
-  } catch (e) {
-    notify([String(e.message ?? e)]);
-  }
-  loop.dirty = true;
-}
+const edit = (method, ...args) => call(method, ...args).catch((e) => notify([String(e.message ?? e)]));
 
 const controls = new Controls({
   setParam,
@@ -190,7 +255,6 @@ const controls = new Controls({
   },
   setField(kind) {
     page.state.field = kind;
-    loop.dirty = true;
     changed();
   },
   setSeed(raw) {
@@ -203,17 +267,19 @@ const controls = new Controls({
     page.state.seed = v;
     changed();
   },
-  togglePlay: () => setPlaying(!loop.playing),
+  togglePlay: () => setPlaying(!isPlaying()),
   stepOnce() {
     setPlaying(false);
-    loop.runSteps(page.state.spf);
+    call('step', page.state.spf);
   },
   reset: () => newSim(),
   screenshot() {
     page.screenshot = true;
+    loop.dirty = true;
   },
-  brush: (x, y, radius, multiplier) => edit(() => page.sim.paint_substrate(x, y, radius, multiplier)),
-  ablate: (x, y) => edit(() => page.sim.remove_cell_at(x, y)),
+  record: () => toggleRecording(),
+  brush: (x, y, radius, multiplier) => edit('paint_substrate', x, y, radius, multiplier),
+  ablate: (x, y) => edit('remove_cell_at', x, y),
   latticeAt,
 });
 
@@ -223,8 +289,8 @@ async function boot() {
   page.state = parsed.state;
   notify(parsed.notices);
   document.body.classList.toggle('embed', page.state.embed);
-  loop.playing = !page.state.paused;
   changed();
+  worker.postMessage({ type: 'spf', n: page.state.spf });
   try {
     await init();
   } catch (e) {
@@ -241,13 +307,8 @@ async function boot() {
   }
   $('backend').textContent = `Drawing with ${page.renderer.backend()}.`;
   demo.backend = page.renderer.backend();
-  try {
-    newSim();
-  } catch (e) {
-    fatal('Could not start the simulation', e);
-    return;
-  }
-  Object.defineProperty(demo, 'sim', { get: () => page.sim });
+  await newSim();
+  if (demo.error) return;
   demo.renderer = page.renderer;
   demo.size = SIZE;
   demo.ready = true;

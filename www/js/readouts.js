@@ -26,30 +26,24 @@ export class Readouts {
     $('time-unit').textContent = `one time unit ≈ ${secondsPerUnit} s`;
   }
 
-  // The numbers of this frame; returns them for window.demo.stats.
-  update(sim, loop, spf) {
-    const step = sim.step_count();
-    const holes = sim.holes();
-    const area = sim.hole_area();
-    const t = sim.active_time();
-    const active = sim.active();
-    const packing = sim.packing_fraction();
+  // The latest stats of the simulation (worker.js) and the loop's rates.
+  update(stats, loop, spf, playing) {
+    const { step, holes, area, time: t, active, packing } = stats;
     const { sps, fps } = loop.rate;
     $('r-step').textContent = step.toLocaleString('en');
     $('r-time').textContent = active
-      ? `${t.toFixed(0)} (${formatSeconds(t * sim.time_unit_seconds())})`
-      : `relaxing ${Math.round((100 * step) / sim.relax_steps())} %`;
+      ? `${t.toFixed(0)} (${formatSeconds(t * stats.timeUnitSeconds)})`
+      : `relaxing ${Math.round((100 * step) / stats.relaxSteps)} %`;
     // Before activity the tissue is still closing up: gaps then are not holes.
     $('r-holes').textContent = active ? String(holes) : `(${holes} gaps)`;
     $('r-area').textContent = `${area} µm²`;
     $('r-packing').textContent = `${(100 * packing).toFixed(1)} %`;
     $('r-sps').textContent = sps.toFixed(0);
-    $('r-spf').textContent = loop.playing ? `${loop.stepsThisFrame} / ${spf}` : `– / ${spf}`;
+    $('r-spf').textContent = playing && fps > 0 ? `${Math.round(sps / fps)} / ${spf}` : `– / ${spf}`;
     $('r-fps').textContent = fps.toFixed(0);
     $('r-fps').title = `drawn at ${Math.round(loop.renderScale * 100)} % resolution`;
     if (active) this.chart.push(t, area);
     if (++this.frames % 10 === 0) this.chart.draw();
-    return { step, holes, area, time: t, active, packing, sps, fps };
   }
 
   // The colour bar's labels, under the bar the renderer drew (its layout, in device pixels).

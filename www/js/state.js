@@ -17,7 +17,7 @@ export const PARAMS = {
   zeta: { label: 'Activity ζ', min: 0, max: 1, def: 0.4, step: 0.01, slider: true, model: true },
   chi: { label: 'Friction ratio χ = ξs/ξcell', min: 0.001, max: 1, def: 0.01, log: true, slider: true, model: true },
   gamma: { label: 'Surface tension γ', min: 0.02, max: 0.2, def: 0.06, step: 0.005, slider: true, model: true },
-  spf: { label: 'Steps per frame (max)', min: 1, max: 50, def: 20, step: 1, integer: true, slider: true },
+  spf: { label: 'Speed limit: steps per 1/30 s', min: 1, max: 50, def: 20, step: 1, integer: true, slider: true },
   seed: { label: 'Seed', min: 0, max: 4294967295, def: 1, step: 1, integer: true },
 };
 export const SLIDERS = Object.keys(PARAMS).filter((k) => PARAMS[k].slider);

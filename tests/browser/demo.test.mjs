@@ -1,14 +1,19 @@
-// Browser tests of the demo (www/), in Debian's headless Chromium driven by playwright-core:
-// once with real WebGPU on SwiftShader and once without WebGPU (wgpu's WebGL2 fallback).
-// Needs www/pkg (scripts/serve.sh --build-only) and the native binary (for the fingerprint).
+// Browser tests of the demo (www/) with node:test, in Debian's headless Chromium driven by
+// playwright-core (no browser is downloaded): once with real WebGPU on SwiftShader, once without
+// WebGPU (wgpu's WebGL2 fallback), once with neither. Needs www/pkg (scripts/serve.sh
+// --build-only) and the native binary (for the fingerprint and the speed ratio).
 //
-//   node tests/browser/run.mjs [--mode webgpu|webgl2] [--skip-hole]
+//   node --test --test-reporter=spec tests/browser/demo.test.mjs
+//   MODES=webgl2 SKIP_HOLE=1 node --test …   one mode, without the first-hole test
 //
-// Screenshots and measurements go to test-output/browser/. Exits non-zero on any failure.
+// Screenshots and the measurements (results.json) go to test-output/browser/.
 
+import { describe, before, after, it } from 'node:test';
+import assert from 'node:assert/strict';
 import { chromium } from 'playwright-core';
 import { createServer } from 'node:http';
 import { readFile, mkdir, writeFile, mkdtemp, rm } from 'node:fs/promises';
+import { mkdirSync, writeFileSync } from 'node:fs';
 import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
@@ -35,10 +40,6 @@ const MODES = {
   webgl2: { backend: 'WebGL2', flags: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'] },
 };
 
-const args = process.argv.slice(2);
-const onlyMode = args.includes('--mode') ? args[args.indexOf('--mode') + 1] : null;
-const skipHole = args.includes('--skip-hole');
-
 // --- a static server for www/ ---------------------------------------------------------------------
 const TYPES = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.wasm': 'application/wasm', '.png': 'image/png' };
 function serve() {
@@ -58,23 +59,24 @@ function serve() {
   return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
 }
 
-// --- tiny test harness ----------------------------------------------------------------------------
+// --- results.json: each test's outcome and the measurements ------------------------------------
 const results = [];
-let failures = 0;
-async function test(name, fn) {
-  const t0 = Date.now();
-  try {
-    await fn();
-    results.push({ name, ok: true, ms: Date.now() - t0 });
-    console.log(`  ok   ${name} (${Date.now() - t0} ms)`);
-  } catch (e) {
-    failures++;
-    results.push({ name, ok: false, error: String(e.stack ?? e) });
-    console.log(`  FAIL ${name}\n       ${String(e.message ?? e).split('\n').join('\n       ')}`);
-  }
-}
-function assert(cond, msg) {
-  if (!cond) throw new Error(msg);
+const metrics = {};
+const t0 = Date.now();
+
+// it() that also records the outcome for results.json.
+function check(name, opts, fn) {
+  if (typeof opts === 'function') [opts, fn] = [{}, opts];
+  it(name, { timeout: 120000, ...opts }, async (t) => {
+    const start = Date.now();
+    try {
+      await fn(t);
+      results.push({ name: t.fullName ?? name, ok: true, ms: Date.now() - start });
+    } catch (e) {
+      results.push({ name: t.fullName ?? name, ok: false, error: String(e.stack ?? e) });
+      throw e;
+    }
+  });
 }
 
 // --- helpers on a page ----------------------------------------------------------------------------
@@ -90,6 +92,17 @@ async function open(context, base, query, errors) {
   assert(!err, `page error: ${err}`);
   return page;
 }
+// The middle of site (L/2, L/2) on the page, in CSS pixels, from the layout the renderer drew
+// (the middle: a point on a site's edge may round to its neighbour).
+const centre = (page) => page.evaluate(async () => {
+  const c = document.getElementById('view');
+  const r = c.getBoundingClientRect();
+  const [x0, y0, side] = window.demo.renderer.layout();
+  const l = await window.demo.call('box_size');
+  const f = (l / 2 + 0.5) / l;
+  const s = c.width / r.width;
+  return { cx: r.left + (x0 + side * f) / s, cy: r.top + (y0 + side * f) / s };
+});
 const stats = (page) => page.evaluate(() => window.demo.stats);
 async function waitStats(page) {
   await page.waitForFunction(() => window.demo.stats !== undefined, null, { timeout: 20000 });
@@ -141,23 +154,57 @@ function nativeMsPerStep(size, p, n) {
   return (time(size.relaxSteps + n) - time(size.relaxSteps)) / n;
 }
 
-// --- the tests, once per mode -----------------------------------------------------------------------
-async function runMode(modeName, base, metrics) {
-  const mode = MODES[modeName];
-  console.log(`\n== ${modeName}: Chromium ${mode.flags.join(' ')}`);
+const SKIP_HOLE = Boolean(process.env.SKIP_HOLE);
+const ONLY = process.env.MODES ? process.env.MODES.split(',') : null;
+const wanted = (mode) => !ONLY || ONLY.includes(mode);
+
+// The default preset (ζ = 0.4, χ = 0.01, γ = 0.06) and seed 1 at the page's size open their first
+// hole (a void region above πR²/4, once active) at this step, relaxation included: found by
+// stepping one at a time and measuring after each step. It changes only with the physics.
+const FIRST_HOLE_STEP = Number(process.env.FIRST_HOLE_STEP ?? 3080);
+
+let server;
+let base;
+before(async () => {
+  await mkdir(OUT, { recursive: true });
+  server = await serve();
+  base = `http://127.0.0.1:${server.address().port}`;
+});
+after(() => {
+  server?.close();
+  metrics.seconds = (Date.now() - t0) / 1000;
+  mkdirSync(OUT, { recursive: true });
+  writeFileSync(path.join(OUT, 'results.json'), JSON.stringify({ results, metrics }, null, 2));
+});
+
+async function launch(flags) {
   const profile = await mkdtemp(path.join(tmpdir(), 'monolayer-chromium-'));
   const context = await chromium.launchPersistentContext(profile, {
     executablePath: CHROMIUM,
     headless: true,
-    args: [...COMMON_FLAGS, ...mode.flags],
+    args: [...COMMON_FLAGS, ...flags],
     viewport: { width: 1280, height: 900 },
   });
-  const errors = [];
-  const m = (metrics[modeName] = {});
-  const shot = (name) => path.join(OUT, `${modeName}-${name}.png`);
-  try {
+  return { context, profile };
+}
+
+for (const [modeName, mode] of Object.entries(MODES)) {
+  describe(`${modeName}: Chromium ${mode.flags.join(' ')}`, { skip: !wanted(modeName) }, () => {
+    let context;
+    let profile;
+    const errors = [];
+    const m = (metrics[modeName] = {});
+    const shot = (name) => path.join(OUT, `${modeName}-${name}.png`);
+    before(async () => {
+      ({ context, profile } = await launch(mode.flags));
+    });
+    after(async () => {
+      await context?.close();
+      if (profile) await rm(profile, { recursive: true, force: true });
+    });
+
     let page;
-    await test(`${modeName}: page loads on ${mode.backend} with no console error`, async () => {
+    check(`page loads on ${mode.backend} with no console error`, async () => {
       page = await open(context, base, '/?seed=1', errors);
       const backend = await page.evaluate(() => window.demo.backend);
       assert(backend.startsWith(mode.backend), `backend ${backend}, expected ${mode.backend}`);
@@ -165,16 +212,27 @@ async function runMode(modeName, base, metrics) {
       await waitStats(page);
       assert(errors.length === 0, errors.join('\n'));
     });
-    if (!page) return;
-
-    await test(`${modeName}: the simulation advances`, async () => {
+    check(`the simulation advances`, async () => {
       const a = (await stats(page)).step;
       await page.waitForTimeout(1500);
       const b = (await stats(page)).step;
       assert(b > a, `step ${a} → ${b}`);
     });
 
-    await test(`${modeName}: the canvas is drawn and changes between two screenshots`, async () => {
+    check('the simulation steps in its worker while the main thread is busy', async () => {
+      assert(await page.evaluate(() => window.demo.worker === true), 'no worker');
+      const before = (await page.evaluate(() => window.demo.call('stats'))).step;
+      // Blocks the main thread (drawing, input) for 1.5 s: stepping carries on in the worker.
+      await page.evaluate(() => {
+        const t = performance.now();
+        while (performance.now() - t < 1500);
+      });
+      const after = (await page.evaluate(() => window.demo.call('stats'))).step;
+      m.stepsWhileMainThreadBlocked = after - before;
+      assert(after - before >= 50, `${after - before} steps while the main thread was blocked for 1.5 s`);
+    });
+
+    check(`the canvas is drawn and changes between two screenshots`, async () => {
       const a = await canvasShot(page, shot('1'));
       await page.waitForTimeout(1500);
       const b = await canvasShot(page, shot('2'));
@@ -183,7 +241,7 @@ async function runMode(modeName, base, metrics) {
       m.colours = a.colours;
     });
 
-    await test(`${modeName}: each field draws with its colour bar`, async () => {
+    check(`each field draws with its colour bar`, async () => {
       const fields = [['2', 'phisum'], ['3', 'speed'], ['4', 'director'], ['5', 'strainrate'], ['6', 'forcedivergence'], ['1', 'tissue']];
       for (const [key, f] of fields) {
         await page.keyboard.press(key);
@@ -195,32 +253,53 @@ async function runMode(modeName, base, metrics) {
         assert(new URL(page.url()).searchParams.get('field') === (f === 'tissue' ? null : f), `${f}: URL ${page.url()}`);
         if (f === 'strainrate') {
           // The ±½ defects of the smoothed nematic field come with it (analysis::defects).
-          const d = await page.evaluate(() => window.demo.sim.defects());
+          const d = await page.evaluate(() => window.demo.call('defects'));
           assert(d.length % 4 === 0, 'defects: 4 numbers each');
           m.defectsSeen = d.length / 4;
         }
       }
     });
 
-    await test(`${modeName}: pause stops time, Space resumes it, Step steps once`, async () => {
-      await page.click('#play');
-      await page.waitForTimeout(200);
-      const a = (await stats(page)).step;
-      await page.waitForTimeout(800);
-      const b = (await stats(page)).step;
-      assert(a === b, `paused, yet step ${a} → ${b}`);
-      assert(page.url().includes('paused'), `URL does not record the pause: ${page.url()}`);
-      const spf = await page.evaluate(() => window.demo.stats && Number(document.getElementById('spf-out').textContent));
-      await page.click('#step');
-      await page.waitForTimeout(200);
-      const c = (await stats(page)).step;
-      assert(c === b + spf, `Step: ${b} → ${c}, expected +${spf}`);
-      await page.locator('body').press(' ');
-      await page.waitForTimeout(800);
-      assert((await stats(page)).step > c, 'Space did not resume');
+    check('spiral cores are found as the analysis finds them and drawn on the strain rate', async () => {
+      await page.keyboard.press('5');
+      // Spiral cores come and go with the flow: wait for a frame that has some.
+      const cores = await page.evaluate(async () => {
+        for (let i = 0; i < 100; i++) {
+          const c = await window.demo.call('spiral_cores');
+          if (c.length) return Array.from(c);
+          await new Promise((r) => setTimeout(r, 200));
+        }
+        return [];
+      });
+      assert(cores.length > 0 && cores.length % 3 === 0, `spiral cores: ${cores}`);
+      for (let i = 0; i < cores.length; i += 3) assert(cores[i + 2] > 0, `a spiral core with ∇·v = ${cores[i + 2]}`);
+      m.spiralCoresSeen = cores.length / 3;
+      await canvasShot(page, shot('spiral-cores'));
+      await page.keyboard.press('1');
     });
 
-    await test(`${modeName}: a preset sets its values`, async () => {
+    check(`pause stops time, Space resumes it, Step steps once`, async () => {
+      // The worker's own count (the readouts follow it with the next frame drawn).
+      const step = () => page.evaluate(() => window.demo.call('stats')).then((s) => s.step);
+      await page.click('#play');
+      await page.waitForTimeout(200);
+      const a = await step();
+      await page.waitForTimeout(800);
+      const b = await step();
+      assert(a === b, `paused, yet step ${a} → ${b}`);
+      assert(page.url().includes('paused'), `URL does not record the pause: ${page.url()}`);
+      const spf = await page.evaluate(() => Number(document.getElementById('spf-out').textContent));
+      await page.click('#step');
+      await page.waitForTimeout(200);
+      const c = await step();
+      assert(c === b + spf, `Step: ${b} → ${c}, expected +${spf}`);
+      await page.waitForFunction((c) => window.demo.stats.step === c, c, { timeout: 10000 });
+      await page.locator('body').press(' ');
+      await page.waitForTimeout(800);
+      assert((await step()) > c, 'Space did not resume');
+    });
+
+    check(`a preset sets its values`, async () => {
       await page.selectOption('#preset', 'no-holes');
       await page.waitForTimeout(200);
       const s = await stats(page);
@@ -231,7 +310,7 @@ async function runMode(modeName, base, metrics) {
       assert(new URL(page.url()).searchParams.get('preset') === 'no-holes', `URL ${page.url()}`);
     });
 
-    await test(`${modeName}: a slider acts on the core and the URL round-trips the state`, async () => {
+    check(`a slider acts on the core and the URL round-trips the state`, async () => {
       await page.locator('#zeta').fill('420'); // slider position 420/1000 of [0, 1]
       await page.locator('#gamma').focus();
       await page.keyboard.press('ArrowRight');
@@ -254,41 +333,51 @@ async function runMode(modeName, base, metrics) {
       await again.close();
     });
 
-    await test(`${modeName}: brushes paint the substrate and remove a cell`, async () => {
+    check('the record button saves a WebM of the canvas', async () => {
+      await page.click('#record');
+      assert((await page.textContent('#record')) === 'Stop', 'the button does not say Stop');
+      await page.waitForTimeout(2500);
+      await page.click('#record');
+      await page.waitForFunction(() => window.demo.lastRecording, null, { timeout: 10000 });
+      const r = await page.evaluate(() => window.demo.lastRecording);
+      m.recording = r;
+      assert(r.type === 'video/webm' && r.size > 1000, `recording ${JSON.stringify(r)}`);
+      assert(r.head === '1a45dfa3', `not a WebM (EBML) file: starts ${r.head}`);
+      // The first page is done: closed, its worker stops stepping, so that the measurements
+      // below have the machine to themselves.
+      await page.close();
+    });
+
+    check(`brushes paint the substrate and remove a cell`, async () => {
       const p = await open(context, base, '/?paused&seed=1', errors);
       await waitStats(p);
       // Relax the tissue so that there is a cell under the pointer.
-      await p.evaluate(() => window.demo.sim.step(300));
-      // The lattice's centre on the page, from the layout the renderer drew.
-      const { cx, cy } = await p.evaluate(() => {
-        const c = document.getElementById('view');
-        const r = c.getBoundingClientRect();
-        const [x0, y0, side] = window.demo.renderer.layout();
-        const s = c.width / r.width;
-        return { cx: r.left + (x0 + side / 2) / s, cy: r.top + (y0 + side / 2) / s };
-      });
-      const l = await p.evaluate(() => window.demo.sim.box_size());
+      await p.evaluate(() => window.demo.call('step', 300));
+      let { cx, cy } = await centre(p);
+      const l = await p.evaluate(() => window.demo.call('box_size'));
       await p.check('input[name=tool][value=soft]');
       await p.mouse.click(cx, cy);
-      const soft = await p.evaluate((l) => window.demo.sim.substrate_at(l / 2, l / 2), l);
+      const soft = await p.evaluate((l) => window.demo.call('substrate_at', l / 2, l / 2), l);
       assert(Math.abs(soft - 0.1) < 1e-12, `soft brush: ξs multiplier ${soft} at the centre`);
       await p.check('input[name=tool][value=stiff]');
       await p.mouse.click(cx, cy);
-      const stiff = await p.evaluate((l) => window.demo.sim.substrate_at(l / 2, l / 2), l);
+      const stiff = await p.evaluate((l) => window.demo.call('substrate_at', l / 2, l / 2), l);
       assert(Math.abs(stiff - 10) < 1e-12, `stiff brush: ${stiff}`);
       await canvasShot(p, shot('brush'));
-      const before = await p.evaluate(() => window.demo.sim.n_cells());
-      const target = await p.evaluate((l) => window.demo.sim.cell_at(l / 2, l / 2), l);
+      const before = await p.evaluate(() => window.demo.call('n_cells'));
+      const target = await p.evaluate((l) => window.demo.call('cell_at', l / 2, l / 2), l);
       assert(target >= 0, 'no cell under the centre after relaxation');
       await p.check('input[name=tool][value=ablate]');
+      ({ cx, cy } = await centre(p)); // the screenshot or the radio may have scrolled the page
       await p.mouse.click(cx, cy);
-      const after = await p.evaluate(() => window.demo.sim.n_cells());
-      assert(after === before - 1, `cells ${before} → ${after}`);
-      await p.evaluate(() => window.demo.sim.step(20)); // the tissue continues without it
+      const after = await p.evaluate(() => window.demo.call('n_cells'));
+      const at = await p.evaluate(() => window.demo.lastPointer);
+      assert(after === before - 1, `cells ${before} → ${after}; the click reached lattice point ${at}`);
+      await p.evaluate(() => window.demo.call('step', 20)); // the tissue continues without it
       await p.close();
     });
 
-    await test(`${modeName}: the screenshot button saves the drawn frame; ?embed hides the chrome`, async () => {
+    check(`the screenshot button saves the drawn frame; ?embed hides the chrome`, async () => {
       const p = await open(context, base, '/?embed&seed=1', errors);
       await waitStats(p);
       assert(!(await p.locator('header').isVisible()), 'header visible in embed mode');
@@ -316,7 +405,7 @@ async function runMode(modeName, base, metrics) {
       await p.close();
     });
 
-    await test(`${modeName}: bad URL parameters are clamped with a visible notice`, async () => {
+    check(`bad URL parameters are clamped with a visible notice`, async () => {
       const p = await open(context, base, '/?chi=5&zeta=abc&seed=-3&preset=nope&field=wrong', errors);
       const s = await waitStats(p);
       assert(await p.locator('#notice').isVisible(), 'no notice');
@@ -331,15 +420,16 @@ async function runMode(modeName, base, metrics) {
       await p.close();
     });
 
-    await test(`${modeName}: the wasm core's fingerprint equals the native one`, async () => {
+    check(`the wasm core's fingerprint equals the native one`, async () => {
       const p = await open(context, base, '/?paused&seed=7', errors);
       await waitStats(p);
       const size = await p.evaluate(() => window.demo.size);
       const active = 150;
-      const wasm = await p.evaluate((n) => {
-        const sim = window.demo.sim;
-        sim.step(n);
-        return { step: sim.step_count(), fingerprint: sim.fingerprint(), zeta: sim.zeta(), chi: sim.chi(), gamma: sim.gamma() };
+      const wasm = await p.evaluate(async (n) => {
+        const call = window.demo.call;
+        await call('step', n);
+        const s = await call('stats');
+        return { step: s.step, fingerprint: await call('fingerprint'), zeta: s.zeta, chi: s.chi, gamma: s.gamma };
       }, size.relaxSteps + active);
       const native = nativeFingerprint(size, wasm, 7, wasm.step);
       assert(native.step === wasm.step, `steps ${native.step} vs ${wasm.step}`);
@@ -348,21 +438,18 @@ async function runMode(modeName, base, metrics) {
       await p.close();
     });
 
-    await test(`${modeName}: speed of the wasm core vs native, and drawing fps`, async () => {
+    check(`speed of the wasm core vs native, and drawing fps`, async () => {
       const p = await open(context, base, '/?paused&seed=1', errors);
       await waitStats(p);
       const size = await p.evaluate(() => window.demo.size);
       const n = 300;
-      // The fastest of three batches of n / 3 active steps, as for the native side.
-      const wasmMs = await p.evaluate(([relax, n]) => {
-        const sim = window.demo.sim;
-        sim.step(relax);
+      // The fastest of three batches of n / 3 active steps, as for the native side, timed in the
+      // worker that steps them.
+      const wasmMs = await p.evaluate(async ([relax, n]) => {
+        const call = window.demo.call;
+        await call('step', relax);
         let best = Infinity;
-        for (let i = 0; i < 3; i++) {
-          const t0 = performance.now();
-          sim.step(n / 3);
-          best = Math.min(best, (performance.now() - t0) / (n / 3));
-        }
+        for (let i = 0; i < 3; i++) best = Math.min(best, (await call('step', n / 3)) / (n / 3));
         return best;
       }, [size.relaxSteps, n]);
       const params = await stats(p);
@@ -370,8 +457,7 @@ async function runMode(modeName, base, metrics) {
       m.wasmMsPerStep = wasmMs;
       m.nativeMsPerStep = nativeMs;
       m.speedRatio = nativeMs / wasmMs;
-      // fps while playing (the adaptive steps per frame at work).
-      // fps while playing, once the frame budget and the resolution have settled.
+      // Steps/s and fps while playing, once the resolution has settled.
       await p.click('#play');
       await p.waitForTimeout(6000);
       const s = await stats(p);
@@ -383,71 +469,48 @@ async function runMode(modeName, base, metrics) {
       await p.close();
     });
 
-    if (!skipHole) {
-      await test(`${modeName}: the default preset opens its first hole within 60 s`, async () => {
-        const p = await open(context, base, '/', errors);
-        await p.waitForFunction(() => window.demo.firstHole !== null, null, { timeout: 90000, polling: 500 });
-        const hole = await p.evaluate(() => window.demo.firstHole);
-        m.firstHole = hole;
-        await p.waitForTimeout(1500);
-        await canvasShot(p, shot('first-hole'));
-        console.log(`       first hole after ${hole.seconds.toFixed(1)} s (step ${hole.step})`);
-        assert(hole.seconds <= 60, `first hole after ${hole.seconds.toFixed(1)} s`);
-        await p.close();
-      });
-    }
+    // The hole's step is the same on every machine (the core is deterministic, and the page
+    // counts holes after every batch of at most `spf` steps); the seconds it takes are this
+    // machine's, reported in results.json and not asserted.
+    check('the default preset opens its first hole at its step', { skip: SKIP_HOLE, timeout: 240000 }, async () => {
+      const p = await open(context, base, '/', errors);
+      const spfMax = await p.evaluate(() => import('./js/state.js').then((m) => m.PARAMS.spf.max));
+      await p.waitForFunction(() => window.demo.firstHole !== null, null, { timeout: 200000, polling: 250 });
+      const hole = await p.evaluate(() => window.demo.firstHole);
+      m.firstHole = hole;
+      await p.waitForTimeout(1500);
+      await canvasShot(p, shot('first-hole'));
+      console.log(`       first hole after ${hole.seconds.toFixed(1)} s (step ${hole.step})`);
+      assert(hole.step >= FIRST_HOLE_STEP && hole.step < FIRST_HOLE_STEP + spfMax,
+        `first hole counted at step ${hole.step}: it opens at step ${FIRST_HOLE_STEP} (default preset, seed 1)`);
+      await p.close();
+    });
 
-    await test(`${modeName}: no console error during the whole run`, async () => {
+    check(`no console error during the whole run`, async () => {
       assert(errors.length === 0, errors.join('\n'));
     });
-  } finally {
-    await context.close();
-    await rm(profile, { recursive: true, force: true });
-  }
-}
-
-async function runNoGpu(base) {
-  console.log('\n== no GPU: Chromium --disable-3d-apis (neither WebGPU nor WebGL2)');
-  const profile = await mkdtemp(path.join(tmpdir(), 'monolayer-chromium-'));
-  const context = await chromium.launchPersistentContext(profile, {
-    executablePath: CHROMIUM, headless: true, args: [...COMMON_FLAGS, '--disable-3d-apis'],
   });
-  try {
-    await test('no GPU: the canvas says why instead of staying blank', async () => {
-      const page = await context.newPage();
-      await page.goto(base + '/');
-      await page.waitForFunction(() => window.demo && (window.demo.ready || window.demo.error), null, { timeout: 30000 });
-      const err = await page.evaluate(() => window.demo.error);
-      assert(err && /WebGPU|WebGL2/.test(err), `no error shown: ${err}`);
-      assert(await page.locator('#message').isVisible(), 'message hidden');
-      const text = await page.textContent('#message');
-      assert(text.includes('WebGPU or WebGL2'), `message: ${text}`);
-      await page.screenshot({ path: path.join(OUT, 'no-gpu.png') });
-    });
-  } finally {
-    await context.close();
-    await rm(profile, { recursive: true, force: true });
-  }
 }
 
-async function main() {
-  await mkdir(OUT, { recursive: true });
-  const server = await serve();
-  const base = `http://127.0.0.1:${server.address().port}`;
-  const metrics = {};
-  const t0 = Date.now();
-  try {
-    for (const mode of Object.keys(MODES)) {
-      if (!onlyMode || onlyMode === mode) await runMode(mode, base, metrics);
-    }
-    if (!onlyMode || onlyMode === 'nogpu') await runNoGpu(base);
-  } finally {
-    server.close();
-  }
-  metrics.seconds = (Date.now() - t0) / 1000;
-  await writeFile(path.join(OUT, 'results.json'), JSON.stringify({ results, metrics }, null, 2));
-  console.log(`\n${results.length - failures} passed, ${failures} failed in ${metrics.seconds.toFixed(0)} s; details in test-output/browser/`);
-  process.exit(failures ? 1 : 0);
-}
-
-main();
+describe('nogpu: Chromium --disable-3d-apis (neither WebGPU nor WebGL2)', { skip: !wanted('nogpu') }, () => {
+  let context;
+  let profile;
+  before(async () => {
+    ({ context, profile } = await launch(['--disable-3d-apis']));
+  });
+  after(async () => {
+    await context?.close();
+    if (profile) await rm(profile, { recursive: true, force: true });
+  });
+  check('the canvas says why instead of staying blank', async () => {
+    const page = await context.newPage();
+    await page.goto(base + '/');
+    await page.waitForFunction(() => window.demo && (window.demo.ready || window.demo.error), null, { timeout: 30000 });
+    const err = await page.evaluate(() => window.demo.error);
+    assert(err && /WebGPU|WebGL2/.test(err), `no error shown: ${err}`);
+    assert(await page.locator('#message').isVisible(), 'message hidden');
+    const text = await page.textContent('#message');
+    assert(text.includes('WebGPU or WebGL2'), `message: ${text}`);
+    await page.screenshot({ path: path.join(OUT, 'no-gpu.png') });
+  });
+});
