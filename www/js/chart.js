@@ -16,8 +16,9 @@ export class HoleChart {
     this.draw();
   }
 
+  // Adds a point; false (and nothing added) unless time has moved on.
   push(time, area) {
-    if (this.t.length && time <= this.t[this.t.length - 1]) return;
+    if (this.t.length && time <= this.t[this.t.length - 1]) return false;
     this.t.push(time);
     this.area.push(area);
     // Keep the whole run in view: halve the resolution when full.
@@ -25,6 +26,7 @@ export class HoleChart {
       this.t = this.t.filter((_, i) => i % 2 === 0);
       this.area = this.area.filter((_, i) => i % 2 === 0);
     }
+    return true;
   }
 
   draw() {

@@ -87,7 +87,8 @@ export class FrameLoop {
       this.adaptResolution(now);
       const t0 = performance.now();
       const dpr = this.resizeCanvas();
-      if (this.latest && (this.fresh || this.dirty)) {
+      const draw = this.latest && (this.fresh || this.dirty);
+      if (draw) {
         this.hooks.draw(this.latest, dpr);
         this.drewAt = now;
         this.rate.frames++;
@@ -99,22 +100,23 @@ export class FrameLoop {
         this.hooks.request(dpr);
         this.requested = true;
       }
-      this.countRate(performance.now());
-      this.hooks.readouts();
+      // The readouts change with a frame or with the rates, not in between.
+      if (this.countRate(performance.now()) || draw) this.hooks.readouts();
     } catch (e) {
       this.hooks.fatal(e);
     }
   }
 
-  // Steps and frames per second over the last half second.
+  // Steps and frames per second over the last half second; whether they were updated.
   countRate(now) {
     const r = this.rate;
-    if (now - r.t0 < 500) return;
+    if (now - r.t0 < 500) return false;
     const s = (now - r.t0) / 1000;
     r.sps = r.steps / s;
     r.fps = r.frames / s;
     r.steps = 0;
     r.frames = 0;
     r.t0 = now;
+    return true;
   }
 }

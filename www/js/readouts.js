@@ -7,6 +7,14 @@ import { HoleChart } from './chart.js';
 
 const $ = (id) => document.getElementById(id);
 
+// Writes only a changed text: every write makes the browser lay out and paint the page again,
+// work that a software GPU does on the CPU the simulation's worker needs.
+function put(id, text, title) {
+  const e = $(id);
+  if (e.textContent !== text) e.textContent = text;
+  if (title !== undefined && e.title !== title) e.title = title;
+}
+
 export function formatSeconds(s) {
   if (s < 120) return `${s.toFixed(0)} s`;
   if (s < 7200) return `${(s / 60).toFixed(1)} min`;
@@ -16,7 +24,7 @@ export function formatSeconds(s) {
 export class Readouts {
   constructor() {
     this.chart = new HoleChart($('chart'));
-    this.frames = 0;
+    this.frames = 0; // points added to the chart (it is redrawn every tenth)
   }
 
   // A new tissue: the chart starts over.
@@ -30,20 +38,18 @@ export class Readouts {
   update(stats, loop, spf, playing) {
     const { step, holes, area, time: t, active, packing } = stats;
     const { sps, fps } = loop.rate;
-    $('r-step').textContent = step.toLocaleString('en');
-    $('r-time').textContent = active
+    put('r-step', step.toLocaleString('en'));
+    put('r-time', active
       ? `${t.toFixed(0)} (${formatSeconds(t * stats.timeUnitSeconds)})`
-      : `relaxing ${Math.round((100 * step) / stats.relaxSteps)} %`;
+      : `relaxing ${Math.round((100 * step) / stats.relaxSteps)} %`);
     // Before activity the tissue is still closing up: gaps then are not holes.
-    $('r-holes').textContent = active ? String(holes) : `(${holes} gaps)`;
-    $('r-area').textContent = `${area} µm²`;
-    $('r-packing').textContent = `${(100 * packing).toFixed(1)} %`;
-    $('r-sps').textContent = sps.toFixed(0);
-    $('r-spf').textContent = playing && fps > 0 ? `${Math.round(sps / fps)} / ${spf}` : `– / ${spf}`;
-    $('r-fps').textContent = fps.toFixed(0);
-    $('r-fps').title = `drawn at ${Math.round(loop.renderScale * 100)} % resolution`;
-    if (active) this.chart.push(t, area);
-    if (++this.frames % 10 === 0) this.chart.draw();
+    put('r-holes', active ? String(holes) : `(${holes} gaps)`);
+    put('r-area', `${area} µm²`);
+    put('r-packing', `${(100 * packing).toFixed(1)} %`);
+    put('r-sps', sps.toFixed(0));
+    put('r-spf', playing && fps > 0 ? `${Math.round(sps / fps)} / ${spf}` : `– / ${spf}`);
+    put('r-fps', fps.toFixed(0), `drawn at ${Math.round(loop.renderScale * 100)} % resolution`);
+    if (active && this.chart.push(t, area) && ++this.frames % 10 === 0) this.chart.draw();
   }
 
   // The colour bar's labels, under the bar the renderer drew (its layout, in device pixels).
