@@ -107,7 +107,8 @@ const stats = (page) => page.evaluate(() => window.demo.stats);
 // The worker's own stats: a call queued after whatever the page just sent it, so it sees it.
 const workerStats = (page) => page.evaluate(() => window.demo.call('stats'));
 async function waitStats(page) {
-  await page.waitForFunction(() => window.demo.stats !== undefined, null, { timeout: 20000 });
+  // Stats and a drawn frame: the renderer's layout (pointer → lattice) is the drawn one.
+  await page.waitForFunction(() => window.demo.stats !== undefined && window.demo.drawn > 0, null, { timeout: 20000 });
   return stats(page);
 }
 
@@ -354,7 +355,9 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       const p = await open(context, base, '/?paused&seed=1', errors);
       await waitStats(p);
       // Relax the tissue so that there is a cell under the pointer.
+      const drawn = await p.evaluate(() => window.demo.drawn);
       await p.evaluate(() => window.demo.call('step', 300));
+      await p.waitForFunction((d) => window.demo.drawn > d, drawn, { timeout: 20000 }); // drawn after
       let { cx, cy } = await centre(p);
       const l = await p.evaluate(() => window.demo.call('box_size'));
       await p.check('input[name=tool][value=soft]');

@@ -116,6 +116,7 @@ function draw(frame, dpr) {
   } finally {
     view.free();
   }
+  demo.drawn = (demo.drawn ?? 0) + 1;
   if (p.kind === FieldKind.Tissue) readouts.hideColourBar();
   else readouts.colourBar(p.kind, p.range, page.renderer.layout(), dpr);
   if (recorder.recording) recorder.frame(caption());
