@@ -358,24 +358,46 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       const drawn = await p.evaluate(() => window.demo.drawn);
       await p.evaluate(() => window.demo.call('step', 300));
       await p.waitForFunction((d) => window.demo.drawn > d, drawn, { timeout: 20000 }); // drawn after
-      let { cx, cy } = await centre(p);
+      // Where the centre is at the moment of the click: checking a radio low in the panel may
+      // scroll the page.
+      const clickCentre = async () => {
+        const { cx, cy } = await centre(p);
+        await p.mouse.click(cx, cy);
+      };
       const l = await p.evaluate(() => window.demo.call('box_size'));
+      // ξs multiplier at the centre once it differs from `was` (a stroke reaches the worker
+      // after the click), or `was` after 2 s.
+      const substrateAtCentre = (was) => p.evaluate(async ([l, was]) => {
+        for (let i = 0; i < 20; i++) {
+          const v = await window.demo.call('substrate_at', l / 2, l / 2);
+          if (v !== was) return v;
+          await new Promise((r) => setTimeout(r, 100));
+        }
+        return was;
+      }, [l, was]);
       await p.check('input[name=tool][value=soft]');
-      await p.mouse.click(cx, cy);
-      const soft = await p.evaluate((l) => window.demo.call('substrate_at', l / 2, l / 2), l);
-      assert(Math.abs(soft - 0.1) < 1e-12, `soft brush: ξs multiplier ${soft} at the centre`);
+      await clickCentre();
+      const soft = await substrateAtCentre(1);
+      const at0 = await p.evaluate(() => window.demo.lastPointer);
+      assert(Math.abs(soft - 0.1) < 1e-12, `soft brush: ξs multiplier ${soft} at the centre; the click reached ${at0}`);
       await p.check('input[name=tool][value=stiff]');
-      await p.mouse.click(cx, cy);
-      const stiff = await p.evaluate((l) => window.demo.call('substrate_at', l / 2, l / 2), l);
+      await clickCentre();
+      const stiff = await substrateAtCentre(soft);
       assert(Math.abs(stiff - 10) < 1e-12, `stiff brush: ${stiff}`);
       await canvasShot(p, shot('brush'));
       const before = await p.evaluate(() => window.demo.call('n_cells'));
       const target = await p.evaluate((l) => window.demo.call('cell_at', l / 2, l / 2), l);
       assert(target >= 0, 'no cell under the centre after relaxation');
       await p.check('input[name=tool][value=ablate]');
-      ({ cx, cy } = await centre(p)); // the screenshot or the radio may have scrolled the page
-      await p.mouse.click(cx, cy);
-      const after = await p.evaluate(() => window.demo.call('n_cells'));
+      await clickCentre();
+      const after = await p.evaluate(async (before) => {
+        for (let i = 0; i < 20; i++) {
+          const n = await window.demo.call('n_cells');
+          if (n !== before) return n;
+          await new Promise((r) => setTimeout(r, 100));
+        }
+        return before;
+      }, before);
       const at = await p.evaluate(() => window.demo.lastPointer);
       assert(after === before - 1, `cells ${before} → ${after}; the click reached lattice point ${at}`);
       await p.evaluate(() => window.demo.call('step', 20)); // the tissue continues without it
