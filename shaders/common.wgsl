@@ -5,14 +5,17 @@
 // encoded twice and look washed out. On a non-sRGB surface (WebGPU's bgra8unorm canvas) the
 // sRGB values go out as they are.
 
+// Written by src/web/render.rs (`Uniforms`, the same layout).
 struct Uniforms {
-    // x: lattice side L; y: field (0 tissue, 1 Σφ, 2 speed, 3 director, 4 strain rate,
-    // 5 active-force divergence: 4 and 5 are signed and use the diverging map);
-    // z: 1 when the surface wants linear values; w: device pixels per CSS pixel.
-    view: vec4<f32>,
-    // x, y: colour range of the field; z: side of the drawn lattice in device pixels;
-    // w: 1 to tint the painted substrate.
+    // x: lattice side L; y: device pixels per CSS pixel; z: side of the drawn lattice in device
+    // pixels.
+    lattice: vec4<f32>,
+    // x, y: colour range of the field.
     range: vec4<f32>,
+    // Booleans, 0 or 1. x: a field is shown under the outlines (else the cells' colours);
+    // y: the field is signed (diverging colormap); z: the surface wants linear values;
+    // w: tint the painted substrate.
+    flags: vec4<u32>,
 };
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
@@ -26,7 +29,7 @@ fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
 // The colour to write for an sRGB colour, on this surface.
 fn out_colour(srgb: vec3<f32>, alpha: f32) -> vec4<f32> {
     let c = clamp(srgb, vec3<f32>(0.0), vec3<f32>(1.0));
-    return vec4<f32>(select(c, srgb_to_linear(c), u.view.z > 0.5), alpha);
+    return vec4<f32>(select(c, srgb_to_linear(c), u.flags.z != 0u), alpha);
 }
 
 // Viridis (perceptually uniform, readable in greyscale and by colour-blind viewers): a
@@ -63,7 +66,7 @@ fn linear_to_srgb(c: vec3<f32>) -> vec3<f32> {
 
 // The colormap of the field shown.
 fn colormap(t: f32) -> vec3<f32> {
-    if u.view.y > 3.5 {
+    if u.flags.y != 0u {
         return diverging(t);
     }
     return viridis(t);

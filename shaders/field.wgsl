@@ -21,7 +21,7 @@ fn vs_full(@builtin(vertex_index) i: u32) -> VOut {
 }
 
 fn wrap_site(s: vec2<i32>) -> vec2<i32> {
-    let l = i32(u.view.x);
+    let l = i32(u.lattice.x);
     return ((s % l) + l) % l;
 }
 
@@ -57,7 +57,7 @@ const JUNCTION_COLOUR: vec3<f32> = vec3<f32>(0.36, 0.37, 0.40);
 
 @fragment
 fn fs_field(in: VOut) -> @location(0) vec4<f32> {
-    let p = in.uv * u.view.x;       // lattice coordinates; site (i, j) is centred at (i + ½, j + ½)
+    let p = in.uv * u.lattice.x;       // lattice coordinates; site (i, j) is centred at (i + ½, j + ½)
     let q = p - 0.5;
     let i0 = vec2<i32>(floor(q));
     let f = q - floor(q);
@@ -84,7 +84,7 @@ fn fs_field(in: VOut) -> @location(0) vec4<f32> {
 
     // The field's four sites are read only when a field is shown (software GPUs pay per load).
     var value = 0.0;
-    if u.view.y > 0.5 {
+    if u.flags.x != 0u {
         value = bilinear(field(i0).x, field(i0 + vec2<i32>(1, 0)).x, field(i0 + vec2<i32>(0, 1)).x,
                          field(i0 + vec2<i32>(1, 1)).x, f);
     }
@@ -92,11 +92,11 @@ fn fs_field(in: VOut) -> @location(0) vec4<f32> {
     // Outline at φ = ½, about 1.5 device pixels wide whatever the zoom (φ's screen gradient).
     let w = max(fwidth(phi), 1e-5);
     let dist_px = abs(phi - 0.5) / w;
-    let line = clamp(1.0 + 0.75 * u.view.w - dist_px, 0.0, 1.0);
+    let line = clamp(1.0 + 0.75 * u.lattice.y - dist_px, 0.0, 1.0);
     let inside = smoothstep(-1.0, 1.0, (phi - 0.5) / w);
 
     var colour: vec3<f32>;
-    if u.view.y < 0.5 {
+    if u.flags.x == 0u {
         // Σφ from the two largest φ of each site (the rest is negligible away from junctions).
         let sum = bilinear(t00.y + t00.w, t10.y + t10.w, t01.y + t01.w, t11.y + t11.w, f);
         let background = mix(HOLE_COLOUR, JUNCTION_COLOUR, smoothstep(0.01, 0.35, sum));
@@ -112,7 +112,7 @@ fn fs_field(in: VOut) -> @location(0) vec4<f32> {
     // Painted substrate: soft (low friction) in blue, stiff in orange, as diagonal stripes so
     // the tint reads without colour vision too.
     var substrate = 1.0;
-    if u.range.w > 0.5 {
+    if u.flags.w != 0u {
         substrate = field(vec2<i32>(floor(p))).y;
     }
     if substrate != 1.0 {

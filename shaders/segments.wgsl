@@ -21,8 +21,8 @@ fn vs_seg(@builtin(vertex_index) vi: u32, s: Seg) -> SOut {
         vec2<f32>(0.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(0.0, 1.0),
     );
     let c = corners[vi];
-    let l = u.view.x;
-    let sites_per_px = l / max(u.range.z, 1.0);
+    let l = u.lattice.x;
+    let sites_per_px = l / max(u.lattice.z, 1.0);
     // At least 1.5 pixels wide, so lines stay smooth when the canvas is drawn at low resolution;
     // one extra pixel for the soft edge.
     let half = 0.5 * (max(s.width, 1.5) + 1.0) * sites_per_px;

@@ -16,7 +16,7 @@
 //! - [`model`]: the physics core, one module per concept of the paper;
 //! - [`analysis`]: the paper's measurements, pure, for both faces (live and offline);
 //! - `run` (native, feature `cli`): files, runs, sweeps, the offline analysis, plots;
-//! - `web` (wasm32): the browser binding and the wgpu renderer.
+//! - [`web`]: the browser demo's view (native and wasm32), its binding and wgpu renderer (wasm32).
 
 pub mod analysis;
 pub mod model;
@@ -24,8 +24,8 @@ pub mod model;
 #[cfg(feature = "cli")]
 pub mod run;
 
-/// The browser demo's binding and wgpu drawing (see `www/`).
-#[cfg(target_arch = "wasm32")]
+/// The browser demo (see `www/`): what it draws and measures, and on wasm32 its binding and
+/// wgpu drawing.
 pub mod web;
 
 pub use model::error::SimError;

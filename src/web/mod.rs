@@ -1,21 +1,26 @@
-//! The browser demo's binding (wasm32 only): a thin `#[wasm_bindgen]` layer over the same
-//! [`crate::Monolayer`] the native tests run, and the wgpu drawing of its fields.
+//! The browser demo: a thin `#[wasm_bindgen]` layer over the same [`crate::Monolayer`] the native
+//! tests run, and the wgpu drawing of its fields.
 //!
-//! - [`sim`]: `WebSim`, the simulation object the page drives (step, parameters, brushes, stats);
-//! - [`measure`]: what the page reads out (holes from void sites, packing fraction);
 //! - [`view`]: the per-site and per-cell data the shaders draw, built from the core's fields;
-//! - [`render`]: `Renderer`, wgpu on WebGPU or WebGL2, with the shaders of `shaders/`.
+//! - [`measure`]: what the page reads out (holes from void sites, packing fraction);
+//! - `sim` (wasm32): `WebSim`, the simulation object the page drives (step, parameters, brushes);
+//! - `render` (wasm32): `Renderer`, wgpu on WebGPU or WebGL2, with the shaders of `shaders/`.
+//!
+//! `view` and `measure` are plain Rust, built and unit-tested natively like the rest of the
+//! crate; only the binding and the GPU need the browser.
 
 pub mod measure;
-pub mod render;
-pub mod sim;
 pub mod view;
 
-use wasm_bindgen::prelude::*;
+#[cfg(target_arch = "wasm32")]
+pub mod render;
+#[cfg(target_arch = "wasm32")]
+pub mod sim;
 
 /// Runs once when the module is instantiated: a Rust panic then reaches the console with its
 /// message, and the page (which wraps every call) shows it instead of freezing silently.
-#[wasm_bindgen(start)]
+#[cfg(target_arch = "wasm32")]
+#[wasm_bindgen::prelude::wasm_bindgen(start)]
 pub fn start() {
     console_error_panic_hook::set_once();
 }

@@ -1,4 +1,4 @@
-//! `Renderer`: draws a [`WebSim`] into a canvas with wgpu, on WebGPU where the browser has a
+//! `Renderer`: draws a [`WebView`] into a canvas with wgpu, on WebGPU where the browser has a
 //! working adapter and on WebGL2 otherwise (`new_instance_with_webgpu_detection`: a plain
 //! instance picks WebGPU whenever `navigator.gpu` exists, even with no adapter behind it).
 //!
@@ -8,12 +8,12 @@
 
 use std::sync::{Arc, Mutex};
 
+use bytemuck::Zeroable;
 use wasm_bindgen::prelude::*;
 use web_sys::HtmlCanvasElement;
 use wgpu::util::DeviceExt;
 
-use super::sim::WebSim;
-use super::view::{FieldKind, Segment};
+use super::view::{FieldKind, Segment, View};
 
 const COMMON_WGSL: &str = include_str!("../../shaders/common.wgsl");
 const FIELD_WGSL: &str = include_str!("../../shaders/field.wgsl");
@@ -25,11 +25,78 @@ const BACKGROUND: [f64; 3] = [0.059, 0.067, 0.082];
 const BAR_CSS: f32 = 12.0;
 const GAP_CSS: f32 = 8.0;
 
+/// `shaders/common.wgsl`'s `Uniforms`, field for field.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Uniforms {
-    view: [f32; 4],
+    /// L, device pixels per CSS pixel, side of the drawn lattice in device pixels, unused.
+    lattice: [f32; 4],
+    /// Colour range of the field (min, max), unused ×2.
     range: [f32; 4],
+    /// Booleans (0/1): a field is shown, its colormap is the signed one, the surface wants linear
+    /// values, the painted substrate is tinted.
+    flags: [u32; 4],
+}
+
+/// One frame's drawing data, handed from the simulation (here or in a worker) to a renderer.
+#[wasm_bindgen]
+pub struct WebView(pub(crate) View);
+
+#[wasm_bindgen]
+impl WebView {
+    /// A view from its parts, as [`WebView::tissue`], [`WebView::field`] and
+    /// [`WebView::segments`] give them (to draw a frame built elsewhere, e.g. in a worker).
+    #[wasm_bindgen(constructor)]
+    pub fn new(
+        l: usize,
+        kind: FieldKind,
+        tissue: &[f32],
+        field: &[f32],
+        segments: &[f32],
+        range: &[f32],
+    ) -> Result<WebView, JsError> {
+        let seg_floats = std::mem::size_of::<Segment>() / 4;
+        if tissue.len() != 4 * l * l || field.len() != 4 * l * l || segments.len() % seg_floats != 0 || range.len() != 2
+        {
+            return Err(JsError::new("WebView: parts of the wrong sizes"));
+        }
+        Ok(WebView(View {
+            l,
+            kind,
+            tissue: bytemuck::cast_slice(tissue).to_vec(),
+            field: bytemuck::cast_slice(field).to_vec(),
+            segments: bytemuck::cast_slice(segments).to_vec(),
+            range: (range[0], range[1]),
+        }))
+    }
+
+    pub fn l(&self) -> usize {
+        self.0.l
+    }
+
+    pub fn kind(&self) -> FieldKind {
+        self.0.kind
+    }
+
+    /// (key₁, φ₁, key₂, φ₂) per site.
+    pub fn tissue(&self) -> Vec<f32> {
+        bytemuck::cast_slice(&self.0.tissue).to_vec()
+    }
+
+    /// (value, substrate multiplier, 0, 0) per site.
+    pub fn field(&self) -> Vec<f32> {
+        bytemuck::cast_slice(&self.0.field).to_vec()
+    }
+
+    /// Twelve floats per segment.
+    pub fn segments(&self) -> Vec<f32> {
+        bytemuck::cast_slice(&self.0.segments).to_vec()
+    }
+
+    /// Colour range of the field, [min, max].
+    pub fn range(&self) -> Vec<f32> {
+        vec![self.0.range.0, self.0.range.1]
+    }
 }
 
 /// Where things are on the canvas, in device pixels.
@@ -211,7 +278,7 @@ impl Renderer {
         );
         let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("uniforms"),
-            contents: bytemuck::bytes_of(&Uniforms { view: [0.0; 4], range: [0.0; 4] }),
+            contents: bytemuck::bytes_of(&Uniforms::zeroed()),
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
         let segment_capacity = 1024;
@@ -255,23 +322,20 @@ impl Renderer {
         vec![g.x, g.y, g.side, g.bar_y, g.bar_h]
     }
 
-    /// Draws `sim` with `field` ("tissue", "phi", "speed", "director", "strain", "activediv");
-    /// `dpr` is the page's
-    /// devicePixelRatio (line widths and the bar are in CSS pixels), `substrate` shows the
-    /// painted substrate. The canvas's backing size is the page's to set (it tracks the window);
-    /// the surface follows it here.
-    pub fn draw(&mut self, sim: &mut WebSim, field: &str, dpr: f32, substrate: bool) -> Result<(), JsError> {
-        let kind = FieldKind::from_name(field).ok_or_else(|| JsError::new(&format!("unknown field `{field}`")))?;
+    /// Draws `view`; `dpr` is the page's devicePixelRatio (the bar is in CSS pixels),
+    /// `substrate` tints the painted substrate. The canvas's backing size is the page's to set
+    /// (it tracks the window); the surface follows it here.
+    pub fn draw(&mut self, view: &WebView, dpr: f32, substrate: bool) -> Result<(), JsError> {
+        let view = &view.0;
+        let kind = view.kind;
         let (w, h) = (self.canvas.width().max(1), self.canvas.height().max(1));
         if (w, h) != (self.config.width, self.config.height) {
             self.config.width = w;
             self.config.height = h;
             self.surface.configure(&self.device, &self.config);
         }
-        let with_bar = kind != FieldKind::Tissue;
+        let with_bar = kind.shows_field();
         self.layout = Layout::of(w, h, dpr, with_bar);
-        sim.build_view(kind, dpr);
-        let view = &sim.view;
         if view.l != self.l || self.textures.is_none() {
             self.textures = Some(self.lattice_textures(view.l));
             self.l = view.l;
@@ -289,17 +353,10 @@ impl Renderer {
                 tex.size(),
             );
         }
-        let mode = match kind {
-            FieldKind::Tissue => 0.0,
-            FieldKind::PhiSum => 1.0,
-            FieldKind::Speed => 2.0,
-            FieldKind::Director => 3.0,
-            FieldKind::StrainRate => 4.0,
-            FieldKind::ForceDivergence => 5.0,
-        };
         let u = Uniforms {
-            view: [view.l as f32, mode, if self.linear_out { 1.0 } else { 0.0 }, dpr],
-            range: [view.range.0, view.range.1, self.layout.side, if substrate { 1.0 } else { 0.0 }],
+            lattice: [view.l as f32, dpr, self.layout.side, 0.0],
+            range: [view.range.0, view.range.1, 0.0, 0.0],
+            flags: [kind.shows_field(), kind.is_signed(), self.linear_out, substrate].map(u32::from),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
         if view.segments.len() > self.segment_capacity {
@@ -362,11 +419,6 @@ impl Renderer {
             Some(e) => Err(JsError::new(&e)),
             None => Ok(()),
         }
-    }
-
-    /// Colour range of the field last drawn, [min, max].
-    pub fn range(&self, sim: &WebSim) -> Vec<f32> {
-        vec![sim.view.range.0, sim.view.range.1]
     }
 }
 

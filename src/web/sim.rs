@@ -5,7 +5,8 @@
 use wasm_bindgen::prelude::*;
 
 use super::measure::{tissue_stats, TissueStats};
-use super::view::{FieldKind, ViewData};
+use super::render::WebView;
+use super::view::{FieldKind, ViewBuilder};
 use crate::analysis::holes::VoidRegions;
 use crate::{Monolayer, Params};
 
@@ -15,12 +16,12 @@ fn js_err(e: impl std::fmt::Display) -> JsError {
 
 #[wasm_bindgen]
 pub struct WebSim {
-    pub(crate) m: Monolayer,
+    m: Monolayer,
     /// Colour key of each cell (cell index + 1 at the start; unchanged when a cell is removed).
-    pub(crate) keys: Vec<u32>,
+    keys: Vec<u32>,
     /// Per-site multiplier of ξ_s painted by the brushes (1 = untouched).
     substrate: Vec<f64>,
-    pub(crate) view: ViewData,
+    view: ViewBuilder,
     stats: TissueStats,
     /// Step at which `stats` was measured (u64::MAX: never).
     stats_step: u64,
@@ -50,7 +51,7 @@ impl WebSim {
         Ok(WebSim {
             keys: (1..=n_cells as u32).collect(),
             substrate: vec![1.0; l * l],
-            view: ViewData::default(),
+            view: ViewBuilder::default(),
             stats: TissueStats::default(),
             stats_step: u64::MAX,
             regions: VoidRegions::default(),
@@ -124,6 +125,11 @@ impl WebSim {
         self.m.step_count().saturating_sub(self.m.params().relax_steps) as f64 * self.m.params().dt
     }
 
+    /// Seconds per simulation time unit (reporting only: the page's clock and chart).
+    pub fn time_unit_seconds(&self) -> f64 {
+        self.m.params().time_unit_seconds
+    }
+
     /// The core's bit-exact hash of the state, as 16 hex digits (as `monolayer fingerprint`).
     pub fn fingerprint(&self) -> String {
         format!("{:016x}", self.m.fingerprint())
@@ -153,6 +159,11 @@ impl WebSim {
     /// flattened as [x, y, twice the charge, orientation] per defect.
     pub fn defects(&self) -> Vec<f64> {
         self.view.defects.iter().flat_map(|d| [d.x, d.y, d.twice_charge as f64, d.orientation]).collect()
+    }
+
+    /// Spiral cores as last drawn (speed and strain rate), flattened as [x, y, ∇·v] per core.
+    pub fn spiral_cores(&self) -> Vec<f64> {
+        self.view.spiral_cores.iter().flat_map(|p| [p.x, p.y, p.divergence]).collect()
     }
 
     /// Fraction of the box covered by cells (Σφ ≥ ½).
@@ -230,8 +241,9 @@ impl WebSim {
         Ok(true)
     }
 
-    /// Rebuilds the drawing data for a field ("tissue", "phi", "speed", "director").
-    pub(crate) fn build_view(&mut self, kind: FieldKind, dpr: f32) {
-        self.view.build(&mut self.m, &self.keys, kind, dpr);
+    /// What the renderer draws for `field` now; `dpr` (device pixels per CSS pixel) sets the
+    /// line widths.
+    pub fn view(&mut self, field: FieldKind, dpr: f32) -> WebView {
+        WebView(self.view.build(&mut self.m, &self.keys, field, dpr).clone())
     }
 }

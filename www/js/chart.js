@@ -1,4 +1,5 @@
-// The hole-area time series: a small 2D-canvas line chart of void area against active time.
+// The hole-area time series: a small 2D-canvas line chart of void area against active time
+// (time in the core's units; the axis label in seconds, `secondsPerUnit` of them per unit).
 
 export class HoleChart {
   constructor(canvas, capacity = 600) {
@@ -6,6 +7,7 @@ export class HoleChart {
     this.capacity = capacity;
     this.t = [];
     this.area = [];
+    this.secondsPerUnit = 1;
   }
 
   clear() {
@@ -14,8 +16,9 @@ export class HoleChart {
     this.draw();
   }
 
+  // Adds a point; false (and nothing added) unless time has moved on.
   push(time, area) {
-    if (this.t.length && time <= this.t[this.t.length - 1]) return;
+    if (this.t.length && time <= this.t[this.t.length - 1]) return false;
     this.t.push(time);
     this.area.push(area);
     // Keep the whole run in view: halve the resolution when full.
@@ -23,6 +26,7 @@ export class HoleChart {
       this.t = this.t.filter((_, i) => i % 2 === 0);
       this.area = this.area.filter((_, i) => i % 2 === 0);
     }
+    return true;
   }
 
   draw() {
@@ -44,7 +48,7 @@ export class HoleChart {
     const t1 = n ? Math.max(this.t[n - 1], t0 + 1) : 1;
     const pad = 4 * dpr;
     g.fillText(`${Math.round(maxA)} µm²`, pad, 11 * dpr);
-    g.fillText(`${Math.round(t1 * 5)} s`, w - 44 * dpr, h - pad);
+    g.fillText(`${Math.round(t1 * this.secondsPerUnit)} s`, w - 44 * dpr, h - pad);
     g.strokeStyle = '#3a4150';
     g.beginPath();
     g.moveTo(pad, h - pad);

@@ -1,29 +1,40 @@
-// The page's state: parameters with their allowed ranges, the presets, and the URL that carries
-// them. A bad URL value never breaks the page: it is clamped (or replaced by the default) and
-// the page says so.
+// The page's state: parameters with their allowed ranges, the fields, the presets, and the URL
+// that carries them. A bad URL value never breaks the page: it is clamped (or replaced by the
+// default) and the page says so.
+
+// Only the FieldKind enum is read here (a plain object of the bindings): the WebAssembly module
+// itself is instantiated by main.js.
+import { FieldKind } from '../pkg/monolayer.js';
 
 // Size of the browser's tissue, chosen from measurements (README, "Browser demo"): big enough
 // for a hole to be a hole (several cells around it), small enough that the default preset opens
 // its first hole within a minute.
 export const SIZE = { box: 80, cells: 33, relaxSteps: 1500 };
 
-// Each parameter: label, range, default, and whether its slider is logarithmic.
+// Each parameter: label, range, default, and whether its slider is logarithmic. The page makes
+// one slider for each entry with `slider` (in this order); `model` ones are the core's.
 export const PARAMS = {
-  zeta: { label: 'Activity ζ', min: 0, max: 1, def: 0.4, step: 0.01 },
-  chi: { label: 'Friction ratio χ = ξs/ξcell', min: 0.001, max: 1, def: 0.01, log: true },
-  gamma: { label: 'Surface tension γ', min: 0.02, max: 0.2, def: 0.06, step: 0.005 },
-  spf: { label: 'Steps per frame (max)', min: 1, max: 50, def: 20, step: 1, integer: true },
+  zeta: { label: 'Activity ζ', min: 0, max: 1, def: 0.4, step: 0.01, slider: true, model: true },
+  chi: { label: 'Friction ratio χ = ξs/ξcell', min: 0.001, max: 1, def: 0.01, log: true, slider: true, model: true },
+  gamma: { label: 'Surface tension γ', min: 0.02, max: 0.2, def: 0.06, step: 0.005, slider: true, model: true },
+  spf: { label: 'Speed limit: steps per 1/30 s', min: 1, max: 50, def: 20, step: 1, integer: true, slider: true },
   seed: { label: 'Seed', min: 0, max: 4294967295, def: 1, step: 1, integer: true },
 };
+export const SLIDERS = Object.keys(PARAMS).filter((k) => PARAMS[k].slider);
+export const MODEL_PARAMS = Object.keys(PARAMS).filter((k) => PARAMS[k].model);
 
-export const FIELDS = {
-  tissue: 'Cells (outline at φ = ½, elongation axis)',
-  phi: 'Σφ (void where < 0.01)',
-  speed: 'Speed |Σφv| with velocity arrows',
-  director: 'Nematic order |Σφ Q̂| with director and ±½ defects',
-  strain: 'Strain rate ε̇ = ∇·v/2 with ±½ defects',
-  activediv: 'Active-force divergence ∇·fᵃ with ±½ defects',
-};
+// The fields the core can draw (src/web/view.rs, `FieldKind`), in the order of keys 1–6, with
+// the colour bar's units. In the URL a field is its FieldKind name in lower case.
+export const FIELDS = new Map([
+  [FieldKind.Tissue, { label: 'Cells (outline at φ = ½, axis ∝ elongation)', units: '' }],
+  [FieldKind.PhiSum, { label: 'Σφ (void where < 0.01)', units: '' }],
+  [FieldKind.Speed, { label: 'Speed |Σφv| with velocity arrows and spiral cores', units: ' µm per time unit' }],
+  [FieldKind.Director, { label: 'Nematic order |Σφ Q̂| with director and ±½ defects', units: '' }],
+  [FieldKind.StrainRate, { label: 'Strain rate ε̇ = ∇·v/2 with ±½ defects and spiral cores', units: ' per time unit' }],
+  [FieldKind.ForceDivergence, { label: 'Active-force divergence ∇·fᵃ with ±½ defects', units: '' }],
+]);
+export const fieldName = (kind) => FieldKind[kind].toLowerCase();
+const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === name);
 
 // The paper's three regimes at this size, from native runs of the same core with the calibrated
 // conventions (`monolayer sweep`, seeds 1 and 2, 1,500 relaxation steps, 8,000 active steps;
@@ -66,13 +77,13 @@ export function parseUrl(search) {
   }
   const base = PRESETS[preset ?? DEFAULT_PRESET];
   const state = {
-    preset: preset ?? (['zeta', 'chi', 'gamma'].some((k) => q.has(k)) ? null : DEFAULT_PRESET),
+    preset: preset ?? (MODEL_PARAMS.some((k) => q.has(k)) ? null : DEFAULT_PRESET),
     zeta: base.zeta,
     chi: base.chi,
     gamma: base.gamma,
     spf: PARAMS.spf.def,
     seed: PARAMS.seed.def,
-    field: 'tissue',
+    field: FieldKind.Tissue,
     embed: q.has('embed'),
     paused: q.has('paused'),
   };
@@ -81,7 +92,8 @@ export function parseUrl(search) {
   }
   const field = q.get('field');
   if (field !== null) {
-    if (field in FIELDS) state.field = field;
+    const kind = fieldByName(field);
+    if (kind !== undefined) state.field = kind;
     else notices.push(`field=${field} is unknown: showing the cells.`);
   }
   return { state, notices };
@@ -92,10 +104,10 @@ export function parseUrl(search) {
 export function toUrl(state) {
   const q = new URLSearchParams();
   if (state.preset) q.set('preset', state.preset);
-  else for (const k of ['zeta', 'chi', 'gamma']) q.set(k, String(state[k]));
+  else for (const k of MODEL_PARAMS) q.set(k, String(state[k]));
   q.set('seed', String(state.seed));
   if (state.spf !== PARAMS.spf.def) q.set('spf', String(state.spf));
-  if (state.field !== 'tissue') q.set('field', state.field);
+  if (state.field !== FieldKind.Tissue) q.set('field', fieldName(state.field));
   if (state.embed) q.set('embed', '');
   if (state.paused) q.set('paused', '');
   return '?' + q.toString().replace(/=(&|$)/g, '$1');

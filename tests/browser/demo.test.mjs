@@ -1,0 +1,545 @@
+// Browser tests of the demo (www/) with node:test, in Debian's headless Chromium driven by
+// playwright-core (no browser is downloaded): once with real WebGPU on SwiftShader, once without
+// WebGPU (wgpu's WebGL2 fallback), once with neither. Needs www/pkg (scripts/serve.sh
+// --build-only) and the native binary (for the fingerprint and the speed ratio).
+//
+//   node --test --test-reporter=spec tests/browser/demo.test.mjs
+//   MODES=webgl2 SKIP_HOLE=1 node --test …   one mode, without the first-hole test
+//
+// Screenshots and the measurements (results.json) go to test-output/browser/.
+
+import { describe, before, after, it } from 'node:test';
+import assert from 'node:assert/strict';
+import { chromium } from 'playwright-core';
+import { createServer } from 'node:http';
+import { readFile, mkdir, writeFile, mkdtemp, rm } from 'node:fs/promises';
+import { mkdirSync, writeFileSync } from 'node:fs';
+import { execFileSync } from 'node:child_process';
+import { tmpdir } from 'node:os';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+const ROOT = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
+const WWW = path.join(ROOT, 'www');
+const OUT = path.join(ROOT, 'test-output', 'browser');
+const NATIVE = process.env.MONOLAYER_BIN
+  ?? path.join(process.env.CARGO_TARGET_DIR ?? path.join(ROOT, 'target'), 'release', 'monolayer');
+const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
+
+const COMMON_FLAGS = [
+  '--no-sandbox', '--disable-background-networking', '--disable-component-update', '--disable-sync',
+  '--no-first-run', '--disable-quic', '--window-size=1280,900',
+];
+// All three GPU flags are needed for a WebGPU canvas on SwiftShader (see the browser recipe).
+const MODES = {
+  webgpu: {
+    backend: 'WebGPU',
+    flags: ['--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
+      '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+  },
+  webgl2: { backend: 'WebGL2', flags: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'] },
+};
+
+// --- a static server for www/ ---------------------------------------------------------------------
+const TYPES = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.wasm': 'application/wasm', '.png': 'image/png' };
+function serve() {
+  const server = createServer(async (req, res) => {
+    const url = new URL(req.url, 'http://x');
+    const rel = decodeURIComponent(url.pathname === '/' ? '/index.html' : url.pathname);
+    const file = path.join(WWW, path.normalize(rel));
+    if (!file.startsWith(WWW)) return res.writeHead(403).end();
+    try {
+      const body = await readFile(file);
+      res.writeHead(200, { 'content-type': TYPES[path.extname(file)] ?? 'application/octet-stream' });
+      res.end(body);
+    } catch {
+      res.writeHead(404).end();
+    }
+  });
+  return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
+}
+
+// --- results.json: each test's outcome and the measurements ------------------------------------
+const results = [];
+const metrics = {};
+const t0 = Date.now();
+
+// it() that also records the outcome for results.json.
+function check(name, opts, fn) {
+  if (typeof opts === 'function') [opts, fn] = [{}, opts];
+  it(name, { timeout: 120000, ...opts }, async (t) => {
+    const start = Date.now();
+    try {
+      await fn(t);
+      results.push({ name: t.fullName ?? name, ok: true, ms: Date.now() - start });
+    } catch (e) {
+      results.push({ name: t.fullName ?? name, ok: false, error: String(e.stack ?? e) });
+      throw e;
+    }
+  });
+}
+
+// --- helpers on a page ----------------------------------------------------------------------------
+async function open(context, base, query, errors) {
+  const page = await context.newPage();
+  page.on('console', (m) => {
+    if (m.type() === 'error') errors.push(`console: ${m.text()}`);
+  });
+  page.on('pageerror', (e) => errors.push(`pageerror: ${e.message}`));
+  await page.goto(base + query);
+  await page.waitForFunction(() => window.demo && (window.demo.ready || window.demo.error), null, { timeout: 60000 });
+  const err = await page.evaluate(() => window.demo.error);
+  assert(!err, `page error: ${err}`);
+  return page;
+}
+// The middle of site (L/2, L/2) on the page, in CSS pixels, from the layout the renderer drew
+// (the middle: a point on a site's edge may round to its neighbour).
+const centre = (page) => page.evaluate(async () => {
+  const c = document.getElementById('view');
+  const r = c.getBoundingClientRect();
+  const [x0, y0, side] = window.demo.renderer.layout();
+  const l = await window.demo.call('box_size');
+  const f = (l / 2 + 0.5) / l;
+  const s = c.width / r.width;
+  return { cx: r.left + (x0 + side * f) / s, cy: r.top + (y0 + side * f) / s };
+});
+const stats = (page) => page.evaluate(() => window.demo.stats);
+// The worker's own stats: a call queued after whatever the page just sent it, so it sees it.
+const workerStats = (page) => page.evaluate(() => window.demo.call('stats'));
+async function waitStats(page) {
+  // Stats and a drawn frame: the renderer's layout (pointer → lattice) is the drawn one.
+  await page.waitForFunction(() => window.demo.stats !== undefined && window.demo.drawn > 0, null, { timeout: 20000 });
+  return stats(page);
+}
+
+// The canvas as the compositor shows it, decoded in the page: distinct colours and a hash.
+async function canvasShot(page, file) {
+  const png = await page.locator('#view').screenshot({ path: file });
+  return page.evaluate(async (b64) => {
+    const img = new Image();
+    img.src = `data:image/png;base64,${b64}`;
+    await img.decode();
+    const c = new OffscreenCanvas(img.width, img.height);
+    const g = c.getContext('2d');
+    g.drawImage(img, 0, 0);
+    const d = g.getImageData(0, 0, img.width, img.height).data;
+    const colours = new Set();
+    let hash = 0;
+    for (let i = 0; i < d.length; i += 4 * 7) {
+      colours.add((d[i] << 16) | (d[i + 1] << 8) | d[i + 2]);
+      hash = (hash * 31 + d[i] + d[i + 1] * 3 + d[i + 2] * 7) >>> 0;
+    }
+    return { colours: colours.size, hash };
+  }, png.toString('base64'));
+}
+
+function nativeFingerprint(size, p, seed, totalSteps) {
+  const out = execFileSync(NATIVE, [
+    'fingerprint', '--set', `box_size=${size.box}`, '--set', `n_cells=${size.cells}`,
+    '--relax-steps', String(size.relaxSteps), '--zeta', String(p.zeta), '--chi', String(p.chi),
+    '--set', `gamma=${p.gamma}`, '--seed', String(seed), '--total-steps', String(totalSteps),
+  ], { encoding: 'utf8', env: { ...process.env, RAYON_NUM_THREADS: '1' } });
+  return JSON.parse(out);
+}
+
+// Native ms per active step at the page's size, one thread: (T(relax + n) − T(relax)) / n, each
+// T the fastest of three runs (the machine is shared: the minimum is the least disturbed).
+function nativeMsPerStep(size, p, n) {
+  const time = (steps) => {
+    let best = Infinity;
+    for (let i = 0; i < 3; i++) {
+      const t0 = process.hrtime.bigint();
+      nativeFingerprint(size, p, 1, steps);
+      best = Math.min(best, Number(process.hrtime.bigint() - t0) / 1e6);
+    }
+    return best;
+  };
+  return (time(size.relaxSteps + n) - time(size.relaxSteps)) / n;
+}
+
+const SKIP_HOLE = Boolean(process.env.SKIP_HOLE);
+const ONLY = process.env.MODES ? process.env.MODES.split(',') : null;
+const wanted = (mode) => !ONLY || ONLY.includes(mode);
+
+// The default preset (ζ = 0.4, χ = 0.01, γ = 0.06) and seed 1 at the page's size open their first
+// hole (a void region above πR²/4, once active) at this step, relaxation included: found by
+// stepping one at a time and measuring after each step. It changes only with the physics.
+const FIRST_HOLE_STEP = Number(process.env.FIRST_HOLE_STEP ?? 3080);
+
+let server;
+let base;
+before(async () => {
+  await mkdir(OUT, { recursive: true });
+  server = await serve();
+  base = `http://127.0.0.1:${server.address().port}`;
+});
+after(() => {
+  server?.close();
+  metrics.seconds = (Date.now() - t0) / 1000;
+  mkdirSync(OUT, { recursive: true });
+  writeFileSync(path.join(OUT, 'results.json'), JSON.stringify({ results, metrics }, null, 2));
+});
+
+async function launch(flags) {
+  const profile = await mkdtemp(path.join(tmpdir(), 'monolayer-chromium-'));
+  const context = await chromium.launchPersistentContext(profile, {
+    executablePath: CHROMIUM,
+    headless: true,
+    args: [...COMMON_FLAGS, ...flags],
+    viewport: { width: 1280, height: 900 },
+  });
+  return { context, profile };
+}
+
+for (const [modeName, mode] of Object.entries(MODES)) {
+  describe(`${modeName}: Chromium ${mode.flags.join(' ')}`, { skip: !wanted(modeName) }, () => {
+    let context;
+    let profile;
+    const errors = [];
+    const m = (metrics[modeName] = {});
+    const shot = (name) => path.join(OUT, `${modeName}-${name}.png`);
+    before(async () => {
+      ({ context, profile } = await launch(mode.flags));
+    });
+    after(async () => {
+      await context?.close();
+      if (profile) await rm(profile, { recursive: true, force: true });
+    });
+
+    let page;
+    check(`page loads on ${mode.backend} with no console error`, async () => {
+      page = await open(context, base, '/?seed=1', errors);
+      const backend = await page.evaluate(() => window.demo.backend);
+      assert(backend.startsWith(mode.backend), `backend ${backend}, expected ${mode.backend}`);
+      m.backend = backend;
+      await waitStats(page);
+      assert(errors.length === 0, errors.join('\n'));
+    });
+    check(`the simulation advances`, async () => {
+      const a = (await stats(page)).step;
+      await page.waitForTimeout(1500);
+      const b = (await stats(page)).step;
+      assert(b > a, `step ${a} → ${b}`);
+    });
+
+    check('the simulation steps in its worker while the main thread is busy', async () => {
+      assert(await page.evaluate(() => window.demo.worker === true), 'no worker');
+      const before = (await page.evaluate(() => window.demo.call('stats'))).step;
+      // Blocks the main thread (drawing, input) for 1.5 s: stepping carries on in the worker.
+      await page.evaluate(() => {
+        const t = performance.now();
+        while (performance.now() - t < 1500);
+      });
+      const after = (await page.evaluate(() => window.demo.call('stats'))).step;
+      m.stepsWhileMainThreadBlocked = after - before;
+      assert(after - before >= 50, `${after - before} steps while the main thread was blocked for 1.5 s`);
+    });
+
+    check(`the canvas is drawn and changes between two screenshots`, async () => {
+      const a = await canvasShot(page, shot('1'));
+      await page.waitForTimeout(1500);
+      const b = await canvasShot(page, shot('2'));
+      assert(a.colours > 20, `only ${a.colours} colours: blank canvas?`);
+      assert(a.hash !== b.hash, 'the canvas did not change');
+      m.colours = a.colours;
+    });
+
+    check(`each field draws with its colour bar`, async () => {
+      const fields = [['2', 'phisum'], ['3', 'speed'], ['4', 'director'], ['5', 'strainrate'], ['6', 'forcedivergence'], ['1', 'tissue']];
+      for (const [key, f] of fields) {
+        await page.keyboard.press(key);
+        await page.waitForTimeout(300);
+        const s = await canvasShot(page, shot(`field-${f}`));
+        assert(s.colours > 20, `${f}: only ${s.colours} colours`);
+        const bar = await page.locator('#colorbar-labels').isVisible();
+        assert(bar === (f !== 'tissue'), `${f}: colour bar labels visible = ${bar}`);
+        assert(new URL(page.url()).searchParams.get('field') === (f === 'tissue' ? null : f), `${f}: URL ${page.url()}`);
+        if (f === 'strainrate') {
+          // The ±½ defects of the smoothed nematic field come with it (analysis::defects).
+          const d = await page.evaluate(() => window.demo.call('defects'));
+          assert(d.length % 4 === 0, 'defects: 4 numbers each');
+          m.defectsSeen = d.length / 4;
+        }
+      }
+    });
+
+    check('spiral cores are found as the analysis finds them and drawn on the strain rate', async () => {
+      await page.keyboard.press('5');
+      // Spiral cores come and go with the flow: wait for a frame that has some.
+      const cores = await page.evaluate(async () => {
+        for (let i = 0; i < 100; i++) {
+          const c = await window.demo.call('spiral_cores');
+          if (c.length) return Array.from(c);
+          await new Promise((r) => setTimeout(r, 200));
+        }
+        return [];
+      });
+      assert(cores.length > 0 && cores.length % 3 === 0, `spiral cores: ${cores}`);
+      for (let i = 0; i < cores.length; i += 3) assert(cores[i + 2] > 0, `a spiral core with ∇·v = ${cores[i + 2]}`);
+      m.spiralCoresSeen = cores.length / 3;
+      await canvasShot(page, shot('spiral-cores'));
+      await page.keyboard.press('1');
+    });
+
+    check(`pause stops time, Space resumes it, Step steps once`, async () => {
+      // The worker's own count (the readouts follow it with the next frame drawn).
+      const step = () => page.evaluate(() => window.demo.call('stats')).then((s) => s.step);
+      await page.click('#play');
+      await page.waitForTimeout(200);
+      const a = await step();
+      await page.waitForTimeout(800);
+      const b = await step();
+      assert(a === b, `paused, yet step ${a} → ${b}`);
+      assert(page.url().includes('paused'), `URL does not record the pause: ${page.url()}`);
+      const spf = await page.evaluate(() => Number(document.getElementById('spf-out').textContent));
+      await page.click('#step');
+      await page.waitForTimeout(200);
+      const c = await step();
+      assert(c === b + spf, `Step: ${b} → ${c}, expected +${spf}`);
+      await page.waitForFunction((c) => window.demo.stats.step === c, c, { timeout: 10000 });
+      await page.locator('body').press(' ');
+      await page.waitForTimeout(800);
+      assert((await step()) > c, 'Space did not resume');
+    });
+
+    check(`a preset sets its values`, async () => {
+      await page.selectOption('#preset', 'no-holes');
+      await page.waitForTimeout(200);
+      const s = await workerStats(page);
+      const p = await page.evaluate(() => import('./js/state.js').then((m) => m.PRESETS['no-holes']));
+      assert(s.zeta === p.zeta && Math.abs(s.chi - p.chi) < 1e-12 && s.gamma === p.gamma,
+        `core has ζ=${s.zeta} χ=${s.chi} γ=${s.gamma}, preset ${JSON.stringify(p)}`);
+      assert((await page.textContent('#chi-out')) === String(p.chi), 'χ readout');
+      assert(new URL(page.url()).searchParams.get('preset') === 'no-holes', `URL ${page.url()}`);
+    });
+
+    check(`a slider acts on the core and the URL round-trips the state`, async () => {
+      await page.locator('#zeta').fill('420'); // slider position 420/1000 of [0, 1]
+      await page.locator('#gamma').focus();
+      await page.keyboard.press('ArrowRight');
+      await page.fill('#seed', '12345');
+      await page.locator('#seed').dispatchEvent('change');
+      await page.evaluate(() => document.activeElement.blur()); // keys typed in a field are text
+      await page.keyboard.press('3');
+      await page.waitForTimeout(200);
+      const s = await workerStats(page);
+      assert(s.zeta === 0.42, `ζ in the core: ${s.zeta}`);
+      const url = page.url();
+      const q = new URL(url).searchParams;
+      assert(q.get('zeta') === '0.42' && q.get('seed') === '12345' && q.get('field') === 'speed' && !q.has('preset'),
+        `URL ${url}`);
+      const again = await open(context, base, new URL(url).search, errors);
+      const s2 = await waitStats(again);
+      assert(s2.zeta === s.zeta && s2.chi === s.chi && s2.gamma === s.gamma, `reopened: ${JSON.stringify(s2)} vs ${JSON.stringify(s)}`);
+      assert(await again.isChecked('input[name=field][value=speed]'), 'field not restored');
+      assert((await again.inputValue('#seed')) === '12345', 'seed not restored');
+      await again.close();
+    });
+
+    check('the record button saves a WebM of the canvas', async () => {
+      await page.click('#record');
+      assert((await page.textContent('#record')) === 'Stop', 'the button does not say Stop');
+      await page.waitForTimeout(2500);
+      await page.click('#record');
+      await page.waitForFunction(() => window.demo.lastRecording, null, { timeout: 10000 });
+      const r = await page.evaluate(() => window.demo.lastRecording);
+      m.recording = r;
+      assert(r.type === 'video/webm' && r.size > 1000, `recording ${JSON.stringify(r)}`);
+      assert(r.head === '1a45dfa3', `not a WebM (EBML) file: starts ${r.head}`);
+      // The first page is done: closed, its worker stops stepping, so that the measurements
+      // below have the machine to themselves.
+      await page.close();
+    });
+
+    check(`brushes paint the substrate and remove a cell`, async () => {
+      const p = await open(context, base, '/?paused&seed=1', errors);
+      await waitStats(p);
+      // Relax the tissue so that there is a cell under the pointer.
+      const drawn = await p.evaluate(() => window.demo.drawn);
+      await p.evaluate(() => window.demo.call('step', 300));
+      await p.waitForFunction((d) => window.demo.drawn > d, drawn, { timeout: 20000 }); // drawn after
+      // Where the centre is at the moment of the click: checking a radio low in the panel may
+      // scroll the page.
+      const clickCentre = async () => {
+        const { cx, cy } = await centre(p);
+        await p.mouse.click(cx, cy);
+      };
+      const l = await p.evaluate(() => window.demo.call('box_size'));
+      // ξs multiplier at the centre once it differs from `was` (a stroke reaches the worker
+      // after the click), or `was` after 2 s.
+      const substrateAtCentre = (was) => p.evaluate(async ([l, was]) => {
+        for (let i = 0; i < 20; i++) {
+          const v = await window.demo.call('substrate_at', l / 2, l / 2);
+          if (v !== was) return v;
+          await new Promise((r) => setTimeout(r, 100));
+        }
+        return was;
+      }, [l, was]);
+      await p.check('input[name=tool][value=soft]');
+      await clickCentre();
+      const soft = await substrateAtCentre(1);
+      const at0 = await p.evaluate(() => window.demo.lastPointer);
+      assert(Math.abs(soft - 0.1) < 1e-12, `soft brush: ξs multiplier ${soft} at the centre; the click reached ${at0}`);
+      await p.check('input[name=tool][value=stiff]');
+      await clickCentre();
+      const stiff = await substrateAtCentre(soft);
+      assert(Math.abs(stiff - 10) < 1e-12, `stiff brush: ${stiff}`);
+      await canvasShot(p, shot('brush'));
+      const before = await p.evaluate(() => window.demo.call('n_cells'));
+      const target = await p.evaluate((l) => window.demo.call('cell_at', l / 2, l / 2), l);
+      assert(target >= 0, 'no cell under the centre after relaxation');
+      await p.check('input[name=tool][value=ablate]');
+      await clickCentre();
+      const after = await p.evaluate(async (before) => {
+        for (let i = 0; i < 20; i++) {
+          const n = await window.demo.call('n_cells');
+          if (n !== before) return n;
+          await new Promise((r) => setTimeout(r, 100));
+        }
+        return before;
+      }, before);
+      const at = await p.evaluate(() => window.demo.lastPointer);
+      assert(after === before - 1, `cells ${before} → ${after}; the click reached lattice point ${at}`);
+      await p.evaluate(() => window.demo.call('step', 20)); // the tissue continues without it
+      await p.close();
+    });
+
+    check(`the screenshot button saves the drawn frame; ?embed hides the chrome`, async () => {
+      const p = await open(context, base, '/?embed&seed=1', errors);
+      await waitStats(p);
+      assert(!(await p.locator('header').isVisible()), 'header visible in embed mode');
+      assert(!(await p.locator('#zeta').isVisible()), 'sliders visible in embed mode');
+      assert(await p.locator('#view').isVisible(), 'no canvas in embed mode');
+      await p.click('#shot');
+      await p.waitForFunction(() => window.demo.lastScreenshot, null, { timeout: 10000 });
+      const url = await p.evaluate(() => window.demo.lastScreenshot);
+      assert(url.startsWith('data:image/png;base64,'), 'not a PNG');
+      const png = Buffer.from(url.slice(url.indexOf(',') + 1), 'base64');
+      await writeFile(shot('screenshot-button'), png);
+      const colours = await p.evaluate(async (u) => {
+        const img = new Image();
+        img.src = u;
+        await img.decode();
+        const c = new OffscreenCanvas(img.width, img.height);
+        const g = c.getContext('2d');
+        g.drawImage(img, 0, 0);
+        const d = g.getImageData(0, 0, img.width, img.height).data;
+        const set = new Set();
+        for (let i = 0; i < d.length; i += 4 * 7) set.add((d[i] << 16) | (d[i + 1] << 8) | d[i + 2]);
+        return set.size;
+      }, url);
+      assert(colours > 20, `screenshot has ${colours} colours: blank?`);
+      await p.close();
+    });
+
+    check(`bad URL parameters are clamped with a visible notice`, async () => {
+      const p = await open(context, base, '/?chi=5&zeta=abc&seed=-3&preset=nope&field=wrong', errors);
+      const s = await waitStats(p);
+      assert(await p.locator('#notice').isVisible(), 'no notice');
+      const text = await p.textContent('#notice');
+      for (const bit of ['chi=5', 'zeta=abc', 'seed=-3', 'preset=nope', 'field=wrong']) {
+        assert(text.includes(bit), `notice does not mention ${bit}: ${text}`);
+      }
+      const zetaDefault = await p.evaluate(() => import('./js/state.js').then((m) => m.PARAMS.zeta.def));
+      assert(s.chi === 1 && s.zeta === zetaDefault, `clamped values in the core: χ=${s.chi} ζ=${s.zeta}`);
+      const seed = await p.inputValue('#seed');
+      assert(seed === '0', `seed ${seed}`);
+      await p.close();
+    });
+
+    check(`the wasm core's fingerprint equals the native one`, async () => {
+      const p = await open(context, base, '/?paused&seed=7', errors);
+      await waitStats(p);
+      const size = await p.evaluate(() => window.demo.size);
+      const active = 150;
+      const wasm = await p.evaluate(async (n) => {
+        const call = window.demo.call;
+        await call('step', n);
+        const s = await call('stats');
+        return { step: s.step, fingerprint: await call('fingerprint'), zeta: s.zeta, chi: s.chi, gamma: s.gamma };
+      }, size.relaxSteps + active);
+      const native = nativeFingerprint(size, wasm, 7, wasm.step);
+      assert(native.step === wasm.step, `steps ${native.step} vs ${wasm.step}`);
+      assert(native.fingerprint === wasm.fingerprint, `wasm ${wasm.fingerprint} vs native ${native.fingerprint} at step ${wasm.step}`);
+      m.fingerprint = wasm;
+      await p.close();
+    });
+
+    check(`speed of the wasm core vs native, and drawing fps`, async () => {
+      const p = await open(context, base, '/?paused&seed=1', errors);
+      await waitStats(p);
+      const size = await p.evaluate(() => window.demo.size);
+      const n = 300;
+      // The fastest of three batches of n / 3 active steps, as for the native side, timed in the
+      // worker that steps them.
+      const wasmMs = await p.evaluate(async ([relax, n]) => {
+        const call = window.demo.call;
+        await call('step', relax);
+        let best = Infinity;
+        for (let i = 0; i < 3; i++) best = Math.min(best, (await call('step', n / 3)) / (n / 3));
+        return best;
+      }, [size.relaxSteps, n]);
+      const params = await stats(p);
+      const nativeMs = nativeMsPerStep(size, params, n);
+      m.wasmMsPerStep = wasmMs;
+      m.nativeMsPerStep = nativeMs;
+      m.speedRatio = nativeMs / wasmMs;
+      // Steps/s and fps while playing, once the resolution has settled.
+      await p.click('#play');
+      await p.waitForTimeout(6000);
+      const s = await stats(p);
+      m.fps = s.fps;
+      m.stepsPerSecondPlaying = s.sps;
+      m.renderScale = s.renderScale;
+      console.log(`       wasm ${wasmMs.toFixed(2)} ms/step, native ${nativeMs.toFixed(2)} ms/step (ratio ${m.speedRatio.toFixed(2)}); playing: ${s.fps.toFixed(0)} fps at ${Math.round(100 * s.renderScale)} % resolution, ${s.sps.toFixed(0)} steps/s`);
+      // Reported, not held to a target: on this shared machine the same build measured 0.26 to
+      // 1.26 in one afternoon. Only a gross loss (an unoptimised build is ~0.05) fails.
+      assert(m.speedRatio >= 0.2, `wasm is ${m.speedRatio.toFixed(2)}× native`);
+      await p.close();
+    });
+
+    // The hole's step is the same on every machine (the core is deterministic, and the page
+    // counts holes after every batch of at most `spf` steps); the seconds it takes are this
+    // machine's, reported in results.json and not asserted.
+    check('the default preset opens its first hole at its step', { skip: SKIP_HOLE, timeout: 240000 }, async () => {
+      const p = await open(context, base, '/', errors);
+      const spfMax = await p.evaluate(() => import('./js/state.js').then((m) => m.PARAMS.spf.max));
+      await p.waitForFunction(() => window.demo.firstHole !== null, null, { timeout: 200000, polling: 250 });
+      const hole = await p.evaluate(() => window.demo.firstHole);
+      m.firstHole = hole;
+      await p.waitForTimeout(1500);
+      await canvasShot(p, shot('first-hole'));
+      console.log(`       first hole after ${hole.seconds.toFixed(1)} s (step ${hole.step})`);
+      assert(hole.step >= FIRST_HOLE_STEP && hole.step < FIRST_HOLE_STEP + spfMax,
+        `first hole counted at step ${hole.step}: it opens at step ${FIRST_HOLE_STEP} (default preset, seed 1)`);
+      await p.close();
+    });
+
+    check(`no console error during the whole run`, async () => {
+      assert(errors.length === 0, errors.join('\n'));
+    });
+  });
+}
+
+describe('nogpu: Chromium --disable-3d-apis (neither WebGPU nor WebGL2)', { skip: !wanted('nogpu') }, () => {
+  let context;
+  let profile;
+  before(async () => {
+    ({ context, profile } = await launch(['--disable-3d-apis']));
+  });
+  after(async () => {
+    await context?.close();
+    if (profile) await rm(profile, { recursive: true, force: true });
+  });
+  check('the canvas says why instead of staying blank', async () => {
+    const page = await context.newPage();
+    await page.goto(base + '/');
+    await page.waitForFunction(() => window.demo && (window.demo.ready || window.demo.error), null, { timeout: 30000 });
+    const err = await page.evaluate(() => window.demo.error);
+    assert(err && /WebGPU|WebGL2/.test(err), `no error shown: ${err}`);
+    assert(await page.locator('#message').isVisible(), 'message hidden');
+    const text = await page.textContent('#message');
+    assert(text.includes('WebGPU or WebGL2'), `message: ${text}`);
+    await page.screenshot({ path: path.join(OUT, 'no-gpu.png') });
+  });
+});

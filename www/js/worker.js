@@ -1,0 +1,193 @@
+// The simulation's own thread. The WebAssembly core is instantiated here and steps while the
+// page plays, whatever the drawing costs; whenever the main thread is ready to draw, it asks
+// for a frame and gets the latest state's view, its arrays transferred (not copied).
+//
+// Messages in: { type: 'new', size, params, seed }, { type: 'play', on }, { type: 'spf', n },
+// { type: 'frame', field, dpr }, { type: 'call', id, method, args }.
+// Messages out: { type: 'ready', info }, { type: 'frame', parts, stats }, { type: 'stopped', why,
+// active }, { type: 'result', id, value | error }, { type: 'fatal', message }.
+
+import init, { WebSim } from '../pkg/monolayer.js';
+
+let sim = null;
+let playing = false;
+// The "steps per frame" slider caps the speed at `spf` steps per 1/30 s: a budget that refills
+// with time, not with frames drawn, so that drawing never holds stepping back.
+let spf = 20;
+let budget = 0;
+let refilledAt = performance.now();
+// The page's pending request for a frame, and whether the state changed since the last frame.
+let frameRequest = null;
+let changed = true;
+let lastSent = { field: null, dpr: null };
+let scheduled = false;
+// A batch of steps is sized to take about this long, so that messages are answered promptly.
+const BATCH_MS = 12;
+let msPerStep = 5;
+
+// console_error_panic_hook writes a Rust panic's message to console.error before the trap.
+let lastConsoleError = '';
+const consoleError = console.error.bind(console);
+console.error = (...args) => {
+  lastConsoleError = args.map(String).join(' ');
+  consoleError(...args);
+};
+
+function fatal(e) {
+  const panic = lastConsoleError.includes('panicked') ? `\n\n${lastConsoleError}` : '';
+  postMessage({ type: 'fatal', message: `${e.message ?? e}${panic}` });
+  sim = null;
+}
+
+// A zero-delay task (setTimeout would be clamped to 4 ms once nested).
+const tick = new MessageChannel();
+tick.port1.onmessage = () => pump();
+function schedule() {
+  if (!scheduled) {
+    scheduled = true;
+    tick.port2.postMessage(null);
+  }
+}
+
+// Steps the core; on an error of the model (the core keeps the state before the failing step)
+// stops and tells the page why.
+function takeSteps(n) {
+  try {
+    sim.step(n);
+    return true;
+  } catch (e) {
+    if (e instanceof WebAssembly.RuntimeError) throw e;
+    playing = false;
+    postMessage({ type: 'stopped', why: String(e.message ?? e), active: sim.active() });
+    return false;
+  }
+}
+
+function refill() {
+  const now = performance.now();
+  budget = Math.min(spf, budget + ((now - refilledAt) * spf * 30) / 1000);
+  refilledAt = now;
+}
+
+function pump() {
+  scheduled = false;
+  if (!sim) return;
+  try {
+    if (playing) {
+      refill();
+      const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(BATCH_MS / msPerStep)));
+      if (n >= 1) {
+        const t0 = performance.now();
+        if (takeSteps(n)) {
+          msPerStep = 0.8 * msPerStep + 0.2 * ((performance.now() - t0) / n);
+          budget -= n;
+          changed = true;
+        }
+      }
+    }
+    if (frameRequest) sendFrame();
+    if (playing) {
+      if (budget >= 1) schedule();
+      else setTimeout(schedule, 1000 / (30 * spf));
+    }
+  } catch (e) {
+    fatal(e);
+  }
+}
+
+function stats() {
+  return {
+    step: sim.step_count(),
+    holes: sim.holes(),
+    area: sim.hole_area(),
+    time: sim.active_time(),
+    active: sim.active(),
+    packing: sim.packing_fraction(),
+    zeta: sim.zeta(),
+    chi: sim.chi(),
+    gamma: sim.gamma(),
+    cells: sim.n_cells(),
+    l: sim.box_size(),
+    relaxSteps: sim.relax_steps(),
+    timeUnitSeconds: sim.time_unit_seconds(),
+    msPerStep,
+  };
+}
+
+function sendFrame() {
+  const { field, dpr } = frameRequest;
+  if (!changed && field === lastSent.field && dpr === lastSent.dpr) return;
+  frameRequest = null;
+  changed = false;
+  lastSent = { field, dpr };
+  const view = sim.view(field, dpr);
+  const parts = {
+    l: view.l(),
+    kind: view.kind(),
+    tissue: view.tissue(),
+    field: view.field(),
+    segments: view.segments(),
+    range: view.range(),
+  };
+  view.free();
+  postMessage({ type: 'frame', parts, stats: stats() }, [parts.tissue.buffer, parts.field.buffer, parts.segments.buffer]);
+}
+
+// What the page and the tests may ask of the simulation, beyond stepping.
+const CALLS = {
+  // Steps n now and returns the milliseconds it took.
+  step: (n) => {
+    const t0 = performance.now();
+    if (!takeSteps(n)) return null;
+    return performance.now() - t0;
+  },
+  set: (name, value) => sim[`set_${name}`](value),
+  paint_substrate: (...a) => sim.paint_substrate(...a),
+  remove_cell_at: (...a) => sim.remove_cell_at(...a),
+  substrate_at: (...a) => sim.substrate_at(...a),
+  cell_at: (...a) => sim.cell_at(...a),
+  n_cells: () => sim.n_cells(),
+  box_size: () => sim.box_size(),
+  fingerprint: () => sim.fingerprint(),
+  defects: () => sim.defects(),
+  spiral_cores: () => sim.spiral_cores(),
+  stats: () => stats(),
+};
+
+onmessage = async (e) => {
+  const m = e.data;
+  try {
+    if (m.type === 'new') {
+      if (!sim) await init();
+      if (sim) sim.free();
+      sim = null;
+      const { size, params: p, seed } = m;
+      try {
+        sim = new WebSim(size.box, size.cells, size.relaxSteps, p.zeta, p.chi, p.gamma, seed);
+      } catch (err) {
+        postMessage({ type: 'fatal', message: `Could not start the simulation: ${err.message ?? err}` });
+        return;
+      }
+      changed = true;
+      postMessage({ type: 'ready', stats: stats() });
+    } else if (m.type === 'play') {
+      playing = m.on;
+    } else if (m.type === 'spf') {
+      spf = m.n;
+    } else if (m.type === 'frame') {
+      frameRequest = m;
+    } else if (m.type === 'call') {
+      try {
+        const value = CALLS[m.method](...(m.args ?? []));
+        changed = true; // cheap to assume: a call may have edited the tissue
+        postMessage({ type: 'result', id: m.id, value });
+      } catch (err) {
+        if (err instanceof WebAssembly.RuntimeError) throw err;
+        postMessage({ type: 'result', id: m.id, error: String(err.message ?? err) });
+      }
+    }
+    schedule();
+  } catch (err) {
+    fatal(err);
+  }
+};
