@@ -50,14 +50,17 @@ export const PRESETS = {
 };
 export const DEFAULT_PRESET = 'persistent';
 
-function clampParam(name, raw, notices) {
+// `fallback` is what the state holds without this value (the preset's, or the default).
+function clampParam(name, raw, notices, fallback) {
   const p = PARAMS[name];
   let v = Number(raw);
   if (raw === null || raw === '' || !Number.isFinite(v)) {
-    notices.push(`${name}=${raw} is not a number: using ${p.def}.`);
-    return p.def;
+    notices.push(`${name}=${raw} is not a number: using ${fallback}.`);
+    return fallback;
   }
   if (p.integer) v = Math.round(v);
+  // −0 would print as "0" in the URL and come back as +0: keep one zero.
+  if (v === 0) v = 0;
   if (v < p.min || v > p.max) {
     const c = Math.min(p.max, Math.max(p.min, v));
     notices.push(`${name}=${raw} is outside [${p.min}, ${p.max}]: using ${c}.`);
@@ -88,7 +91,12 @@ export function parseUrl(search) {
     paused: q.has('paused'),
   };
   for (const name of Object.keys(PARAMS)) {
-    if (q.has(name)) state[name] = clampParam(name, q.get(name), notices);
+    if (q.has(name)) state[name] = clampParam(name, q.get(name), notices, state[name]);
+  }
+  // A preset with a model parameter changed is no longer that preset: the URL written back
+  // must carry the values, or a shared link would show another tissue.
+  if (state.preset !== null && MODEL_PARAMS.some((k) => state[k] !== PRESETS[state.preset][k])) {
+    state.preset = null;
   }
   const field = q.get('field');
   if (field !== null) {
