@@ -56,7 +56,10 @@ impl WebView {
         range: &[f32],
     ) -> Result<WebView, JsError> {
         let seg_floats = std::mem::size_of::<Segment>() / 4;
-        if tissue.len() != 4 * l * l || field.len() != 4 * l * l || segments.len() % seg_floats != 0 || range.len() != 2
+        if tissue.len() != 4 * l * l
+            || field.len() != 4 * l * l
+            || !segments.len().is_multiple_of(seg_floats)
+            || range.len() != 2
         {
             return Err(JsError::new("WebView: parts of the wrong sizes"));
         }
