@@ -35,8 +35,7 @@ pub struct Cell {
     pub(crate) phi0: Vec<f64>,
     /// dφ_i/dt of the predictor evaluation.
     pub(crate) k1: Vec<f64>,
-    /// dφ_i/dt of an evaluation outside the stepping; within a step, where the corrector writes
-    /// φ' before it is swapped into `phi`.
+    /// dφ_i/dt of the latest evaluation.
     pub(crate) rate: Vec<f64>,
     /// μ_i = δF/δφ_i.
     pub(crate) mu: Vec<f64>,

@@ -24,7 +24,7 @@ use crate::model::free_energy::{area, FreeEnergy};
 use crate::model::friction::{FrictionProblem, FrictionSolver, SolveStats};
 use crate::model::init::random_disks;
 use crate::model::lattice::{wrap, Patch};
-use crate::model::motion::{friction_weight, velocity_and_rate, Drag, MotionFields, Output};
+use crate::model::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
 use crate::model::par;
 use crate::model::params::Params;
 use crate::model::shape::{normalise, shape_tensor};
@@ -112,37 +112,25 @@ enum Then {
 }
 
 impl Then {
-    /// The motion pass's output for cell `c`: the rate, or Heun's next φ written into a spare
-    /// buffer ([`Then::finish`] swaps it in). φ_n and R(φ_n) are kept by the predictor in
-    /// `phi0` and `k1` this way, not copied; the corrector's φ' goes to `rate`, which the
-    /// stepping does not otherwise need.
-    fn output(self, c: &mut Cell) -> (MotionFields<'_>, Patch) {
-        let out = match self {
-            Then::Nothing => Output::Rate { vx: &mut c.vx, vy: &mut c.vy, rate: &mut c.rate },
-            Then::Predict { dt } => Output::Predict { dt, k1: &mut c.k1, next: &mut c.phi0 },
-            Then::Correct { dt, lo, hi } => Output::Correct {
-                dt,
-                phi0: &c.phi0,
-                k1: &c.k1,
-                vx: &mut c.vx,
-                vy: &mut c.vy,
-                next: &mut c.rate,
-                lo,
-                hi,
-            },
-        };
-        (MotionFields { phi: &c.phi, mu: &c.mu, fx: &c.fx, fy: &c.fy, out }, c.patch)
-    }
-
-    /// Swaps the next φ in; after the corrector, finds where φ' left [lo, hi] if the motion pass
-    /// saw that it did.
-    fn finish(self, c: &mut Cell, outside: bool) {
+    fn apply(self, c: &mut Cell) {
         match self {
             Then::Nothing => {}
-            Then::Predict { .. } => std::mem::swap(&mut c.phi0, &mut c.phi),
-            Then::Correct { lo, hi, .. } => {
-                std::mem::swap(&mut c.rate, &mut c.phi);
-                c.fault = if outside { first_out_of_range(c, lo, hi) } else { None };
+            Then::Predict { dt } => {
+                // φ_n and R(φ_n) are kept by swapping buffers, not copying them; the stale
+                // buffers left in φ and R are overwritten whole, φ here and R by the
+                // corrector's evaluation (its padding stays zero in both).
+                std::mem::swap(&mut c.phi0, &mut c.phi);
+                std::mem::swap(&mut c.k1, &mut c.rate);
+                for ((phi, &p0), &k) in c.phi.iter_mut().zip(&c.phi0).zip(&c.k1) {
+                    *phi = p0 + dt * k;
+                }
+            }
+            Then::Correct { dt, lo, hi } => {
+                let half = 0.5 * dt;
+                for ((phi, &p0), (&k1, &k2)) in c.phi.iter_mut().zip(&c.phi0).zip(c.k1.iter().zip(&c.rate)) {
+                    *phi = p0 + half * (k1 + k2);
+                }
+                c.fault = first_out_of_range(c, lo, hi);
             }
         }
     }
@@ -523,11 +511,19 @@ impl Monolayer {
         counters.time_laps([Stage::Velocity, Stage::Update], |laps| {
             let drag = Drag { mobility: &lat.mobility, pull: &lat.pull };
             par::for_each_mut(cells, |_, c| {
-                let outside = laps.lap(0, || {
-                    let (fields, patch) = then.output(c);
-                    velocity_and_rate(patch, fields, &drag, l, j0, advection)
+                laps.lap(0, || {
+                    let fields = MotionFields {
+                        phi: &c.phi,
+                        mu: &c.mu,
+                        fx: &c.fx,
+                        fy: &c.fy,
+                        vx: &mut c.vx,
+                        vy: &mut c.vy,
+                        rate: &mut c.rate,
+                    };
+                    velocity_and_rate(c.patch, fields, &drag, l, j0, advection);
                 });
-                laps.lap(1, || then.finish(c, outside));
+                laps.lap(1, || then.apply(c));
             })
         });
         Ok(())

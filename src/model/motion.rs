@@ -39,51 +39,33 @@ pub struct Drag<'a> {
     pub pull: &'a [C64],
 }
 
-/// The cell's fields on its patch that this stage reads, and what it writes.
+/// The cell's fields on its patch that this stage reads and writes.
 pub struct MotionFields<'a> {
     pub phi: &'a [f64],
     pub mu: &'a [f64],
     pub fx: &'a [f64],
     pub fy: &'a [f64],
-    pub out: Output<'a>,
+    pub vx: &'a mut [f64],
+    pub vy: &'a mut [f64],
+    pub rate: &'a mut [f64],
 }
 
-/// What the pass writes. Heun's update is taken site by site as the rate is known, so the
-/// patch fields are streamed once per evaluation instead of twice. Only the interior of each
-/// patch is written: the halos stay zero.
-pub enum Output<'a> {
-    /// v_i and ∂_t φ_i.
-    Rate { vx: &'a mut [f64], vy: &'a mut [f64], rate: &'a mut [f64] },
-    /// Heun's predictor: k1 = ∂_t φ_i and next = φ_i + Δt k1. No v: the corrector's replaces it
-    /// before anything reads it.
-    Predict { dt: f64, k1: &'a mut [f64], next: &'a mut [f64] },
-    /// Heun's corrector: v_i and next = φ_0 + ½Δt (k1 + ∂_t φ_i).
-    Correct {
-        dt: f64,
-        phi0: &'a [f64],
-        k1: &'a [f64],
-        vx: &'a mut [f64],
-        vy: &'a mut [f64],
-        next: &'a mut [f64],
-        lo: f64,
-        hi: f64,
-    },
-}
-
-/// v_i and ∂_t φ_i at every site of the patch, written as `c.out` says. Returns whether some
-/// corrected φ is not finite or lies outside [lo, hi] (always false for the other outputs).
-pub fn velocity_and_rate(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j0: f64, advection: Advection) -> bool {
-    let (phi, mu_all, fx_all, fy_all, mut out) = (c.phi, c.mu, c.fx, c.fy, c.out);
-    let mut outside = false;
+/// v_i and ∂_t φ_i at every site of the patch.
+pub fn velocity_and_rate(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j0: f64, advection: Advection) {
     for run in patch.runs(l) {
         let len = run.len;
-        let f = Neighbourhood::new(phi, patch, run.b, run.a0, len);
+        let f = Neighbourhood::new(c.phi, patch, run.b, run.a0, len);
         let mobility = &drag.mobility[run.global..][..len];
         let pull = &drag.pull[run.global..][..len];
-        let (mu, fx, fy) = (&mu_all[run.padded..][..len], &fx_all[run.padded..][..len], &fy_all[run.padded..][..len]);
-        let at = |k: usize| {
+        let (mu, fx, fy) = (&c.mu[run.padded..][..len], &c.fx[run.padded..][..len], &c.fy[run.padded..][..len]);
+        let vx_out = &mut c.vx[run.padded..][..len];
+        let vy_out = &mut c.vy[run.padded..][..len];
+        let rate = &mut c.rate[run.padded..][..len];
+        for k in 0..len {
             let vx = (fx[k] + pull[k].re) * mobility[k];
             let vy = (fy[k] + pull[k].im) * mobility[k];
+            vx_out[k] = vx;
+            vy_out[k] = vy;
             let (gx, gy) = match advection {
                 Advection::Central => f.gradient(k),
                 Advection::Upwind => (
@@ -91,39 +73,9 @@ pub fn velocity_and_rate(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j
                     if vy > 0.0 { f.c[k] - f.ym[k] } else { f.yp[k] - f.c[k] },
                 ),
             };
-            (vx, vy, -(vx * gx + vy * gy) - j0 * mu[k])
-        };
-        let i = run.padded;
-        match &mut out {
-            Output::Rate { vx, vy, rate } => {
-                let (vx, vy, rate) = (&mut vx[i..][..len], &mut vy[i..][..len], &mut rate[i..][..len]);
-                for k in 0..len {
-                    (vx[k], vy[k], rate[k]) = at(k);
-                }
-            }
-            Output::Predict { dt, k1, next } => {
-                let (dt, k1, next) = (*dt, &mut k1[i..][..len], &mut next[i..][..len]);
-                for k in 0..len {
-                    let (_, _, r) = at(k);
-                    k1[k] = r;
-                    next[k] = f.c[k] + dt * r;
-                }
-            }
-            Output::Correct { dt, phi0, k1, vx, vy, next, lo, hi } => {
-                let (half, lo, hi) = (0.5 * *dt, *lo, *hi);
-                let (p0, k1) = (&phi0[i..][..len], &k1[i..][..len]);
-                let (vx, vy, next) = (&mut vx[i..][..len], &mut vy[i..][..len], &mut next[i..][..len]);
-                for k in 0..len {
-                    let r;
-                    (vx[k], vy[k], r) = at(k);
-                    let v = p0[k] + half * (k1[k] + r);
-                    next[k] = v;
-                    outside |= !(v >= lo && v <= hi);
-                }
-            }
+            rate[k] = -(vx * gx + vy * gy) - j0 * mu[k];
         }
     }
-    outside
 }
 
 #[cfg(test)]
@@ -151,13 +103,7 @@ mod tests {
         for adv in [Advection::Central, Advection::Upwind] {
             velocity_and_rate(
                 patch,
-                MotionFields {
-                    phi: &phi,
-                    mu: &mu,
-                    fx: &fx,
-                    fy: &fy,
-                    out: Output::Rate { vx: &mut vx, vy: &mut vy, rate: &mut rate },
-                },
+                MotionFields { phi: &phi, mu: &mu, fx: &fx, fy: &fy, vx: &mut vx, vy: &mut vy, rate: &mut rate },
                 &Drag { mobility: &mobility, pull: &pull },
                 l,
                 1.0,
@@ -165,44 +111,6 @@ mod tests {
             );
             let i = patch.idx(2, 1);
             assert_eq!((vx[i], vy[i], rate[i]), (1.0, 0.0, -1.0));
-        }
-    }
-
-    /// Heun's outputs are the rate's: the predictor's and corrector's φ are the plain update
-    /// formulas bit for bit, only the interior is written, and an out-of-range φ' is seen.
-    #[test]
-    fn heun_outputs_follow_the_rate() {
-        let patch = Patch { x0: 6, y0: 1, w: 5, h: 4 };
-        let (l, n, s) = (8, patch.padded_len(), patch.stride());
-        let interior = |i: usize| (1..=patch.w).contains(&(i % s)) && (1..=patch.h).contains(&(i / s));
-        let field =
-            |k: f64| -> Vec<f64> { (0..n).map(|i| if interior(i) { (k * i as f64).sin() } else { 0.0 }).collect() };
-        let (phi, mu, fx, fy, phi0, k1) = (field(0.3), field(0.7), field(1.1), field(1.9), field(2.3), field(2.9));
-        let mobility: Vec<f64> = (0..l * l).map(|x| 0.5 + 0.01 * x as f64).collect();
-        let pull: Vec<C64> = (0..l * l).map(|x| C64::new((0.2 * x as f64).cos(), (0.5 * x as f64).sin())).collect();
-        let drag = Drag { mobility: &mobility, pull: &pull };
-        let f = [&phi[..], &mu, &fx, &fy];
-        fn run(f: [&[f64]; 4], out: Output, drag: &Drag, patch: Patch, l: usize) -> bool {
-            let fields = MotionFields { phi: f[0], mu: f[1], fx: f[2], fy: f[3], out };
-            velocity_and_rate(patch, fields, drag, l, 0.3, Advection::Central)
-        }
-        let (mut vx, mut vy, mut rate) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        assert!(!run(f, Output::Rate { vx: &mut vx, vy: &mut vy, rate: &mut rate }, &drag, patch, l));
-        let (mut k, mut next) = (vec![0.0; n], vec![0.0; n]);
-        assert!(!run(f, Output::Predict { dt: 0.1, k1: &mut k, next: &mut next }, &drag, patch, l));
-        assert_eq!(k, rate);
-        for i in 0..n {
-            assert_eq!(next[i], if interior(i) { phi[i] + 0.1 * rate[i] } else { 0.0 });
-        }
-        let (mut cvx, mut cvy) = (vec![0.0; n], vec![0.0; n]);
-        for (lo, hi, outside) in [(-0.5, 0.5, true), (-10.0, 10.0, false)] {
-            let out =
-                Output::Correct { dt: 0.1, phi0: &phi0, k1: &k1, vx: &mut cvx, vy: &mut cvy, next: &mut next, lo, hi };
-            assert_eq!(run(f, out, &drag, patch, l), outside);
-        }
-        assert_eq!((&cvx, &cvy), (&vx, &vy));
-        for i in 0..n {
-            assert_eq!(next[i], if interior(i) { phi0[i] + 0.05 * (k1[i] + rate[i]) } else { 0.0 });
         }
     }
 
