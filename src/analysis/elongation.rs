@@ -25,45 +25,98 @@ pub fn gradient_trace(patch: Patch, phi: &[f64]) -> f64 {
     t
 }
 
-/// g+/g− of the outline of an ellipse with aspect ratio k ≥ 1 (see the module's doc).
-/// The trapezoid rule on a smooth periodic integrand converges geometrically; 512 points
-/// resolve it to 1e-12 up to k = 50.
-pub fn ellipse_eigenvalue_ratio(k: f64) -> f64 {
-    const POINTS: usize = 512;
+/// Quadrature points of the ellipse integrals: the trapezoid rule on a smooth periodic integrand
+/// converges geometrically, and 512 points resolve it to 1e-12 up to k = 50.
+const POINTS: usize = 512;
+/// Aspect ratios tabulated once (log-spaced in [1, MAX_ASPECT_RATIO]) to bracket an inversion.
+const GRID: usize = 256;
+
+/// What every inversion reuses: (sin²t, cos²t) at the quadrature points, and the ratio on a grid
+/// of k. Computed once per process, so a frame's hundred inversions cost a few integrals each.
+struct Tables {
+    samples: Vec<(f64, f64)>,
+    grid: Vec<(f64, f64)>,
+}
+
+fn tables() -> &'static Tables {
+    static TABLES: std::sync::OnceLock<Tables> = std::sync::OnceLock::new();
+    TABLES.get_or_init(|| {
+        let samples: Vec<(f64, f64)> = (0..POINTS)
+            .map(|j| {
+                let t = (j as f64 + 0.5) * std::f64::consts::TAU / POINTS as f64;
+                let (s, c) = (libm::sin(t), libm::cos(t));
+                (s * s, c * c)
+            })
+            .collect();
+        let grid = (0..GRID)
+            .map(|i| {
+                let k = libm::pow(MAX_ASPECT_RATIO, i as f64 / (GRID - 1) as f64);
+                (k, ratio_from(&samples, k))
+            })
+            .collect();
+        Tables { samples, grid }
+    })
+}
+
+fn ratio_from(samples: &[(f64, f64)], k: f64) -> f64 {
     let (mut along, mut across) = (0.0, 0.0);
-    for j in 0..POINTS {
-        let t = (j as f64 + 0.5) * std::f64::consts::TAU / POINTS as f64;
-        let (s, c) = (libm::sin(t), libm::cos(t));
-        let h = (k * k * s * s + c * c).sqrt();
-        across += k * k * s * s / h;
-        along += c * c / h;
+    for &(s2, c2) in samples {
+        let h = (k * k * s2 + c2).sqrt();
+        across += k * k * s2 / h;
+        along += c2 / h;
     }
     across / along
 }
 
+/// g+/g− of the outline of an ellipse with aspect ratio k ≥ 1 (see the module's doc).
+pub fn ellipse_eigenvalue_ratio(k: f64) -> f64 {
+    ratio_from(&tables().samples, k)
+}
+
 /// The aspect ratio of a cell from its gradient tensor's trace T and shape tensor Q:
-/// the k ≥ 1 with [`ellipse_eigenvalue_ratio`](k) = (T/2 + |Q|)/(T/2 − |Q|), by bisection.
-/// 1 for a round cell; [`MAX_ASPECT_RATIO`] at most; None for a cell with no gradient.
+/// the k ≥ 1 with [`ellipse_eigenvalue_ratio`](k) = (T/2 + |Q|)/(T/2 − |Q|), bracketed on the
+/// tabulated grid and refined by regula falsi (Illinois). 1 for a round cell;
+/// [`MAX_ASPECT_RATIO`] at most; None for a cell with no gradient.
 pub fn aspect_ratio(trace: f64, q: [f64; 2]) -> Option<f64> {
     let q = (q[0] * q[0] + q[1] * q[1]).sqrt();
     if trace.is_nan() || trace <= 0.0 || !q.is_finite() {
         return None;
     }
     let (hi, lo) = (0.5 * trace + q, 0.5 * trace - q);
-    if lo <= 0.0 || hi / lo >= ellipse_eigenvalue_ratio(MAX_ASPECT_RATIO) {
+    let t = tables();
+    let last = t.grid[GRID - 1];
+    if lo <= 0.0 || hi / lo >= last.1 {
         return Some(MAX_ASPECT_RATIO);
     }
     let target = hi / lo;
-    let (mut a, mut b) = (1.0, MAX_ASPECT_RATIO);
-    for _ in 0..60 {
-        let mid = 0.5 * (a + b);
-        if ellipse_eigenvalue_ratio(mid) < target {
-            a = mid;
+    let i = t.grid.partition_point(|g| g.1 <= target).clamp(1, GRID - 1);
+    let ((mut a, mut fa), (mut b, mut fb)) =
+        ((t.grid[i - 1].0, t.grid[i - 1].1 - target), (t.grid[i].0, t.grid[i].1 - target));
+    let mut side = 0;
+    for _ in 0..100 {
+        if b - a <= 1e-14 * b {
+            break;
+        }
+        let c = (a * fb - b * fa) / (fb - fa);
+        let fc = ellipse_eigenvalue_ratio(c) - target;
+        if fc == 0.0 {
+            return Some(c);
+        }
+        if (fc < 0.0) == (fa < 0.0) {
+            (a, fa) = (c, fc);
+            if side == -1 {
+                fb *= 0.5;
+            }
+            side = -1;
         } else {
-            b = mid;
+            (b, fb) = (c, fc);
+            if side == 1 {
+                fa *= 0.5;
+            }
+            side = 1;
         }
     }
-    Some(0.5 * (a + b))
+    Some(if fa.abs() < fb.abs() { a } else { b })
 }
 
 /// The aspect ratio of one cell given as its patch and φ.
@@ -71,12 +124,13 @@ pub fn cell_aspect_ratio(patch: Patch, phi: &[f64]) -> Option<f64> {
     aspect_ratio(gradient_trace(patch, phi), shape_tensor(patch, phi))
 }
 
-/// Mean and 90th percentile (nearest rank) of a set of aspect ratios; None when empty.
-pub fn mean_and_p90(values: &mut [f64]) -> Option<(f64, f64)> {
+/// Mean and 90th percentile (nearest rank) of aspect ratios given in ascending order; None
+/// when empty.
+pub fn mean_and_p90(values: &[f64]) -> Option<(f64, f64)> {
     if values.is_empty() {
         return None;
     }
-    values.sort_by(f64::total_cmp);
+    debug_assert!(values.is_sorted_by(|a, b| a <= b), "mean_and_p90 takes sorted values");
     let mean = values.iter().sum::<f64>() / values.len() as f64;
     let rank = (0.9 * values.len() as f64).ceil() as usize;
     Some((mean, values[rank.clamp(1, values.len()) - 1]))
@@ -140,7 +194,8 @@ mod tests {
         assert_eq!(cell_aspect_ratio(p, &vec![0.0; p.padded_len()]), None);
         let mut v: Vec<f64> = (1..=10).map(f64::from).collect();
         v.reverse();
-        assert_eq!(mean_and_p90(&mut v), Some((5.5, 9.0)));
-        assert_eq!(mean_and_p90(&mut []), None);
+        v.sort_by(f64::total_cmp);
+        assert_eq!(mean_and_p90(&v), Some((5.5, 9.0)));
+        assert_eq!(mean_and_p90(&[]), None);
     }
 }

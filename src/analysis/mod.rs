@@ -96,6 +96,8 @@ pub struct Analysis {
     pub voids: VoidRegions,
     /// Each cell's aspect ratio, in cell order ([`elongation::cell_aspect_ratio`]).
     pub aspect_ratios: Vec<f64>,
+    /// The same, sorted, for the frame's percentile (kept so that no frame allocates).
+    aspect_sorted: Vec<f64>,
     /// C_v(r), C_Q(r) for r = 0..=L/2 (unsmoothed fields).
     pub velocity_correlation: Vec<f64>,
     pub nematic_correlation: Vec<f64>,
@@ -127,6 +129,7 @@ impl Analysis {
             plus_ones: Vec::new(),
             voids: VoidRegions::default(),
             aspect_ratios: Vec::new(),
+            aspect_sorted: Vec::new(),
             velocity_correlation: Vec::new(),
             nematic_correlation: Vec::new(),
             divergence_scale: 0.0,
@@ -168,9 +171,12 @@ impl Analysis {
         self.derive();
     }
 
-    /// Everything that follows from the raw fields.
+    /// Everything that follows from the raw fields and the cells' aspect ratios.
     fn derive(&mut self) {
         let l = self.l;
+        self.aspect_sorted.clear();
+        self.aspect_sorted.extend_from_slice(&self.aspect_ratios);
+        self.aspect_sorted.sort_by(f64::total_cmp);
         self.smooth.smooth_from(&self.raw, self.half_window, &mut self.row, &mut self.tmp);
         let s = &self.smooth;
         strain_rate(&s.vx, &s.vy, &mut self.strain_rate, l);
@@ -197,8 +203,7 @@ impl Analysis {
     /// The scalar measurements of the last frame measured.
     pub fn summary(&self) -> FrameSummary {
         let v = &self.voids;
-        let mut ratios = self.aspect_ratios.clone();
-        let aspect = mean_and_p90(&mut ratios);
+        let aspect = mean_and_p90(&self.aspect_sorted);
         let mass: f64 = self.raw.phi_sum.iter().sum();
         let flux: f64 = self.raw.vx.iter().zip(&self.raw.vy).map(|(x, y)| x.hypot(*y)).sum();
         FrameSummary {

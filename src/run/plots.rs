@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Once;
 
 use image::ImageEncoder;
+use plotters::coord::combinators::LogCoord;
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -83,7 +84,9 @@ fn draw_legend<'a, DB: DrawingBackend + 'a>(
         .map_err(plot_err)
 }
 
-const PALETTE: [RGBColor; 8] = [
+/// Colours of the plots' series (matplotlib's first eight), shared by `analyze`, the sweep and
+/// the figures.
+pub(crate) const PALETTE: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -333,4 +336,31 @@ impl Draw for Snapshot<'_> {
 /// `a` must hold the measurements of `frame`.
 pub fn snapshot(base: &Path, frame: &Frame, a: &Analysis, background: Background) -> Result<Vec<PathBuf>, String> {
     both_of(base, (900, 930), &Snapshot { frame, a, background })
+}
+
+/// One grid point of a regime map (the paper's Fig. 3d), drawn as the paper draws it: no holes a
+/// red circle, only short-lived holes a blue square, short- and long-lived a green triangle; a
+/// cross over a point where a run failed. Shared by the sweep's map and the figures'.
+pub(crate) fn regime_marker<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<LogCoord<f64>, RangedCoordf64>>,
+    (x, y): (f64, f64),
+    regime: crate::analysis::regime::Regime,
+    failed: bool,
+) -> Result<(), String> {
+    use crate::analysis::regime::Regime;
+    let (red, blue, green) = (PALETTE[3], PALETTE[0], PALETTE[2]);
+    match regime {
+        Regime::NoHoles => chart.draw_series(std::iter::once(Circle::new((x, y), 7, red.filled()))),
+        Regime::OnlyShortLived => chart
+            .draw_series(std::iter::once(EmptyElement::at((x, y)) + Rectangle::new([(-7, -7), (7, 7)], blue.filled()))),
+        Regime::ShortAndLongLived => chart.draw_series(std::iter::once(
+            EmptyElement::at((x, y)) + Polygon::new(vec![(0, -8), (-8, 7), (8, 7)], green.filled()),
+        )),
+    }
+    .map_err(plot_err)?;
+    if failed {
+        let cross = EmptyElement::at((x, y)) + Cross::new((0, 0), 10, BLACK.stroke_width(2));
+        chart.draw_series(std::iter::once(cross)).map_err(plot_err)?;
+    }
+    Ok(())
 }

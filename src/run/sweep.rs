@@ -582,7 +582,7 @@ pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>
 /// squares only short-lived, green triangles short- and long-lived; a cross where a run blew up.
 /// Drawn only when the grid varies both `chi` and `zeta`.
 fn plot_regime_map(base: &Path, points: &[RegimePoint]) -> Result<Vec<PathBuf>, String> {
-    use crate::run::plots::{both_of, plot_err, Draw, FONT};
+    use crate::run::plots::{both_of, plot_err, regime_marker, Draw, FONT};
     use plotters::coord::Shift;
     use plotters::prelude::*;
 
@@ -610,24 +610,8 @@ fn plot_regime_map(base: &Path, points: &[RegimePoint]) -> Result<Vec<PathBuf>, 
                 .build_cartesian_2d((x0..x1).log_scale(), (y0 - pad)..(y1 + pad))
                 .map_err(plot_err)?;
             chart.configure_mesh().x_desc("χ = ξ_s / ξ_cell").y_desc("ζ").draw().map_err(plot_err)?;
-            let red = RGBColor(214, 39, 40);
-            let blue = RGBColor(31, 119, 180);
-            let green = RGBColor(44, 160, 44);
             for &(x, y, regime, blew_up) in &self.0 {
-                match regime {
-                    Regime::NoHoles => chart.draw_series(std::iter::once(Circle::new((x, y), 7, red.filled()))),
-                    Regime::OnlyShortLived => chart.draw_series(std::iter::once(
-                        EmptyElement::at((x, y)) + Rectangle::new([(-7, -7), (7, 7)], blue.filled()),
-                    )),
-                    Regime::ShortAndLongLived => chart.draw_series(std::iter::once(
-                        EmptyElement::at((x, y)) + Polygon::new(vec![(0, -8), (-8, 7), (8, 7)], green.filled()),
-                    )),
-                }
-                .map_err(plot_err)?;
-                if blew_up {
-                    let cross = EmptyElement::at((x, y)) + Cross::new((0, 0), 10, BLACK.stroke_width(2));
-                    chart.draw_series(std::iter::once(cross)).map_err(plot_err)?;
-                }
+                regime_marker(&mut chart, (x, y), regime, blew_up)?;
             }
             Ok(())
         }

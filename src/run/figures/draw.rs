@@ -7,16 +7,10 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::analysis::regime::Regime;
-use crate::run::plots::{both_of, plot_err, Draw, FONT};
+use crate::run::plots::{self, both_of, plot_err, regime_marker, Draw, FONT};
 
-const PALETTE: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
+/// The first six of the shared palette: the figures cycle through six colours.
+const PALETTE: &[RGBColor] = plots::PALETTE.split_at(6).0;
 
 /// How a series marks its points (the paper tells χ apart by filled, faint and empty symbols).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -293,22 +287,8 @@ impl Draw for RegimeMap<'_> {
             .build_cartesian_2d((x0 / 2.0..x1 * 2.0).log_scale(), (y0 - pad)..(y1 + pad))
             .map_err(plot_err)?;
         chart.configure_mesh().x_desc("χ = ξ_s / ξ_cell").y_desc("ζ").draw().map_err(plot_err)?;
-        let (red, blue, green) = (RGBColor(214, 39, 40), RGBColor(31, 119, 180), RGBColor(44, 160, 44));
         for &(x, y, regime, failed) in self.0 {
-            match regime {
-                Regime::NoHoles => chart.draw_series(std::iter::once(Circle::new((x, y), 7, red.filled()))),
-                Regime::OnlyShortLived => chart.draw_series(std::iter::once(
-                    EmptyElement::at((x, y)) + Rectangle::new([(-7, -7), (7, 7)], blue.filled()),
-                )),
-                Regime::ShortAndLongLived => chart.draw_series(std::iter::once(
-                    EmptyElement::at((x, y)) + Polygon::new(vec![(0, -8), (-8, 7), (8, 7)], green.filled()),
-                )),
-            }
-            .map_err(plot_err)?;
-            if failed {
-                let cross = EmptyElement::at((x, y)) + Cross::new((0, 0), 10, BLACK.stroke_width(2));
-                chart.draw_series(std::iter::once(cross)).map_err(plot_err)?;
-            }
+            regime_marker(&mut chart, (x, y), regime, failed)?;
         }
         Ok(())
     }
