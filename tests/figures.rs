@@ -1,7 +1,9 @@
 //! `monolayer figures`: the plan (one run per point and seed, shared between figures, the paper's
 //! counts), its refusals, the Slurm scripts, and the `smoke` scale end to end.
 
-use std::collections::BTreeMap;
+mod common;
+
+use common::csv_files;
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -92,15 +94,6 @@ fn slurm_dry_run_prints_an_array_with_a_throttle_and_an_afterok_aggregation() {
     assert!(!out.exists(), "a dry run writes nothing");
 }
 
-fn read_csvs(dir: &Path) -> BTreeMap<String, String> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
-        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read_to_string(&p).unwrap()))
-        .collect()
-}
-
 #[test]
 #[ignore = "28 small runs, 1–2 minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn the_smoke_scale_draws_every_figure_and_resumes_without_running_again() {
@@ -119,12 +112,12 @@ fn the_smoke_scale_draws_every_figure_and_resumes_without_running_again() {
         assert!(md.contains(&format!("({}.png)", f.stem())), "figures.md lacks {}", f.stem());
     }
     assert!(md.contains("**The paper:**") && md.contains("scale `smoke`"), "{md}");
-    let csvs = read_csvs(&out);
+    let csvs = csv_files(&out);
     assert!(csvs["fig3d.csv"].lines().count() == 16, "{}", csvs["fig3d.csv"]);
     assert!(csvs["figS1.csv"].contains("dry,"), "the dry limit is in Fig. S1");
     // Again: every run is done, nothing runs, the same tables.
     let o = monolayer(&["figures", "--out", out.to_str().unwrap(), "--scale", "smoke", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("0 to run"), "{}", stderr(&o));
-    assert_eq!(read_csvs(&out), csvs);
+    assert_eq!(csv_files(&out), csvs);
 }

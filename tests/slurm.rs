@@ -5,8 +5,10 @@
 //! Without a cluster the test says so and passes, unless `CI=true` or `MONOLAYER_SLURM_TEST=1`,
 //! where a missing cluster fails it (`.ci/run` starts one).
 
+mod common;
+
+use common::csv_files;
 use std::collections::BTreeMap;
-use std::path::Path;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
@@ -27,15 +29,6 @@ fn cluster_up() -> bool {
                 l == "idle" || l == "mixed" || l == "allocated"
             })
     })
-}
-
-fn csvs(dir: &Path) -> BTreeMap<String, String> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
-        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read_to_string(&p).unwrap()))
-        .collect()
 }
 
 /// `squeue` states of the jobs (array tasks as `ID_K`), terminal ones included while Slurm keeps
@@ -129,7 +122,7 @@ fn the_smoke_scale_through_sbatch_gives_the_local_runs_csvs() {
     assert!(
         cluster.join("figures.md").exists() && cluster.join("fig3d.png").exists() && cluster.join("figS1.svg").exists()
     );
-    let (a, b) = (csvs(&local), csvs(&cluster));
+    let (a, b) = (csv_files(&local), csv_files(&cluster));
     assert!(a.len() >= 12, "{:?}", a.keys());
     assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
     for (name, text) in &a {

@@ -85,3 +85,13 @@ pub fn lines(path: &std::path::Path) -> Vec<String> {
         .map(String::from)
         .collect()
 }
+
+/// The CSV files of a directory by name, with their text: two runs' tables compared whole.
+pub fn csv_files(dir: &std::path::Path) -> std::collections::BTreeMap<String, String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read_to_string(&p).unwrap()))
+        .collect()
+}
