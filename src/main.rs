@@ -1,5 +1,6 @@
 //! `monolayer`: run the paper's protocol at full size, continue a run, measure speed.
 
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -7,9 +8,10 @@ use std::time::Instant;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use monolayer::model::snapshot::{self, relaxation_key};
 use monolayer::run::bench::BenchOptions;
 use monolayer::run::config::{load_params, parse_assignment};
-use monolayer::run::files::RunStatus;
+use monolayer::run::files::{self, RunStatus};
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
 use monolayer::run::runner::{Event, RunDir};
@@ -34,6 +36,9 @@ enum Command {
     /// Step from the random disks and print the state's fingerprint as JSON (to compare the
     /// WebAssembly core with this one, bit for bit).
     Fingerprint(FingerprintArgs),
+    /// Relax a tissue from the random disks (the protocol's relaxation, nothing after it) and
+    /// write the confluent state as a snapshot the browser demo starts from (www/assets/).
+    RelaxedState(RelaxedStateArgs),
     /// Run a grid of parameters (χ, ζ, γ, any parameter, seeds), one simulation per core,
     /// resumable; summary.csv and the regime map.
     Sweep(SweepArgs),
@@ -126,6 +131,17 @@ struct FingerprintArgs {
     /// Steps from the start of the protocol (relaxation included) before the fingerprint.
     #[arg(long)]
     total_steps: u64,
+}
+
+#[derive(Args)]
+struct RelaxedStateArgs {
+    #[command(flatten)]
+    params: ParamArgs,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The snapshot file to write (atomically).
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Args)]
@@ -278,6 +294,7 @@ fn main() -> ExitCode {
         Command::Bench(a) => bench(&a),
         Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| e.to_string()),
         Command::Fingerprint(a) => fingerprint(&a),
+        Command::RelaxedState(a) => relaxed_state(&a),
         Command::Sweep(a) => sweep(&a),
         Command::Analyze(a) => with_threads(Some(1), || analyze(&a)),
         Command::Figures(a) => figures(a),
@@ -479,6 +496,31 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
     let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
     m.advance(a.total_steps).map_err(|e| e.to_string())?;
     println!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint());
+    Ok(())
+}
+
+fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), String> {
+    let params = a.params.params()?;
+    let steps = params.relax_steps;
+    let key = relaxation_key(&params, a.seed);
+    let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
+    let bar = progress_bar(steps, 0, false);
+    bar.set_message("relaxing");
+    for _ in 0..steps {
+        m.step().map_err(|e| e.to_string())?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let bytes = snapshot::encode(&m.state(), key);
+    let out = a.out.display();
+    files::write_atomic(&a.out, |w| w.write_all(&bytes).map_err(|e| format!("{out}: {e}")))?;
+    eprintln!(
+        "{}: step {steps}, {} cells, {} bytes, key {key:016x}, fingerprint {:016x}",
+        a.out.display(),
+        m.cells().len(),
+        bytes.len(),
+        m.fingerprint()
+    );
     Ok(())
 }
 

@@ -7,7 +7,8 @@
 //! protocol, patches, stability checks).
 //!
 //! [`lattice`] and [`cell`] hold the geometry, [`counters`] the time per stage, [`par`] the
-//! deterministic parallel loops, [`error`] what can go wrong. Nothing here touches files,
+//! deterministic parallel loops, [`error`] what can go wrong, [`snapshot`] a state as bytes
+//! (the browser demo's confluent start). Nothing here touches files,
 //! clocks or threads directly (threads only through [`par`], behind the `parallel` feature), so
 //! the core compiles for `wasm32-unknown-unknown` with the same bits. It imports nothing from
 //! `analysis`, `run` or `web` (tested by `tests/layers.rs`).
@@ -26,3 +27,4 @@ pub mod multigrid;
 pub mod par;
 pub mod params;
 pub mod shape;
+pub mod snapshot;

@@ -8,10 +8,18 @@ use super::measure::{tissue_stats, TissueStats};
 use super::render::WebView;
 use super::view::{FieldKind, ViewBuilder};
 use crate::analysis::holes::VoidRegions;
+use crate::model::snapshot::{self, relaxation_key};
 use crate::{Monolayer, Params};
 
 fn js_err(e: impl std::fmt::Display) -> JsError {
     JsError::new(&e.to_string())
+}
+
+/// The page's parameters: its size and the three sliders; every other one is the native default.
+fn page_params(box_size: usize, n_cells: usize, relax_steps: u32, zeta: f64, chi: f64, gamma: f64) -> Params {
+    let mut p = Params { box_size, n_cells, relax_steps: relax_steps as u64, zeta, gamma, ..Params::default() };
+    p.set_chi(chi);
+    p
 }
 
 #[wasm_bindgen]
@@ -44,19 +52,49 @@ impl WebSim {
         gamma: f64,
         seed: u32,
     ) -> Result<WebSim, JsError> {
-        let mut p = Params { box_size, n_cells, relax_steps: relax_steps as u64, zeta, gamma, ..Params::default() };
-        p.set_chi(chi);
-        let m = Monolayer::new(p, seed as u64).map_err(js_err)?;
-        let l = box_size;
-        Ok(WebSim {
-            keys: (1..=n_cells as u32).collect(),
+        let p = page_params(box_size, n_cells, relax_steps, zeta, chi, gamma);
+        Ok(Self::wrap(Monolayer::new(p, seed as u64).map_err(js_err)?))
+    }
+
+    /// The same tissue as [`WebSim::new`] with the same arguments, already relaxed: its state
+    /// at the end of the relaxation is read from `snapshot` (written natively by `monolayer
+    /// relaxed-state`), bit for bit what relaxing here would give. Throws if the snapshot was
+    /// made with other parameters or another seed, or is damaged; the page then relaxes live.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_relaxed(
+        snapshot: &[u8],
+        box_size: usize,
+        n_cells: usize,
+        relax_steps: u32,
+        zeta: f64,
+        chi: f64,
+        gamma: f64,
+        seed: u32,
+    ) -> Result<WebSim, JsError> {
+        let p = page_params(box_size, n_cells, relax_steps, zeta, chi, gamma);
+        p.validate().map_err(js_err)?;
+        let key = relaxation_key(&p, seed as u64);
+        let state = snapshot::decode(snapshot, key, box_size).map_err(js_err)?;
+        if state.step != p.relax_steps {
+            return Err(JsError::new(&format!(
+                "relaxed state: saved at step {}, not at the end of the {} relaxation steps",
+                state.step, p.relax_steps
+            )));
+        }
+        Ok(Self::wrap(Monolayer::from_state(p, seed as u64, state).map_err(js_err)?))
+    }
+
+    fn wrap(m: Monolayer) -> WebSim {
+        let (n, l) = (m.params().n_cells, m.params().box_size);
+        WebSim {
+            keys: (1..=n as u32).collect(),
             substrate: vec![1.0; l * l],
             view: ViewBuilder::default(),
             stats: TissueStats::default(),
             stats_step: u64::MAX,
             regions: VoidRegions::default(),
             m,
-        })
+        }
     }
 
     /// Runs `n` steps. On an error (instability, failed solve) the state before the failing

@@ -20,7 +20,7 @@ function rng(seed) {
   };
 }
 
-const KEYS = [...Object.keys(PARAMS), 'preset', 'field', 'embed', 'paused', 'junk', ''];
+const KEYS = [...Object.keys(PARAMS), 'preset', 'field', 'embed', 'paused', 'relax', 'junk', ''];
 const NASTY = ['', 'NaN', 'nan', 'Infinity', '-Infinity', '1e999', '-1e999', '.5', '5.', '0x10', '1e-400', ' 3 ',
   'abc', '%', '%%20', '∞', '🙂', '-0', '4294967296', '-1', '1,5', 'null', 'undefined', '[]', '{}', '&&', '=='];
 

@@ -4,7 +4,7 @@
 // through the actions below, which keep the worker, the controls and the URL in step.
 
 import init, { Renderer, WebView, FieldKind } from '../pkg/monolayer.js';
-import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZE, parseUrl, toUrl } from './state.js';
+import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZE, parseUrl, toUrl, relaxedStateFor } from './state.js';
 import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
 import { Readouts, formatSeconds } from './readouts.js';
@@ -197,7 +197,9 @@ function newSim() {
   const ready = new Promise((resolve) => {
     onReady = resolve;
   });
-  worker.postMessage({ type: 'new', size: SIZE, params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed });
+  worker.postMessage({
+    type: 'new', size: SIZE, params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed, relaxed: relaxedStateFor(s),
+  });
   tellWorkerToPlay();
   loop.restart();
   demo.firstHole = null;

@@ -11,6 +11,15 @@ import { FieldKind } from '../pkg/monolayer.js';
 // its first hole within a minute.
 export const SIZE = { box: 80, cells: 33, relaxSteps: 1500 };
 
+// Relaxed tissues shipped with the page (`monolayer relaxed-state`, README "Browser demo"): the
+// state at the end of the relaxation for these seeds at this size and γ, so that the page opens
+// on a confluent tissue. The core checks that a file was made with exactly the page's
+// parameters and seed, and refuses it otherwise; any other seed or γ relaxes live, with its
+// progress shown, as does `?relax` (to watch the tissue close up).
+export const RELAXED_STATES = [{ seed: 1, gamma: 0.06, file: new URL('../assets/relaxed-seed1.bin', import.meta.url).href }];
+export const relaxedStateFor = (state) =>
+  state.relax ? null : RELAXED_STATES.find((r) => r.seed === state.seed && r.gamma === state.gamma)?.file ?? null;
+
 // Each parameter: label, range, default, and whether its slider is logarithmic. The page makes
 // one slider for each entry with `slider` (in this order); `model` ones are the core's.
 export const PARAMS = {
@@ -89,6 +98,7 @@ export function parseUrl(search) {
     field: FieldKind.Tissue,
     embed: q.has('embed'),
     paused: q.has('paused'),
+    relax: q.has('relax'),
   };
   for (const name of Object.keys(PARAMS)) {
     if (q.has(name)) state[name] = clampParam(name, q.get(name), notices, state[name]);
@@ -118,6 +128,7 @@ export function toUrl(state) {
   if (state.field !== FieldKind.Tissue) q.set('field', fieldName(state.field));
   if (state.embed) q.set('embed', '');
   if (state.paused) q.set('paused', '');
+  if (state.relax) q.set('relax', '');
   return '?' + q.toString().replace(/=(&|$)/g, '$1');
 }
 

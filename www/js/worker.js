@@ -2,7 +2,7 @@
 // page plays, whatever the drawing costs; whenever the main thread is ready to draw, it asks
 // for a frame and gets the latest state's view, its arrays transferred (not copied).
 //
-// Messages in: { type: 'new', size, params, seed }, { type: 'play', on }, { type: 'spf', n },
+// Messages in: { type: 'new', size, params, seed, relaxed (a relaxed state's URL, or null) }, { type: 'play', on }, { type: 'spf', n },
 // { type: 'frame', field, dpr }, { type: 'call', id, method, args }.
 // Messages out: { type: 'ready', info }, { type: 'frame', parts, stats }, { type: 'stopped', why,
 // active }, { type: 'result', id, value | error }, { type: 'fatal', message }.
@@ -10,6 +10,8 @@
 import init, { WebSim } from '../pkg/monolayer.js';
 
 let sim = null;
+// How the current tissue started: 'snapshot' (a shipped relaxed state) or 'disks' (relaxing here).
+let startedFrom = null;
 let playing = false;
 // The "steps per frame" slider caps the speed at `spf` steps per 1/30 s: a budget that refills
 // with time, not with frames drawn, so that drawing never holds stepping back.
@@ -111,6 +113,7 @@ function stats() {
     relaxSteps: sim.relax_steps(),
     timeUnitSeconds: sim.time_unit_seconds(),
     msPerStep,
+    startedFrom,
   };
 }
 
@@ -154,16 +157,38 @@ const CALLS = {
   stats: () => stats(),
 };
 
-onmessage = async (e) => {
-  const m = e.data;
+// Messages are handled one after the other, each after the last one's awaits (the core's
+// instantiation, a relaxed state's download): a call or a second 'new' never meets a
+// half-made simulation.
+let inbox = Promise.resolve();
+onmessage = (e) => {
+  inbox = inbox.then(() => handle(e.data));
+};
+
+async function handle(m) {
   try {
     if (m.type === 'new') {
       if (!sim) await init();
       if (sim) sim.free();
       sim = null;
       const { size, params: p, seed } = m;
+      const args = [size.box, size.cells, size.relaxSteps, p.zeta, p.chi, p.gamma, seed];
+      if (m.relaxed) {
+        try {
+          const res = await fetch(m.relaxed);
+          if (!res.ok) throw new Error(`HTTP ${res.status}`);
+          sim = WebSim.from_relaxed(new Uint8Array(await res.arrayBuffer()), ...args);
+          startedFrom = 'snapshot';
+        } catch (err) {
+          // Not fatal: the same tissue comes from relaxing here, only later.
+          console.warn(`relaxing live: the relaxed state ${m.relaxed} was not usable (${err.message ?? err})`);
+        }
+      }
       try {
-        sim = new WebSim(size.box, size.cells, size.relaxSteps, p.zeta, p.chi, p.gamma, seed);
+        if (!sim) {
+          sim = new WebSim(...args);
+          startedFrom = 'disks';
+        }
       } catch (err) {
         postMessage({ type: 'fatal', message: `Could not start the simulation: ${err.message ?? err}` });
         return;
@@ -190,4 +215,4 @@ onmessage = async (e) => {
   } catch (err) {
     fatal(err);
   }
-};
+}

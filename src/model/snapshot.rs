@@ -1,0 +1,243 @@
+//! A [`State`] as bytes that both targets read, bit for bit: how the browser demo starts from a
+//! confluent tissue relaxed natively by the same core (`monolayer relaxed-state`, www/assets/)
+//! instead of spending its first seconds on the relaxation.
+//!
+//! A snapshot is keyed by everything its state depends on (the seed and every parameter the
+//! relaxation reads, [`relaxation_key`]), so a page whose parameters differ from the ones it was
+//! made with refuses it and relaxes live instead; and by a checksum, so a damaged file is refused
+//! rather than simulated. The native checkpoint (`run::files`, .npz) stays the format for Python;
+//! this one is for the page, where a zip reader would cost more than the state.
+//!
+//! Layout, little-endian: `MAGIC`, `VERSION` (u32), key (u64), step (u64), L (u32), N (u32);
+//! per cell x0, y0, w, h (u32) and its padded φ ((w + 2)(h + 2) f64); a flags byte (bit 0: the
+//! solver's warm start follows as L² pairs of f64, else it is zero; bit 1: the substrate map
+//! follows as L² f64, else it is 1 everywhere); then FNV-1a 64 of every byte before it.
+
+use num_complex::Complex64 as C64;
+
+use crate::model::error::SimError;
+use crate::model::lattice::Patch;
+use crate::model::monolayer::State;
+use crate::model::params::Params;
+
+const MAGIC: &[u8; 8] = b"MLSTATE\0";
+const VERSION: u32 = 1;
+const HAS_WARM_START: u8 = 1;
+const HAS_SUBSTRATE: u8 = 2;
+
+/// FNV-1a, 64 bits: small, the same on every target, and enough to tell parameter sets and
+/// damaged files apart (it is not a defence against a forged file, which the page never loads).
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+}
+
+/// The key of a relaxed state: the seed and every parameter the relaxation reads. Those it does
+/// not read (activity, the friction of the active phase and its solve, the active steps, the
+/// time unit) are set to their defaults first, so that one relaxed state serves every preset
+/// that differs only in them. Any other parameter changes the key.
+pub fn relaxation_key(params: &Params, seed: u64) -> u64 {
+    let d = Params::default();
+    let p = Params {
+        zeta: d.zeta,
+        q_magnitude: d.q_magnitude,
+        q_epsilon: d.q_epsilon,
+        xi_substrate: d.xi_substrate,
+        xi_cell: d.xi_cell,
+        friction_weights: d.friction_weights,
+        friction_tolerance: d.friction_tolerance,
+        friction_max_iterations: d.friction_max_iterations,
+        active_steps: d.active_steps,
+        time_unit_seconds: d.time_unit_seconds,
+        ..params.clone()
+    };
+    // Debug prints every field, floats exactly (shortest round-trip form), on both targets.
+    fnv1a(format!("seed {seed}; {p:?}").as_bytes())
+}
+
+/// The bytes of `state`, under `key` (see [`relaxation_key`]).
+pub fn encode(state: &State, key: u64) -> Vec<u8> {
+    let l = (state.substrate.len() as f64).sqrt() as usize;
+    let mut out = Vec::with_capacity(64 + state.cells.iter().map(|(_, phi)| 16 + 8 * phi.len()).sum::<usize>());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&key.to_le_bytes());
+    out.extend_from_slice(&state.step.to_le_bytes());
+    out.extend_from_slice(&(l as u32).to_le_bytes());
+    out.extend_from_slice(&(state.cells.len() as u32).to_le_bytes());
+    for (p, phi) in &state.cells {
+        for v in [p.x0, p.y0, p.w, p.h] {
+            out.extend_from_slice(&(v as u32).to_le_bytes());
+        }
+        phi.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+    }
+    let warm = state.warm_start.iter().any(|u| u.re != 0.0 || u.im != 0.0);
+    let substrate = state.substrate.iter().any(|&s| s != 1.0);
+    out.push(if warm { HAS_WARM_START } else { 0 } | if substrate { HAS_SUBSTRATE } else { 0 });
+    if warm {
+        state.warm_start.iter().for_each(|u| {
+            out.extend_from_slice(&u.re.to_le_bytes());
+            out.extend_from_slice(&u.im.to_le_bytes());
+        });
+    }
+    if substrate {
+        state.substrate.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+    }
+    out.extend_from_slice(&fnv1a(&out).to_le_bytes());
+    out
+}
+
+/// Reads bytes written by [`encode`]; refuses a damaged file, another format, another key (a
+/// state relaxed with other parameters or another seed) or another lattice side `l`.
+pub fn decode(bytes: &[u8], key: u64, l: usize) -> Result<State, SimError> {
+    let bad = |why: String| SimError::Invalid(format!("relaxed state: {why}"));
+    if bytes.len() < MAGIC.len() + 8 {
+        return Err(bad(format!("{} bytes, shorter than its header", bytes.len())));
+    }
+    let (body, sum) = bytes.split_at(bytes.len() - 8);
+    if !body.starts_with(MAGIC) {
+        return Err(bad("not a relaxed-state file (wrong magic bytes)".into()));
+    }
+    if fnv1a(body) != u64::from_le_bytes(sum.try_into().expect("8 bytes")) {
+        return Err(bad("checksum mismatch: the file is damaged or truncated".into()));
+    }
+    let mut r = Reader { bytes: body, at: MAGIC.len() };
+    let version = r.u32()?;
+    if version != VERSION {
+        return Err(bad(format!("format version {version}, this core reads {VERSION}")));
+    }
+    let file_key = r.u64()?;
+    if file_key != key {
+        return Err(bad(format!(
+            "made with other parameters or another seed (key {file_key:016x}, these parameters give {key:016x})"
+        )));
+    }
+    let step = r.u64()?;
+    let (file_l, n) = (r.u32()? as usize, r.u32()? as usize);
+    if file_l != l {
+        return Err(bad(format!("lattice {file_l}×{file_l}, the parameters say {l}×{l}")));
+    }
+    let mut cells = Vec::with_capacity(n.min(body.len() / 16));
+    for i in 0..n {
+        let [x0, y0, w, h] = [r.u32()?, r.u32()?, r.u32()?, r.u32()?].map(|v| v as usize);
+        if [x0, y0, w, h].iter().any(|&v| v >= l) {
+            return Err(bad(format!("cell {i}: patch ({x0}, {y0}, {w}, {h}) does not fit the {l}×{l} lattice")));
+        }
+        let patch = Patch { x0, y0, w, h };
+        let phi = r.f64s(patch.padded_len())?;
+        cells.push((patch, phi));
+    }
+    let flags = r.u8()?;
+    let warm_start = if flags & HAS_WARM_START != 0 {
+        r.f64s(2 * l * l)?.chunks_exact(2).map(|c| C64::new(c[0], c[1])).collect()
+    } else {
+        vec![C64::new(0.0, 0.0); l * l]
+    };
+    let substrate = if flags & HAS_SUBSTRATE != 0 { r.f64s(l * l)? } else { vec![1.0; l * l] };
+    if r.at != body.len() {
+        return Err(bad(format!("{} bytes left over after the state", body.len() - r.at)));
+    }
+    Ok(State { step, cells, warm_start, substrate })
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn take(&mut self, n: usize) -> Result<&[u8], SimError> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.bytes.len());
+        let end = end.ok_or_else(|| SimError::Invalid("relaxed state: ends in the middle of its data".into()))?;
+        let s = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+    fn u8(&mut self) -> Result<u8, SimError> {
+        Ok(self.take(1)?[0])
+    }
+    fn u32(&mut self) -> Result<u32, SimError> {
+        Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
+    }
+    fn u64(&mut self) -> Result<u64, SimError> {
+        Ok(u64::from_le_bytes(self.take(8)?.try_into().expect("8 bytes")))
+    }
+    fn f64s(&mut self, n: usize) -> Result<Vec<f64>, SimError> {
+        let bytes = self.take(n.saturating_mul(8))?;
+        Ok(bytes.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes"))).collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::monolayer::Monolayer;
+
+    fn small() -> Params {
+        Params { box_size: 40, n_cells: 6, relax_steps: 30, relax_patch_size: 26, ..Params::default() }
+    }
+
+    fn relaxed(p: &Params, seed: u64) -> Monolayer {
+        let mut m = Monolayer::new(p.clone(), seed).unwrap();
+        m.advance(p.relax_steps).unwrap();
+        m
+    }
+
+    #[test]
+    fn round_trip_continues_bit_for_bit() {
+        let p = small();
+        let mut a = relaxed(&p, 3);
+        let key = relaxation_key(&p, 3);
+        let bytes = encode(&a.state(), key);
+        let s = decode(&bytes, key, p.box_size).unwrap();
+        assert_eq!(s, a.state());
+        let mut b = Monolayer::from_state(p.clone(), 3, s).unwrap();
+        a.advance(20).unwrap();
+        b.advance(20).unwrap();
+        assert_eq!(a.fingerprint(), b.fingerprint());
+    }
+
+    #[test]
+    fn warm_start_and_substrate_are_kept_when_not_trivial() {
+        let p = small();
+        let mut m = relaxed(&p, 1);
+        let mut map = vec![1.0; 40 * 40];
+        map[17] = 0.25;
+        m.set_substrate(&map).unwrap();
+        m.advance(3).unwrap(); // active: the solver's warm start is no longer zero
+        let s = m.state();
+        assert!(s.warm_start.iter().any(|u| u.re != 0.0));
+        let bytes = encode(&s, 9);
+        assert_eq!(decode(&bytes, 9, 40).unwrap(), s);
+    }
+
+    #[test]
+    fn the_key_reads_the_relaxation_parameters_only() {
+        let p = small();
+        let k = relaxation_key(&p, 1);
+        let active_only = Params { zeta: 0.3, xi_substrate: 0.5, q_magnitude: 2.0, active_steps: 7, ..p.clone() };
+        assert_eq!(relaxation_key(&active_only, 1), k);
+        assert_ne!(relaxation_key(&p, 2), k, "the seed");
+        assert_ne!(relaxation_key(&Params { gamma: 0.07, ..p.clone() }, 1), k, "γ");
+        assert_ne!(relaxation_key(&Params { relax_steps: 31, ..p.clone() }, 1), k, "relaxation steps");
+        assert_ne!(relaxation_key(&Params { box_size: 41, ..p }, 1), k, "the box");
+    }
+
+    #[test]
+    fn damaged_foreign_or_mismatched_files_are_refused() {
+        let p = small();
+        let key = relaxation_key(&p, 1);
+        let bytes = encode(&relaxed(&p, 1).state(), key);
+        let err = |b: &[u8], key, l| decode(b, key, l).unwrap_err().to_string();
+        assert!(err(&bytes, key ^ 1, 40).contains("other parameters"));
+        assert!(err(&bytes, key, 41).contains("lattice"));
+        assert!(err(&bytes[..bytes.len() - 3], key, 40).contains("checksum"));
+        assert!(err(&bytes[..5], key, 40).contains("header"));
+        assert!(err(b"", key, 40).contains("header"));
+        assert!(err(b"PK\x03\x04 a zip file, not a state", key, 40).contains("magic"));
+        for at in [20, bytes.len() / 2, bytes.len() - 9] {
+            let mut b = bytes.clone();
+            b[at] ^= 0x10;
+            assert!(err(&b, key, 40).contains("checksum"), "a bit flipped at byte {at}");
+        }
+    }
+}

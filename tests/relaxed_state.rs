@@ -1,0 +1,99 @@
+//! The relaxed tissues the browser demo starts from (www/assets/): each file the page lists is,
+//! byte for byte, what `monolayer relaxed-state` writes now, and decodes to the state the core
+//! reaches by relaxing with the page's parameters. A change of the physics or of the page's size
+//! that would make the page start from a stale tissue fails here, with the command that remakes
+//! the file.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{monolayer, stderr};
+use monolayer::model::snapshot::{self, relaxation_key};
+use monolayer::{Monolayer, Params};
+
+const STATE_JS: &str = include_str!("../www/js/state.js");
+
+/// The number after `key:` in the first line of state.js that starts with `line_start`.
+fn number_after(line_start: &str, key: &str) -> f64 {
+    let line = STATE_JS.lines().find(|l| l.trim_start().starts_with(line_start)).expect(line_start);
+    let rest = &line[line.find(&format!("{key}:")).unwrap_or_else(|| panic!("{key} in {line}")) + key.len() + 1..];
+    let num: String = rest.trim_start().chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
+    num.parse().unwrap_or_else(|_| panic!("{key} in {line}"))
+}
+
+/// The page's size and its listed relaxed states: (seed, γ, file under www/).
+fn page() -> (Params, Vec<(u64, f64, PathBuf)>) {
+    let p = Params {
+        box_size: number_after("export const SIZE", "box") as usize,
+        n_cells: number_after("export const SIZE", "cells") as usize,
+        relax_steps: number_after("export const SIZE", "relaxSteps") as u64,
+        ..Params::default()
+    };
+    let line = STATE_JS.lines().find(|l| l.starts_with("export const RELAXED_STATES")).expect("RELAXED_STATES");
+    let entries = line
+        .split("{ seed:")
+        .skip(1)
+        .map(|e| {
+            let seed = e.trim_start().split(',').next().unwrap().trim().parse().unwrap();
+            let gamma = number_after_in(e, "gamma");
+            let file = e.split("'../").nth(1).unwrap().split('\'').next().unwrap();
+            (seed, gamma, Path::new(env!("CARGO_MANIFEST_DIR")).join("www").join(file))
+        })
+        .collect::<Vec<_>>();
+    assert!(!entries.is_empty(), "state.js lists no relaxed state");
+    (p, entries)
+}
+
+fn number_after_in(s: &str, key: &str) -> f64 {
+    let rest = &s[s.find(&format!("{key}:")).unwrap() + key.len() + 1..];
+    rest.trim_start().chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect::<String>().parse().unwrap()
+}
+
+#[test]
+fn shipped_relaxed_states_are_what_the_core_relaxes_now() {
+    let (size, entries) = page();
+    for (seed, gamma, file) in entries {
+        let p = Params { gamma, ..size.clone() };
+        let remake = format!(
+            "cargo run --release -- relaxed-state --set box_size={} --set n_cells={} --relax-steps {} --set gamma={gamma} \
+             --seed {seed} --out www/{}",
+            p.box_size,
+            p.n_cells,
+            p.relax_steps,
+            file.strip_prefix(Path::new(env!("CARGO_MANIFEST_DIR")).join("www")).unwrap().display()
+        );
+        let bytes = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e}; remake it: {remake}", file.display()));
+        let mut m = Monolayer::new(p.clone(), seed).unwrap();
+        m.advance(p.relax_steps).unwrap();
+        let shipped = snapshot::decode(&bytes, relaxation_key(&p, seed), p.box_size)
+            .unwrap_or_else(|e| panic!("{}: {e}; remake it: {remake}", file.display()));
+        assert!(shipped == m.state(), "{} is not the state the core relaxes now; remake it: {remake}", file.display());
+        assert_eq!(bytes, snapshot::encode(&m.state(), relaxation_key(&p, seed)));
+    }
+}
+
+#[test]
+fn the_command_writes_a_state_that_continues_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("relaxed.bin");
+    let small = ["--set", "box_size=50", "--set", "n_cells=8", "--relax-steps", "120", "--seed", "4"];
+    let o = monolayer(&[&["relaxed-state", "--out", out.to_str().unwrap()][..], &small[..]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("step 120, 8 cells"), "{}", stderr(&o));
+    let p = Params { box_size: 50, n_cells: 8, relax_steps: 120, ..Params::default() };
+    let state = snapshot::decode(&std::fs::read(&out).unwrap(), relaxation_key(&p, 4), 50).unwrap();
+    let mut from_file = Monolayer::from_state(p.clone(), 4, state).unwrap();
+    let mut straight = Monolayer::new(p, 4).unwrap();
+    straight.advance(120 + 30).unwrap();
+    from_file.advance(30).unwrap();
+    assert_eq!(from_file.fingerprint(), straight.fingerprint());
+    assert_eq!(from_file.step_count(), 150);
+
+    // A bad parameter is named, and nothing is written.
+    let bad = dir.path().join("bad.bin");
+    let o = monolayer(&["relaxed-state", "--set", "n_cells=0", "--out", bad.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("n_cells"), "{}", stderr(&o));
+    assert!(!bad.exists());
+}
