@@ -103,7 +103,7 @@ pub struct Neighbourhood<'a> {
 
 impl<'a> Neighbourhood<'a> {
     /// Sites (a0 .. a0 + len, b) of the patch, in the padded storage `f`.
-    #[inline]
+    #[inline(always)]
     pub fn new(f: &'a [f64], patch: Patch, b: usize, a0: usize, len: usize) -> Self {
         let s = patch.stride();
         // Patch row b is padded row b + 1; patch column a is padded column a + 1.
