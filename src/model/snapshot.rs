@@ -18,7 +18,7 @@ use num_complex::Complex64 as C64;
 use crate::model::error::SimError;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::State;
-use crate::model::params::Params;
+use crate::model::params::{FrictionWeights, Params};
 
 const MAGIC: &[u8; 8] = b"MLSTATE\0";
 const VERSION: u32 = 1;
@@ -33,21 +33,21 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 
 /// The key of a relaxed state: the seed and every parameter the relaxation reads. Those it does
 /// not read (activity, the friction of the active phase and its solve, the active steps, the
-/// time unit) are set to their defaults first, so that one relaxed state serves every preset
-/// that differs only in them. Any other parameter changes the key.
+/// time unit) are set to fixed values first, so that one relaxed state serves every preset that
+/// differs only in them, and a change of their defaults leaves the key alone. Any other
+/// parameter changes the key.
 pub fn relaxation_key(params: &Params, seed: u64) -> u64 {
-    let d = Params::default();
     let p = Params {
-        zeta: d.zeta,
-        q_magnitude: d.q_magnitude,
-        q_epsilon: d.q_epsilon,
-        xi_substrate: d.xi_substrate,
-        xi_cell: d.xi_cell,
-        friction_weights: d.friction_weights,
-        friction_tolerance: d.friction_tolerance,
-        friction_max_iterations: d.friction_max_iterations,
-        active_steps: d.active_steps,
-        time_unit_seconds: d.time_unit_seconds,
+        zeta: 0.0,
+        q_magnitude: 0.0,
+        q_epsilon: 0.0,
+        xi_substrate: 0.0,
+        xi_cell: 0.0,
+        friction_weights: FrictionWeights::Phi,
+        friction_tolerance: 0.0,
+        friction_max_iterations: 0,
+        active_steps: 0,
+        time_unit_seconds: 0.0,
         ..params.clone()
     };
     // Debug prints every field, floats exactly (shortest round-trip form), on both targets.
@@ -214,7 +214,14 @@ mod tests {
     fn the_key_reads_the_relaxation_parameters_only() {
         let p = small();
         let k = relaxation_key(&p, 1);
-        let active_only = Params { zeta: 0.3, xi_substrate: 0.5, q_magnitude: 2.0, active_steps: 7, ..p.clone() };
+        let active_only = Params {
+            zeta: 0.3,
+            xi_substrate: 0.5,
+            q_magnitude: 2.0,
+            active_steps: 7,
+            friction_weights: FrictionWeights::Subdomain,
+            ..p.clone()
+        };
         assert_eq!(relaxation_key(&active_only, 1), k);
         assert_ne!(relaxation_key(&p, 2), k, "the seed");
         assert_ne!(relaxation_key(&Params { gamma: 0.07, ..p.clone() }, 1), k, "γ");
