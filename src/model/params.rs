@@ -24,14 +24,16 @@ pub enum FrictionWeights {
     /// Each cell j at x' weighs φ_j(x'), clamped to [0, 1] (docs/reading.md §4).
     Phi,
     /// Each cell with φ_j(x') > `presence_threshold` weighs 1: "j ∈ x'" read as every cell
-    /// present at x', with the paper's own threshold; a stronger friction at cell edges. The
-    /// calibrated default (docs/calibration.md).
+    /// present at x', with the paper's own threshold; a stronger friction at cell edges (the
+    /// default until the subdomain reading was screened; docs/calibration.md).
     Presence,
     /// Every cell whose subdomain (patch) covers x' weighs 1, whatever φ_j(x') is: in the
     /// paper's code each phase field lives on its own subdomain (its SI Sec. A), so "all phase
     /// fields at the lattice site x'" may be every field defined there. The patch rule
     /// (`relax_patch_size`, then `patch_margin` beyond φ > `presence_threshold`) then becomes
-    /// part of the model. The strongest of the three readings (n ≈ 4.5 per site at full size).
+    /// part of the model. The strongest of the three readings (n ≈ 4.5 per site at full size),
+    /// and the default: the one that comes closest to the paper's regime map and speeds
+    /// (docs/calibration.md).
     Subdomain,
 }
 
@@ -163,7 +165,7 @@ impl Default for Params {
             xi_substrate: 0.01,
             xi_cell: 1.0,
             passive_force: PassiveForce::PhiGradMu,
-            friction_weights: FrictionWeights::Presence,
+            friction_weights: FrictionWeights::Subdomain,
             presence_threshold: 0.01,
             dt: 0.1,
             laplacian: Laplacian::FivePoint,
@@ -382,7 +384,7 @@ mod tests {
         assert_eq!(p.active_steps, 100_000);
         assert!((p.chi() - 0.01).abs() < 1e-15);
         // The conventions the calibration chose (docs/calibration.md).
-        assert_eq!((p.passive_force, p.friction_weights), (PassiveForce::PhiGradMu, FrictionWeights::Presence));
+        assert_eq!((p.passive_force, p.friction_weights), (PassiveForce::PhiGradMu, FrictionWeights::Subdomain));
         assert_eq!(p.q_magnitude, 0.5);
         // One site per time unit is 1,000 µm/h at 3.6 s per time unit, 720 µm/h at 5 s.
         assert_eq!(p.microns_per_hour(), 1000.0);
