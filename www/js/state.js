@@ -23,8 +23,8 @@ export const relaxedStateFor = (state) =>
 // Each parameter: label, range, default, and whether its slider is logarithmic. The page makes
 // one slider for each entry with `slider` (in this order); `model` ones are the core's.
 export const PARAMS = {
-  zeta: { label: 'Activity ζ', min: 0, max: 1, def: 0.4, step: 0.01, slider: true, model: true },
-  chi: { label: 'Friction ratio χ = ξs/ξcell', min: 0.001, max: 1, def: 0.01, log: true, slider: true, model: true },
+  zeta: { label: 'Activity ζ', min: 0, max: 3, def: 2.5, step: 0.01, slider: true, model: true },
+  chi: { label: 'Friction ratio χ = ξs/ξcell', min: 0.001, max: 1, def: 0.001, log: true, slider: true, model: true },
   gamma: { label: 'Surface tension γ', min: 0.02, max: 0.2, def: 0.06, step: 0.005, slider: true, model: true },
   spf: { label: 'Speed limit: steps per 1/30 s', min: 1, max: 50, def: 20, step: 1, integer: true, slider: true },
   seed: { label: 'Seed', min: 0, max: 4294967295, def: 1, step: 1, integer: true },
@@ -46,16 +46,18 @@ export const fieldName = (kind) => FieldKind[kind].toLowerCase();
 const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === name);
 
 // The paper's three regimes at this size, from native runs of the same core with the calibrated
-// conventions (`monolayer sweep`, seeds 1 and 2, 1,500 relaxation steps, 8,000 active steps;
-// README, "Browser demo"). At ζ = 0.4 only χ changes:
-//   χ = 0.1:  no void site in 8,000 active steps (both seeds);
-//   χ = 0.03: a hole opens after 2,500–3,000 active steps; seed 1's closes after 250 time units;
-//   χ = 0.01: seed 1 (the default) opens a hole after 1,750 active steps that stays open until a
-//             stretched cell spans the box (step 5,292); seed 2 opens none in 8,000 steps.
+// conventions (subdomain friction weights; `monolayer sweep`, seeds 1 and 2, 1,500 relaxation
+// steps, 8,000 active steps; README, "Browser demo"). An 80-site box truncates the long-range
+// flows that tear the full-size tissue at the paper's ζ ≤ 0.5, so the presets drive 3–5× harder:
+//   χ = 0.1,   ζ = 2:   no void site in 8,000 active steps (both seeds);
+//   χ = 0.001, ζ = 1.5: seed 1 opens a hole after ≈ 2,500 active steps that closes by 6,000;
+//                       seed 2 opens none;
+//   χ = 0.001, ζ = 2.5: a hole that grows to ≈ 30 % of the box and stays open, after ≈ 1,200
+//                       active steps for seed 1 (the default) and ≈ 4,500 for seed 2.
 export const PRESETS = {
-  'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 0.4, chi: 0.1, gamma: 0.06 },
-  'short-lived': { label: 'Short-lived holes (χ = 0.03)', zeta: 0.4, chi: 0.03, gamma: 0.06 },
-  persistent: { label: 'Persistent holes (low friction, χ = 0.01)', zeta: 0.4, chi: 0.01, gamma: 0.06 },
+  'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 2, chi: 0.1, gamma: 0.06 },
+  'short-lived': { label: 'Short-lived holes (χ = 0.001, ζ = 1.5)', zeta: 1.5, chi: 0.001, gamma: 0.06 },
+  persistent: { label: 'Persistent holes (low friction, χ = 0.001)', zeta: 2.5, chi: 0.001, gamma: 0.06 },
 };
 export const DEFAULT_PRESET = 'persistent';
 
