@@ -17,9 +17,15 @@ const STATE_JS: &str = include_str!("../www/js/state.js");
 /// The number after `key:` in the first line of state.js that starts with `line_start`.
 fn number_after(line_start: &str, key: &str) -> f64 {
     let line = STATE_JS.lines().find(|l| l.trim_start().starts_with(line_start)).expect(line_start);
-    let rest = &line[line.find(&format!("{key}:")).unwrap_or_else(|| panic!("{key} in {line}")) + key.len() + 1..];
-    let num: String = rest.trim_start().chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
-    num.parse().unwrap_or_else(|_| panic!("{key} in {line}"))
+    number_after_in(line, key)
+}
+
+/// The number after the first `key:` in `s`.
+fn number_after_in(s: &str, key: &str) -> f64 {
+    let at = s.find(&format!("{key}:")).unwrap_or_else(|| panic!("no {key}: in {s}"));
+    let num: String =
+        s[at + key.len() + 1..].trim_start().chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
+    num.parse().unwrap_or_else(|_| panic!("{key} in {s}"))
 }
 
 /// The page's size and its listed relaxed states: (seed, γ, file under www/).
@@ -43,11 +49,6 @@ fn page() -> (Params, Vec<(u64, f64, PathBuf)>) {
         .collect::<Vec<_>>();
     assert!(!entries.is_empty(), "state.js lists no relaxed state");
     (p, entries)
-}
-
-fn number_after_in(s: &str, key: &str) -> f64 {
-    let rest = &s[s.find(&format!("{key}:")).unwrap() + key.len() + 1..];
-    rest.trim_start().chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect::<String>().parse().unwrap()
 }
 
 #[test]

@@ -19,27 +19,15 @@ use monolayer::{Monolayer, Params};
 use ndarray::{ArrayD, IxDyn};
 use ndarray_npy::{NpzReader, NpzWriter};
 
-/// A small quick run: 6 cells on a 48×48 box, relaxation to step 100, frames every 50 steps.
+/// A small quick protocol: 6 cells on a 48×48 box, on one thread, relaxation to step 100.
+const SMALL_RUN: [&str; 10] =
+    ["run", "--quiet", "--threads", "1", "--set", "box_size=48", "--set", "n_cells=6", "--relax-steps", "100"];
+
+/// [`SMALL_RUN`] for `active_steps`, frames every 50 steps.
 fn small(out: &Path, active_steps: u64, extra: &[&str]) -> Output {
     let steps = active_steps.to_string();
-    let mut args = vec![
-        "run",
-        "--quiet",
-        "--threads",
-        "1",
-        "--set",
-        "box_size=48",
-        "--set",
-        "n_cells=6",
-        "--relax-steps",
-        "100",
-        "--steps",
-        &steps,
-        "--frame-interval",
-        "50",
-        "--out",
-        arg(out),
-    ];
+    let mut args = SMALL_RUN.to_vec();
+    args.extend(["--steps", &steps, "--frame-interval", "50", "--out", arg(out)]);
     args.extend_from_slice(extra);
     monolayer(&args)
 }
@@ -227,25 +215,7 @@ fn a_sweep_retries_runs_stopped_by_an_io_error() {
 fn a_full_disk_stops_a_run_cleanly() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("full");
-    let o = with_file_size_limit(
-        8,
-        &[
-            "run",
-            "--quiet",
-            "--threads",
-            "1",
-            "--set",
-            "box_size=48",
-            "--set",
-            "n_cells=6",
-            "--relax-steps",
-            "100",
-            "--steps",
-            "100",
-            "--out",
-            arg(&run),
-        ],
-    );
+    let o = with_file_size_limit(8, &[&SMALL_RUN[..], &["--steps", "100", "--out", arg(&run)]].concat());
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("File too large"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("ZipWriter"), "{}", stderr(&o));

@@ -28,6 +28,7 @@ use crate::model::motion::{friction_weight, velocity_and_rate, Drag, MotionField
 use crate::model::par;
 use crate::model::params::Params;
 use crate::model::shape::{normalise, shape_tensor};
+use crate::model::snapshot::{fnv1a_continue, FNV1A_START};
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 
@@ -337,14 +338,8 @@ impl Monolayer {
     /// simulations agree bit for bit exactly when their fingerprints do (up to hash collisions).
     /// Used to compare the WebAssembly core with the native one.
     pub fn fingerprint(&self) -> u64 {
-        const PRIME: u64 = 0x0000_0100_0000_01b3;
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        let mut eat = |v: u64| {
-            for byte in v.to_le_bytes() {
-                h ^= byte as u64;
-                h = h.wrapping_mul(PRIME);
-            }
-        };
+        let mut h = FNV1A_START;
+        let mut eat = |v: u64| h = fnv1a_continue(h, &v.to_le_bytes());
         eat(self.step);
         for c in &self.cells {
             let p = c.patch;

@@ -25,10 +25,19 @@ const VERSION: u32 = 1;
 const HAS_WARM_START: u8 = 1;
 const HAS_SUBSTRATE: u8 = 2;
 
-/// FNV-1a, 64 bits: small, the same on every target, and enough to tell parameter sets and
-/// damaged files apart (it is not a defence against a forged file, which the page never loads).
+/// The offset basis of 64-bit FNV-1a, the hash of no bytes.
+pub(crate) const FNV1A_START: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// 64-bit FNV-1a of `bytes`, continuing from the hash `h` of what came before them (start from
+/// [`FNV1A_START`]): small, the same on every target, and enough to tell parameter sets, damaged
+/// files and states apart (it is no defence against a forged file, which the page never loads).
+/// [`Monolayer::fingerprint`](crate::model::monolayer::Monolayer::fingerprint) hashes a state with it.
+pub(crate) fn fnv1a_continue(h: u64, bytes: &[u8]) -> u64 {
+    bytes.iter().fold(h, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+}
+
 fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+    fnv1a_continue(FNV1A_START, bytes)
 }
 
 /// The key of a relaxed state: the seed and every parameter the relaxation reads. Those it does

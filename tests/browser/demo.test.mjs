@@ -112,9 +112,8 @@ async function waitStats(page) {
   return stats(page);
 }
 
-// The canvas as the compositor shows it, decoded in the page: distinct colours and a hash.
-async function canvasShot(page, file) {
-  const png = await page.locator('#view').screenshot({ path: file });
+// A PNG (bytes) decoded in the page: its distinct colours (every 7th pixel) and a hash.
+function pngColours(page, png) {
   return page.evaluate(async (b64) => {
     const img = new Image();
     img.src = `data:image/png;base64,${b64}`;
@@ -131,6 +130,11 @@ async function canvasShot(page, file) {
     }
     return { colours: colours.size, hash };
   }, png.toString('base64'));
+}
+
+// The canvas as the compositor shows it, decoded in the page.
+async function canvasShot(page, file) {
+  return pngColours(page, await page.locator('#view').screenshot({ path: file }));
 }
 
 function nativeFingerprint(size, p, seed, totalSteps) {
@@ -417,18 +421,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert(url.startsWith('data:image/png;base64,'), 'not a PNG');
       const png = Buffer.from(url.slice(url.indexOf(',') + 1), 'base64');
       await writeFile(shot('screenshot-button'), png);
-      const colours = await p.evaluate(async (u) => {
-        const img = new Image();
-        img.src = u;
-        await img.decode();
-        const c = new OffscreenCanvas(img.width, img.height);
-        const g = c.getContext('2d');
-        g.drawImage(img, 0, 0);
-        const d = g.getImageData(0, 0, img.width, img.height).data;
-        const set = new Set();
-        for (let i = 0; i < d.length; i += 4 * 7) set.add((d[i] << 16) | (d[i + 1] << 8) | d[i + 2]);
-        return set.size;
-      }, url);
+      const { colours } = await pngColours(p, png);
       assert(colours > 20, `screenshot has ${colours} colours: blank?`);
       await p.close();
     });
