@@ -14,6 +14,8 @@
 //! stage) and the threads meet twice per evaluation instead of four times; the counters still
 //! time every stage ([`Counters::time_laps`]).
 
+use std::ops::Range;
+
 use num_complex::Complex64 as C64;
 
 use crate::model::cell::Cell;
@@ -26,7 +28,7 @@ use crate::model::init::random_disks;
 use crate::model::lattice::{wrap, Patch};
 use crate::model::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
 use crate::model::par;
-use crate::model::params::Params;
+use crate::model::params::{FrictionWeights, Params};
 use crate::model::shape::{normalise, shape_tensor};
 use crate::model::snapshot::{fnv1a_continue, FNV1A_START};
 
@@ -162,11 +164,14 @@ pub struct Monolayer {
     last_solve: SolveStats,
 }
 
-/// Adds `value(cell, padded index)` of every cell onto the lattice array `out`. Each thread
-/// owns a band of rows and visits the cells in order, so every site sums in cell order.
-fn gather<T>(out: &mut [T], zero: T, cells: &[Cell], l: usize, value: impl Fn(&Cell, usize) -> T + Sync)
+/// Adds every cell's values onto the lattice array `out`: `add(cell, padded, run)` adds the
+/// cell's values at the padded patch sites `padded` onto the lattice run `run` of the same
+/// length, which it receives as slices so that its loop runs in SIMD lanes without bounds checks.
+/// Each thread owns a band of rows and visits the cells in order, so every site sums in cell
+/// order.
+fn gather<T>(out: &mut [T], zero: T, cells: &[Cell], l: usize, add: impl Fn(&Cell, Range<usize>, &mut [T]) + Sync)
 where
-    T: Copy + Send + Sync + std::ops::AddAssign,
+    T: Copy + Send + Sync,
 {
     let rows = par::band_rows(l);
     par::for_each_chunk_mut(out, rows * l, |band, chunk| {
@@ -179,13 +184,19 @@ where
                 let Some(b) = p.row_of(gy, l) else { continue };
                 for run in p.row_runs(b, l).into_iter().flatten() {
                     let start = (gy - y0) * l + run.global % l;
-                    for (k, o) in chunk[start..start + run.len].iter_mut().enumerate() {
-                        *o += value(cell, run.padded + k);
-                    }
+                    add(cell, run.padded..run.padded + run.len, &mut chunk[start..start + run.len]);
                 }
             }
         }
     });
+}
+
+/// `out += value` site by site over a run.
+#[inline(always)]
+fn add_each<T: Copy + std::ops::AddAssign>(out: &mut [T], values: impl Iterator<Item = T>) {
+    for (o, v) in out.iter_mut().zip(values) {
+        *o += v;
+    }
 }
 
 impl Monolayer {
@@ -356,15 +367,16 @@ impl Monolayer {
     /// Σ_i φ_i on the lattice.
     pub fn phi_sum(&mut self) -> &[f64] {
         let l = self.params.box_size;
-        gather(&mut self.lattice.phi_sum, 0.0, &self.cells, l, |c, i| c.phi[i]);
+        gather(&mut self.lattice.phi_sum, 0.0, &self.cells, l, |c, r, out| add_each(out, c.phi[r].iter().copied()));
         &self.lattice.phi_sum
     }
 
     /// The coarse-grained velocity Σ_i φ_i v_i (Eq. S4) as of the last evaluation.
     pub fn velocity_field(&mut self) -> &[C64] {
         let l = self.params.box_size;
-        gather(&mut self.lattice.velocity, ZERO, &self.cells, l, |c, i| {
-            C64::new(c.phi[i] * c.vx[i], c.phi[i] * c.vy[i])
+        gather(&mut self.lattice.velocity, ZERO, &self.cells, l, |c, r, out| {
+            let (phi, vx, vy) = (&c.phi[r.clone()], &c.vx[r.clone()], &c.vy[r]);
+            add_each(out, phi.iter().zip(vx.iter().zip(vy)).map(|(p, (x, y))| C64::new(p * x, p * y)));
         });
         &self.lattice.velocity
     }
@@ -438,7 +450,9 @@ impl Monolayer {
         let cells = &mut self.cells;
         let lat = &mut self.lattice;
 
-        counters.time(Stage::Gather, || gather(&mut lat.sum_phi2, 0.0, cells, l, |c, i| c.phi[i] * c.phi[i]));
+        counters.time(Stage::Gather, || {
+            gather(&mut lat.sum_phi2, 0.0, cells, l, |c, r, out| add_each(out, c.phi[r].iter().map(|p| p * p)))
+        });
         // Cell by cell in one loop, so that each patch is still in cache for its forces.
         counters.time_laps([Stage::ChemicalPotential, Stage::Forces], |laps| {
             let sum_phi2 = &lat.sum_phi2;
@@ -457,9 +471,17 @@ impl Monolayer {
 
         if xi_c > 0.0 {
             counters.time(Stage::Gather, || {
-                gather(&mut lat.weighted_force, WeightedForce::default(), cells, l, |c, i| {
-                    let n = friction_weight(weights, c.phi[i], threshold);
-                    WeightedForce { n, f: C64::new(n * c.fx[i], n * c.fy[i]) }
+                gather(&mut lat.weighted_force, WeightedForce::default(), cells, l, |c, r, out| {
+                    let (phi, fx, fy) = (&c.phi[r.clone()], &c.fx[r.clone()], &c.fy[r]);
+                    let wf = |n: f64, fx: f64, fy: f64| WeightedForce { n, f: C64::new(n * fx, n * fy) };
+                    let sites = phi.iter().zip(fx.iter().zip(fy));
+                    // One loop per reading, so that none tests the reading site by site.
+                    match weights {
+                        FrictionWeights::Subdomain => add_each(out, sites.map(|(_, (&x, &y))| wf(1.0, x, y))),
+                        _ => {
+                            add_each(out, sites.map(|(&p, (&x, &y))| wf(friction_weight(weights, p, threshold), x, y)))
+                        }
+                    }
                 });
                 for ((n, f), wf) in lat.weight.iter_mut().zip(lat.force.iter_mut()).zip(&lat.weighted_force) {
                     (*n, *f) = (wf.n, wf.f);
@@ -503,6 +525,7 @@ impl Monolayer {
 
         // Each cell takes its Heun update as soon as its rate is known, while its patch is in
         // cache: no cell's update reads another's fields.
+        let keep_velocity = !matches!(then, Then::Predict { .. });
         counters.time_laps([Stage::Velocity, Stage::Update], |laps| {
             let drag = Drag { mobility: &lat.mobility, pull: &lat.pull };
             par::for_each_mut(cells, |_, c| {
@@ -512,8 +535,7 @@ impl Monolayer {
                         mu: &c.mu,
                         fx: &c.fx,
                         fy: &c.fy,
-                        vx: &mut c.vx,
-                        vy: &mut c.vy,
+                        velocity: keep_velocity.then_some((&mut c.vx, &mut c.vy)),
                         rate: &mut c.rate,
                     };
                     velocity_and_rate(c.patch, fields, &drag, l, j0, advection);

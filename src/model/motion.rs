@@ -45,33 +45,55 @@ pub struct MotionFields<'a> {
     pub mu: &'a [f64],
     pub fx: &'a [f64],
     pub fy: &'a [f64],
-    pub vx: &'a mut [f64],
-    pub vy: &'a mut [f64],
+    /// Where v_i goes, if it is to be kept (Heun's predictor does not keep it: the corrector's
+    /// replaces it before anything reads it, and not writing it saves two of the pass's nine
+    /// streams).
+    pub velocity: Option<(&'a mut [f64], &'a mut [f64])>,
     pub rate: &'a mut [f64],
 }
 
-/// v_i and ∂_t φ_i at every site of the patch.
+/// v_i (if kept) and ∂_t φ_i at every site of the patch.
 pub fn velocity_and_rate(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j0: f64, advection: Advection) {
+    match (c.velocity.is_some(), advection) {
+        (true, Advection::Central) => rates::<true, false>(patch, c, drag, l, j0),
+        (true, Advection::Upwind) => rates::<true, true>(patch, c, drag, l, j0),
+        (false, Advection::Central) => rates::<false, false>(patch, c, drag, l, j0),
+        (false, Advection::Upwind) => rates::<false, true>(patch, c, drag, l, j0),
+    }
+}
+
+/// The pass itself, one copy per choice, so that no choice is tested site by site and each loop
+/// runs in SIMD lanes.
+#[inline(always)]
+fn rates<const KEEP_V: bool, const UPWIND: bool>(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j0: f64) {
+    let MotionFields { phi, mu, fx, fy, velocity, rate } = c;
+    let (vx_all, vy_all) = velocity.unwrap_or_default();
     for run in patch.runs(l) {
         let len = run.len;
-        let f = Neighbourhood::new(c.phi, patch, run.b, run.a0, len);
+        let f = Neighbourhood::new(phi, patch, run.b, run.a0, len);
         let mobility = &drag.mobility[run.global..][..len];
         let pull = &drag.pull[run.global..][..len];
-        let (mu, fx, fy) = (&c.mu[run.padded..][..len], &c.fx[run.padded..][..len], &c.fy[run.padded..][..len]);
-        let vx_out = &mut c.vx[run.padded..][..len];
-        let vy_out = &mut c.vy[run.padded..][..len];
-        let rate = &mut c.rate[run.padded..][..len];
+        let (mu, fx, fy) = (&mu[run.padded..][..len], &fx[run.padded..][..len], &fy[run.padded..][..len]);
+        let rate = &mut rate[run.padded..][..len];
+        let (vx_out, vy_out) = if KEEP_V {
+            (&mut vx_all[run.padded..][..len], &mut vy_all[run.padded..][..len])
+        } else {
+            (&mut [][..], &mut [][..])
+        };
         for k in 0..len {
             let vx = (fx[k] + pull[k].re) * mobility[k];
             let vy = (fy[k] + pull[k].im) * mobility[k];
-            vx_out[k] = vx;
-            vy_out[k] = vy;
-            let (gx, gy) = match advection {
-                Advection::Central => f.gradient(k),
-                Advection::Upwind => (
+            if KEEP_V {
+                vx_out[k] = vx;
+                vy_out[k] = vy;
+            }
+            let (gx, gy) = if UPWIND {
+                (
                     if vx > 0.0 { f.c[k] - f.xm[k] } else { f.xp[k] - f.c[k] },
                     if vy > 0.0 { f.c[k] - f.ym[k] } else { f.yp[k] - f.c[k] },
-                ),
+                )
+            } else {
+                f.gradient(k)
             };
             rate[k] = -(vx * gx + vy * gy) - j0 * mu[k];
         }
@@ -103,7 +125,14 @@ mod tests {
         for adv in [Advection::Central, Advection::Upwind] {
             velocity_and_rate(
                 patch,
-                MotionFields { phi: &phi, mu: &mu, fx: &fx, fy: &fy, vx: &mut vx, vy: &mut vy, rate: &mut rate },
+                MotionFields {
+                    phi: &phi,
+                    mu: &mu,
+                    fx: &fx,
+                    fy: &fy,
+                    velocity: Some((&mut vx, &mut vy)),
+                    rate: &mut rate,
+                },
                 &Drag { mobility: &mobility, pull: &pull },
                 l,
                 1.0,
