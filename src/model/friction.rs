@@ -82,6 +82,10 @@ pub struct FrictionSolver {
     pub velocity: Vec<C64>,
     /// S(x) = Σ_{N8} V.
     pub velocity_nb: Vec<C64>,
+    /// The n, ξ_s and ξ_c the hierarchy was last built for: an unchanged operator is not built
+    /// again (with subdomain weights n changes only when the patches move, after each step, so
+    /// Heun's corrector solves with the predictor's hierarchy).
+    built_for: Option<(Vec<f64>, Vec<f64>, f64)>,
 }
 
 impl FrictionSolver {
@@ -96,6 +100,7 @@ impl FrictionSolver {
             held: vec![ZERO; n],
             velocity: vec![ZERO; n],
             velocity_nb: vec![ZERO; n],
+            built_for: None,
             mg,
         }
     }
@@ -120,8 +125,17 @@ impl FrictionSolver {
     /// initial guess.
     pub fn solve(&mut self, pb: &FrictionProblem) -> Result<SolveStats, SolveError> {
         let l = self.l;
-        neighbour_sum8(pb.weight, &mut self.weight_nb, l);
-        self.mg.setup(pb.weight, &self.weight_nb, pb.xi_s, pb.xi_c);
+        let built = matches!(&self.built_for, Some((n, xs, xc)) if n == pb.weight && xs == pb.xi_s && *xc == pb.xi_c);
+        if !built {
+            neighbour_sum8(pb.weight, &mut self.weight_nb, l);
+            self.mg.setup(pb.weight, &self.weight_nb, pb.xi_s, pb.xi_c);
+            let (mut n, mut xs) = self.built_for.take().map(|(n, xs, _)| (n, xs)).unwrap_or_default();
+            n.clear();
+            n.extend_from_slice(pb.weight);
+            xs.clear();
+            xs.extend_from_slice(pb.xi_s);
+            self.built_for = Some((n, xs, pb.xi_c));
+        }
         // Each component takes its part of F and of the initial guess, zero outside the solve
         // (where C's diagonal is zero).
         let (u, diag) = (&self.mean_velocity, self.mg.diagonal());
