@@ -353,6 +353,33 @@ mod tests {
 
     /// Subdomain weights: n(x) = the number of rectangular patches (wrapping at the edges) that
     /// cover x, 0 to 4 here, with an uncovered stretch (a hole no patch reaches).
+    fn problem<'a>(n: &'a [f64], f: &'a [C64], xi_s: &'a [f64], xi_c: f64) -> FrictionProblem<'a> {
+        FrictionProblem { weight: n, force: f, xi_s, xi_c, tolerance: 1e-8, max_iterations: 500 }
+    }
+
+    #[test]
+    fn a_changed_operator_is_set_up_again() {
+        // The solver skips the setup when n, ξ_s and ξ_c are those of its last solve; any change
+        // must rebuild, so that a reused solver agrees bit for bit with a fresh one.
+        let l = 24;
+        let (n1, f) = problem_fields(l, true);
+        let n2: Vec<f64> = n1.iter().enumerate().map(|(x, n)| if x % 7 == 0 { n * 1.5 } else { *n }).collect();
+        let (xi_a, xi_b) = (vec![0.001; l * l], vec![0.01; l * l]);
+        let mut reused = FrictionSolver::new(l);
+        reused.solve(&problem(&n1, &f, &xi_a, 1.0)).unwrap();
+        let changes = [(&n2, &xi_a, 1.0), (&n2, &xi_b, 1.0), (&n2, &xi_b, 0.5), (&n2, &xi_b, 0.5)];
+        for (n, xi_s, xi_c) in changes {
+            let pb = problem(n, &f, xi_s, xi_c);
+            reused.reset();
+            let a = reused.solve(&pb).unwrap();
+            let mut fresh = FrictionSolver::new(l);
+            let b = fresh.solve(&pb).unwrap();
+            assert_eq!(a, b);
+            let bits = |v: &[C64]| v.iter().flat_map(|z| [z.re.to_bits(), z.im.to_bits()]).collect::<Vec<_>>();
+            assert_eq!(bits(&reused.velocity), bits(&fresh.velocity));
+        }
+    }
+
     fn subdomain_counts(l: usize) -> Vec<f64> {
         let patches = [(3, 5, 24, 20), (20, 2, 22, 26), (30, 18, 19, 25), (8, 22, 26, 14), (33, 30, 16, 16)];
         let mut n = vec![0.0; l * l];
