@@ -15,7 +15,7 @@ use monolayer::run::files::{self, RunStatus};
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
 use monolayer::run::runner::{Event, RunDir};
-use monolayer::run::sweep::{run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
+use monolayer::run::sweep::{measure_existing, run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
 use monolayer::{Monolayer, Params, Phase};
 
 #[derive(Parser)]
@@ -233,6 +233,15 @@ struct SweepArgs {
     /// A grid axis: --grid chi=0.1,0.01,0.001 --grid zeta=0.3,0.5 (any parameter by name).
     #[arg(long = "grid", value_name = "KEY=V1,V2,..")]
     grid: Vec<String>,
+    /// Run nothing: measure the runs already in OUT/runs (finished or part way) and write the
+    /// tables and the regime map, which counts only the runs that ended. For a look at a sweep
+    /// that is still running, or a map over runs made by several sweeps.
+    #[arg(long)]
+    tables_only: bool,
+    /// One point instead of a grid (repeatable; every point sets the same parameters):
+    /// --point chi=0.1,zeta=0.5 --point chi=0.001,zeta=0.3. With --grid, each point takes its product.
+    #[arg(long = "point", value_name = "K1=V1,K2=V2,..")]
+    point: Vec<String>,
     /// A parameter for every run: --set active_steps=20000.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
@@ -401,6 +410,9 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     for g in &a.grid {
         spec.add_grid(g)?;
     }
+    for p in &a.point {
+        spec.add_point(p)?;
+    }
     if let Some(seeds) = &a.seeds {
         spec.seeds = seeds.clone();
     }
@@ -408,6 +420,20 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
         spec.frame_interval = fi;
     }
     let jobs = spec.jobs()?;
+    if a.tables_only {
+        let summaries = measure_existing(&jobs, &a.out)?;
+        let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
+        eprintln!(
+            "sweep --tables-only: {} of {} runs have a directory in {}, {complete} of them ended",
+            summaries.len(),
+            jobs.len(),
+            a.out.join("runs").display()
+        );
+        for path in write_tables(&a.out, &summaries)? {
+            println!("{}", path.display());
+        }
+        return Ok(());
+    }
     let shard = a.shard.or(slurm_shard()?);
     let workers = match a.jobs {
         Some(n) => check_threads("--jobs", n)?,

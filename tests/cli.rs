@@ -144,3 +144,40 @@ fn sweep_from_the_command_line() {
     assert!(stderr(&o).contains("zeta = 99") && stderr(&o).contains("[−10, 10]"), "{}", stderr(&o));
     assert!(!bad.exists());
 }
+
+/// `monolayer sweep --point`: listed points instead of a grid, named like grid runs; then
+/// `--tables-only` with one point more measures what exists and runs nothing.
+#[test]
+fn sweep_of_points_and_its_tables_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("points");
+    let small = ["--set", "box_size=48", "--set", "n_cells=6", "--set", "relax_steps=100", "--set", "active_steps=100"];
+    let run = |extra: &[&str]| {
+        let mut args = vec!["sweep", "--quiet", "--out", out.to_str().unwrap(), "--frame-interval", "50"];
+        args.extend_from_slice(&small);
+        args.extend_from_slice(&["--point", "chi=0.1,zeta=0.2", "--point", "chi=0.01,zeta=0.4"]);
+        args.extend_from_slice(extra);
+        monolayer(&args)
+    };
+    let o = run(&["--jobs", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    let names: Vec<&str> = summary.lines().skip(1).map(|l| l.split(',').next().unwrap()).collect();
+    assert_eq!(names, ["chi0.1_zeta0.2_seed1", "chi0.01_zeta0.4_seed1"], "{summary}");
+    assert!(out.join("regime_map.png").exists());
+
+    std::fs::remove_file(out.join("summary.csv")).unwrap();
+    let o = run(&["--tables-only", "--point", "chi=0.001,zeta=0.4"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("2 of 3 runs have a directory") && stderr(&o).contains("2 of them ended"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read_to_string(out.join("summary.csv")).unwrap(), summary);
+    assert!(!out.join("runs/chi0.001_zeta0.4_seed1").exists(), "--tables-only ran a simulation");
+
+    let o = run(&["--point", "chi=0.01"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("the same parameters"), "{}", stderr(&o));
+}

@@ -12,6 +12,10 @@
 //! chi = [0.1, 0.01, 0.001]
 //! zeta = [0.3, 0.4, 0.5]
 //! ```
+//!
+//! Points that are not a grid (the paper's regime-map set, say) are listed instead as
+//! `[[points]]` tables, or `--point chi=0.1,zeta=0.5` on the command line; every point takes the
+//! grid's product if there is one too. All points set the same parameters.
 
 use std::fmt::Write as _;
 use std::fs;
@@ -23,7 +27,7 @@ use serde::Deserialize;
 
 use crate::analysis::regime::{classify, fitted_lifetime, Regime};
 use crate::model::params::Params;
-use crate::run::config::{number, params_from_table, parse_list};
+use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
 use crate::run::files::{check_frame, read_frame, RunFrames};
 use crate::run::files::{checkpoint_path, write_atomic, RunLock, RunRecord, RunStatus};
 use crate::run::offline::RunAnalysis;
@@ -37,6 +41,10 @@ pub struct SweepSpec {
     pub base: toml::Table,
     #[serde(default)]
     pub grid: toml::Table,
+    /// Single points, each a table of parameter values, run instead of the empty point the grid
+    /// starts from.
+    #[serde(default)]
+    pub points: Vec<toml::Table>,
     #[serde(default = "default_seeds")]
     pub seeds: Vec<u64>,
     #[serde(default = "default_frame_interval")]
@@ -83,6 +91,52 @@ impl SweepSpec {
         Ok(())
     }
 
+    /// `K1=V1,K2=V2,…` from the command line as one point (values in TOML syntax, one each).
+    pub fn add_point(&mut self, arg: &str) -> Result<(), String> {
+        let mut point = toml::Table::new();
+        for pair in arg.split(',') {
+            let (k, v) = parse_assignment("--point", pair)?;
+            if point.insert(k.clone(), v).is_some() {
+                return Err(format!("--point {arg}: sets `{k}` twice"));
+            }
+        }
+        self.points.push(point);
+        Ok(())
+    }
+
+    /// The listed points as (key, value) lists in key order, or the one empty point; checked:
+    /// every point sets the same keys, none twice, and none that the grid varies.
+    fn starting_points(&self) -> Result<Vec<Vec<(String, toml::Value)>>, String> {
+        let Some(first) = self.points.first() else { return Ok(vec![Vec::new()]) };
+        let keys: Vec<&String> = first.keys().collect();
+        if keys.is_empty() {
+            return Err("sweep: a point sets no parameter".into());
+        }
+        if let Some(k) = keys.iter().find(|k| self.grid.contains_key(k.as_str())) {
+            return Err(format!("sweep: `{k}` is set both by the points and by the grid"));
+        }
+        let mut seen: Vec<String> = Vec::new();
+        let mut out = Vec::new();
+        for p in &self.points {
+            if p.keys().collect::<Vec<_>>() != keys {
+                let names = |t: &toml::Table| t.keys().cloned().collect::<Vec<_>>().join(", ");
+                return Err(format!(
+                    "sweep: every point must set the same parameters: {} against {}",
+                    names(first),
+                    names(p)
+                ));
+            }
+            let text: Vec<String> = p.iter().map(|(k, v)| format!("{k} = {}", value_text(v))).collect();
+            let text = text.join(", ");
+            if seen.contains(&text) {
+                return Err(format!("sweep: the point {text} is listed twice"));
+            }
+            seen.push(text);
+            out.push(p.iter().map(|(k, v)| (k.clone(), v.clone())).collect());
+        }
+        Ok(out)
+    }
+
     /// Every run of the sweep, each one's parameters validated: a bad sweep fails here, before
     /// anything runs, naming the run and the parameter.
     pub fn jobs(&self) -> Result<Vec<Job>, String> {
@@ -109,7 +163,7 @@ impl SweepSpec {
             }
             axes.push((k.clone(), values));
         }
-        let mut points: Vec<Vec<(String, toml::Value)>> = vec![Vec::new()];
+        let mut points = self.starting_points()?;
         for (k, values) in &axes {
             points = points
                 .into_iter()
@@ -419,13 +473,23 @@ pub fn run_sweep(
         return Err(errors.join("\n"));
     }
     let seconds = seconds.into_inner().expect("no panics hold it");
+    let mut summaries = measure_existing(jobs, out)?;
+    for s in &mut summaries {
+        s.run_seconds = seconds.get(&s.name).copied().unwrap_or(0.0);
+    }
+    Ok(summaries)
+}
+
+/// Measures every run of `jobs` that has a directory in `OUT/runs/`, finished or not, running
+/// nothing (`sweep --tables-only`, and the end of every sweep). A run still being written is
+/// read as far as its frames go: each frame is renamed into place whole.
+pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, String> {
+    let runs_dir = out.join("runs");
     let mut summaries = Vec::new();
     for job in jobs {
         let dir = runs_dir.join(&job.name);
         if RunRecord::path(&dir).exists() {
-            let mut s = summarize(job, &dir)?;
-            s.run_seconds = seconds.get(&job.name).copied().unwrap_or(0.0);
-            summaries.push(s);
+            summaries.push(summarize(job, &dir)?);
         }
     }
     Ok(summaries)
@@ -640,6 +704,39 @@ mod tests {
         assert!(typo.jobs().unwrap_err().contains("zetta"));
         assert!(toml::from_str::<SweepSpec>("sedes = [1]\n").is_err());
         assert_eq!("2/4".parse::<Shard>().unwrap(), Shard { index: 2, count: 4 });
+    }
+
+    #[test]
+    fn points_are_listed_runs_named_like_grid_runs() {
+        let mut spec: SweepSpec = toml::from_str("seeds = [1, 2]\n[[points]]\nchi = 0.1\nzeta = 0.5\n").unwrap();
+        spec.add_point("chi=0.001,zeta=0.3").unwrap();
+        let jobs = spec.jobs().unwrap();
+        let names: Vec<&str> = jobs.iter().map(|j| j.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["chi0.1_zeta0.5_seed1", "chi0.1_zeta0.5_seed2", "chi0.001_zeta0.3_seed1", "chi0.001_zeta0.3_seed2"]
+        );
+        assert!((jobs[2].params.xi_substrate - 0.001).abs() < 1e-15 && jobs[2].params.zeta == 0.3);
+        // With a grid, every point takes its product.
+        spec.add_grid("gamma=0.05,0.06").unwrap();
+        assert_eq!(spec.jobs().unwrap()[0].name, "chi0.1_zeta0.5_gamma0.05_seed1");
+        assert_eq!(spec.jobs().unwrap().len(), 8);
+        // Refused, each naming why.
+        let err = |spec: &SweepSpec| spec.jobs().unwrap_err();
+        let mut overlap = spec.clone();
+        overlap.add_grid("zeta=0.3").unwrap();
+        assert!(err(&overlap).contains("`zeta` is set both"), "{}", err(&overlap));
+        let mut uneven = spec.clone();
+        uneven.add_point("chi=0.01").unwrap();
+        assert!(err(&uneven).contains("the same parameters"), "{}", err(&uneven));
+        let mut twice = spec.clone();
+        twice.add_point("chi=0.1,zeta=0.5").unwrap();
+        assert!(err(&twice).contains("listed twice"), "{}", err(&twice));
+        let empty = || toml::from_str::<SweepSpec>("").unwrap();
+        assert!(empty().add_point("chi=0.1,chi=0.2").unwrap_err().contains("twice"));
+        let mut bad = empty();
+        bad.add_point("chi=0.1,zeta=40").unwrap();
+        assert!(err(&bad).contains("zeta"), "{}", err(&bad));
         assert!("4/4".parse::<Shard>().is_err());
     }
 }
