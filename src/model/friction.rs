@@ -82,10 +82,12 @@ pub struct FrictionSolver {
     pub velocity: Vec<C64>,
     /// S(x) = Σ_{N8} V.
     pub velocity_nb: Vec<C64>,
-    /// The n, ξ_s and ξ_c the hierarchy was last built for: an unchanged operator is not built
-    /// again (with subdomain weights n changes only when the patches move, after each step, so
-    /// Heun's corrector solves with the predictor's hierarchy).
-    built_for: Option<(Vec<f64>, Vec<f64>, f64)>,
+    /// The n, ξ_s and ξ_c the hierarchy was last built for (ξ_c `None` before the first solve):
+    /// an unchanged operator is not built again (with subdomain weights n changes only when the
+    /// patches move, after each step, so Heun's corrector solves with the predictor's hierarchy).
+    built_n: Vec<f64>,
+    built_xi_s: Vec<f64>,
+    built_xi_c: Option<f64>,
 }
 
 impl FrictionSolver {
@@ -100,7 +102,9 @@ impl FrictionSolver {
             held: vec![ZERO; n],
             velocity: vec![ZERO; n],
             velocity_nb: vec![ZERO; n],
-            built_for: None,
+            built_n: Vec::new(),
+            built_xi_s: Vec::new(),
+            built_xi_c: None,
             mg,
         }
     }
@@ -125,16 +129,15 @@ impl FrictionSolver {
     /// initial guess.
     pub fn solve(&mut self, pb: &FrictionProblem) -> Result<SolveStats, SolveError> {
         let l = self.l;
-        let built = matches!(&self.built_for, Some((n, xs, xc)) if n == pb.weight && xs == pb.xi_s && *xc == pb.xi_c);
+        let built = self.built_xi_c == Some(pb.xi_c) && self.built_n == pb.weight && self.built_xi_s == pb.xi_s;
         if !built {
             neighbour_sum8(pb.weight, &mut self.weight_nb, l);
             self.mg.setup(pb.weight, &self.weight_nb, pb.xi_s, pb.xi_c);
-            let (mut n, mut xs) = self.built_for.take().map(|(n, xs, _)| (n, xs)).unwrap_or_default();
-            n.clear();
-            n.extend_from_slice(pb.weight);
-            xs.clear();
-            xs.extend_from_slice(pb.xi_s);
-            self.built_for = Some((n, xs, pb.xi_c));
+            self.built_n.clear();
+            self.built_n.extend_from_slice(pb.weight);
+            self.built_xi_s.clear();
+            self.built_xi_s.extend_from_slice(pb.xi_s);
+            self.built_xi_c = Some(pb.xi_c);
         }
         // Each component takes its part of F and of the initial guess, zero outside the solve
         // (where C's diagonal is zero).
@@ -351,8 +354,6 @@ mod tests {
         assert!(st.iterations <= 15, "{st:?}");
     }
 
-    /// Subdomain weights: n(x) = the number of rectangular patches (wrapping at the edges) that
-    /// cover x, 0 to 4 here, with an uncovered stretch (a hole no patch reaches).
     fn problem<'a>(n: &'a [f64], f: &'a [C64], xi_s: &'a [f64], xi_c: f64) -> FrictionProblem<'a> {
         FrictionProblem { weight: n, force: f, xi_s, xi_c, tolerance: 1e-8, max_iterations: 500 }
     }
@@ -367,6 +368,8 @@ mod tests {
         let (xi_a, xi_b) = (vec![0.001; l * l], vec![0.01; l * l]);
         let mut reused = FrictionSolver::new(l);
         reused.solve(&problem(&n1, &f, &xi_a, 1.0)).unwrap();
+        // n, then ξ_s, then ξ_c changes; the last solve repeats the one before it, so the
+        // hierarchy is reused there.
         let changes = [(&n2, &xi_a, 1.0), (&n2, &xi_b, 1.0), (&n2, &xi_b, 0.5), (&n2, &xi_b, 0.5)];
         for (n, xi_s, xi_c) in changes {
             let pb = problem(n, &f, xi_s, xi_c);
@@ -380,6 +383,8 @@ mod tests {
         }
     }
 
+    /// Subdomain weights: n(x) = the number of rectangular patches (wrapping at the edges) that
+    /// cover x, 0 to 4 here, with an uncovered stretch (a hole no patch reaches).
     fn subdomain_counts(l: usize) -> Vec<f64> {
         let patches = [(3, 5, 24, 20), (20, 2, 22, 26), (30, 18, 19, 25), (8, 22, 26, 14), (33, 30, 16, 16)];
         let mut n = vec![0.0; l * l];

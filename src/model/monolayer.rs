@@ -475,12 +475,14 @@ impl Monolayer {
                     let (phi, fx, fy) = (&c.phi[r.clone()], &c.fx[r.clone()], &c.fy[r]);
                     let wf = |n: f64, fx: f64, fy: f64| WeightedForce { n, f: C64::new(n * fx, n * fy) };
                     let sites = phi.iter().zip(fx.iter().zip(fy));
-                    // One loop per reading, so that none tests the reading site by site.
+                    let add =
+                        |kind| add_each(out, sites.map(|(&p, (&x, &y))| wf(friction_weight(kind, p, threshold), x, y)));
+                    // One loop per reading, each with its reading a constant, so that none tests
+                    // the reading site by site.
                     match weights {
-                        FrictionWeights::Subdomain => add_each(out, sites.map(|(_, (&x, &y))| wf(1.0, x, y))),
-                        _ => {
-                            add_each(out, sites.map(|(&p, (&x, &y))| wf(friction_weight(weights, p, threshold), x, y)))
-                        }
+                        FrictionWeights::Phi => add(FrictionWeights::Phi),
+                        FrictionWeights::Presence => add(FrictionWeights::Presence),
+                        FrictionWeights::Subdomain => add(FrictionWeights::Subdomain),
                     }
                 });
                 for ((n, f), wf) in lat.weight.iter_mut().zip(lat.force.iter_mut()).zip(&lat.weighted_force) {
