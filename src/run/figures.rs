@@ -192,6 +192,11 @@ impl Friction {
     }
 }
 
+/// ζ of the figures whose ζ the paper does not state (Figs. 1c–d, S1, S2), unless the user's
+/// `--set zeta=…` says otherwise: the lowest of the paper's three, as the figures had it while
+/// it was the parameters' default (now ζ = 0.5, where `run` opens holes soonest).
+pub const UNSTATED_ZETA: f64 = 0.3;
+
 /// A parameter point of the plan; the rest of the parameters are the scale's base.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Point {
@@ -232,7 +237,8 @@ impl Plan {
     /// Every run's parameters are validated here, before anything runs.
     pub fn new(scale: Scale, figures: &[Figure], sets: &[String]) -> Result<Plan, String> {
         let spec = scale.spec();
-        let mut all: Vec<String> = spec.overrides.iter().map(|s| s.to_string()).collect();
+        let mut all: Vec<String> = vec![format!("zeta={UNSTATED_ZETA}")];
+        all.extend(spec.overrides.iter().map(|s| s.to_string()));
         all.extend(sets.iter().cloned());
         let base = load_params(None, &all)?;
         base.validate().map_err(|e| format!("--set: {e}"))?;
@@ -244,7 +250,8 @@ impl Plan {
         };
         for &f in figures {
             match f {
-                // The paper does not state ζ for Figs. 1c–d and S2: the base's (default 0.3).
+                // The paper does not state ζ for Figs. 1c–d and S2: the base's (UNSTATED_ZETA
+                // unless `--set zeta=…`).
                 Figure::Fig1c | Figure::Fig1d | Figure::FigS2 => {
                     for chi in CHI_REGIMES {
                         want(f, Friction::Chi(chi), zeta0, gamma0, None, spec.few);

@@ -169,7 +169,7 @@ const wanted = (mode) => !ONLY || ONLY.includes(mode);
 // hole (a void region above πR²/4, once active) at this step, relaxation included: found by
 // stepping the wasm core one step at a time from the shipped relaxed state and counting holes
 // after each step. It changes only with the physics.
-const FIRST_HOLE_STEP = Number(process.env.FIRST_HOLE_STEP ?? 2712);
+const FIRST_HOLE_STEP = Number(process.env.FIRST_HOLE_STEP ?? 2677);
 
 let server;
 let base;

@@ -46,14 +46,15 @@ export const fieldName = (kind) => FieldKind[kind].toLowerCase();
 const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === name);
 
 // The paper's three regimes at this size, from native runs of the same core with the calibrated
-// conventions (subdomain friction weights; `monolayer sweep`, seeds 1 and 2, 1,500 relaxation
-// steps, 8,000 active steps; README, "Browser demo"). An 80-site box truncates the long-range
-// flows that tear the full-size tissue at the paper's ζ ≤ 0.5, so the presets drive 3–5× harder:
+// conventions (subdomain friction weights, −∇μ; `monolayer sweep`, seeds 1 and 2, 1,500
+// relaxation steps, 8,000 active steps; README, "Browser demo"). An 80-site box truncates the
+// long-range flows that tear the full-size tissue at the paper's ζ ≤ 0.5, so the presets drive
+// 3–5× harder:
 //   χ = 0.1,   ζ = 2:   no void site in 8,000 active steps (both seeds);
-//   χ = 0.001, ζ = 1.5: seed 1 opens a hole after ≈ 2,500 active steps that closes by 6,000;
-//                       seed 2 opens none;
-//   χ = 0.001, ζ = 2.5: a hole that grows to ≈ 30 % of the box and stays open, after ≈ 1,200
-//                       active steps for seed 1 (the default) and ≈ 4,500 for seed 2.
+//   χ = 0.001, ζ = 1.5: a hole after ≈ 2,000 active steps that closes by 6,500 (seed 1), a
+//                       small one after ≈ 5,250 that closes by 7,000 (seed 2);
+//   χ = 0.001, ζ = 2.5: a hole that grows to 34–40 % of the box and stays open, after ≈ 1,200
+//                       active steps for seed 1 (the default) and ≈ 4,000 for seed 2.
 export const PRESETS = {
   'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 2, chi: 0.1, gamma: 0.06 },
   'short-lived': { label: 'Short-lived holes (χ = 0.001, ζ = 1.5)', zeta: 1.5, chi: 0.001, gamma: 0.06 },
