@@ -227,17 +227,28 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert(b > a, `step ${a} → ${b}`);
     });
 
+    // A worker that steps on its own carries on while the main thread is blocked; one driven by
+    // the main thread could finish at most the batch it was given (at most `spf` steps). The
+    // block lasts long enough for 3 × spf steps at the worker's own rate, measured just before,
+    // so the check holds on a slow or loaded machine as on a fast one.
     check('the simulation steps in its worker while the main thread is busy', async () => {
       assert(await page.evaluate(() => window.demo.worker === true), 'no worker');
-      const before = (await page.evaluate(() => window.demo.call('stats'))).step;
-      // Blocks the main thread (drawing, input) for 1.5 s: stepping carries on in the worker.
-      await page.evaluate(() => {
+      const spf = await page.evaluate(() => import('./js/state.js').then((m) => m.PARAMS.spf.def));
+      const step = async () => (await page.evaluate(() => window.demo.call('stats'))).step;
+      const s0 = await step();
+      await page.waitForTimeout(1500);
+      const rate = ((await step()) - s0) / 1.5;
+      assert(rate > 0, 'the simulation does not advance');
+      const blockMs = Math.min(20000, Math.max(1500, (3 * spf * 1000) / rate));
+      const before = await step();
+      await page.evaluate((ms) => {
         const t = performance.now();
-        while (performance.now() - t < 1500);
-      });
-      const after = (await page.evaluate(() => window.demo.call('stats'))).step;
+        while (performance.now() - t < ms);
+      }, blockMs);
+      const after = await step();
       m.stepsWhileMainThreadBlocked = after - before;
-      assert(after - before >= 50, `${after - before} steps while the main thread was blocked for 1.5 s`);
+      assert(after - before > spf,
+        `${after - before} steps while the main thread was blocked for ${(blockMs / 1000).toFixed(1)} s (${rate.toFixed(0)} steps/s before; one batch is at most ${spf})`);
     });
 
     check(`the canvas is drawn and changes between two screenshots`, async () => {
