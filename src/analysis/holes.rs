@@ -271,6 +271,91 @@ impl HoleTracker {
     }
 }
 
+/// How holes are counted for their lifetimes (the survival fit of the paper's Fig. 3c–d). The
+/// tracker follows every void region; the paper does not say what a region that breaks off an
+/// open hole, or one that opens beside it and joins it, counts as.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HoleCounting {
+    /// A hole is a family: the region that nucleated it, the fragments that break off it (and
+    /// theirs), and the holes that join it. It lives from the first nucleation in the family
+    /// until no member is open. The paper's reading (its "only one hole can form at a time, [so]
+    /// long lifetimes prevent new ones from forming"), and the one the regime criterion uses.
+    Families,
+    /// Every tracked region is a hole of its own: a fragment above the nucleation area is born
+    /// when it breaks off, and a hole that joins an older one dies there.
+    Regions,
+}
+
+impl HoleCounting {
+    pub fn name(self) -> &'static str {
+        match self {
+            HoleCounting::Families => "families",
+            HoleCounting::Regions => "regions",
+        }
+    }
+}
+
+/// One counted hole: how long it lived (or was seen, if still open at `end`), whether it closed,
+/// and its largest area (its largest member's, for a family).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CountedHole {
+    pub duration: f64,
+    pub closed: bool,
+    pub max_area: usize,
+}
+
+/// The holes as `counting` counts them, in order of nucleation; `end` is the time of the last
+/// frame (open holes are censored there).
+pub fn counted_holes(holes: &[Hole], end: f64, counting: HoleCounting) -> Vec<CountedHole> {
+    let one = |h: &Hole| CountedHole {
+        duration: h.lifetime().unwrap_or(end - h.nucleated),
+        closed: h.closed.is_some(),
+        max_area: h.max_area(),
+    };
+    match counting {
+        HoleCounting::Regions => holes.iter().map(one).collect(),
+        HoleCounting::Families => {
+            // Union–find over the split and merge links; ids are indices into `holes`.
+            let mut root: Vec<usize> = (0..holes.len()).collect();
+            fn find(root: &mut [usize], mut a: usize) -> usize {
+                while root[a] != a {
+                    root[a] = root[root[a]];
+                    a = root[a];
+                }
+                a
+            }
+            for h in holes {
+                for other in [h.split_from, h.merged_into].into_iter().flatten() {
+                    let (a, b) = (find(&mut root, h.id), find(&mut root, other));
+                    // The older hole (smaller id) stands for the family.
+                    root[a.max(b)] = a.min(b);
+                }
+            }
+            let mut families: Vec<(usize, f64, Option<f64>, usize)> = Vec::new(); // root, start, last close, area
+            for h in holes {
+                let r = find(&mut root, h.id);
+                let close = h.closed.unwrap_or(f64::INFINITY);
+                match families.iter_mut().find(|f| f.0 == r) {
+                    Some(f) => {
+                        f.1 = f.1.min(h.nucleated);
+                        f.2 = f.2.map(|c| c.max(close));
+                        f.3 = f.3.max(h.max_area());
+                    }
+                    None => families.push((r, h.nucleated, Some(close), h.max_area())),
+                }
+            }
+            families
+                .into_iter()
+                .map(|(_, start, close, max_area)| {
+                    let close = close.expect("a family has a member");
+                    let closed = close.is_finite();
+                    CountedHole { duration: if closed { close } else { end } - start, closed, max_area }
+                })
+                .collect()
+        }
+    }
+}
+
 /// Distance between two points on the periodic L×L box.
 pub fn periodic_distance(x0: f64, y0: f64, x1: f64, y1: f64, l: usize) -> f64 {
     let lf = l as f64;
@@ -279,4 +364,53 @@ pub fn periodic_distance(x0: f64, y0: f64, x1: f64, y1: f64, l: usize) -> f64 {
         d.min(lf - d)
     };
     d(x0, x1).hypot(d(y0, y1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hole(id: usize, nucleated: f64, closed: Option<f64>, area: usize) -> Hole {
+        Hole { id, nucleated, closed, history: vec![(nucleated, area, 0.0, 0.0)], split_from: None, merged_into: None }
+    }
+
+    /// A hole (0) that loses a fragment (2) which closes, is joined by a pocket (1) that opens
+    /// beside it, and closes; then a hole of its own (3) that is still open at the end.
+    fn history() -> Vec<Hole> {
+        let mut h = vec![
+            hole(0, 100.0, Some(900.0), 500),
+            hole(1, 150.0, Some(200.0), 60),
+            hole(2, 400.0, Some(950.0), 700),
+            hole(3, 1000.0, None, 80),
+        ];
+        h[1].merged_into = Some(0);
+        h[2].split_from = Some(0);
+        h
+    }
+
+    #[test]
+    fn regions_count_every_tracked_region() {
+        let c = counted_holes(&history(), 1200.0, HoleCounting::Regions);
+        let d: Vec<(f64, bool)> = c.iter().map(|h| (h.duration, h.closed)).collect();
+        assert_eq!(d, [(800.0, true), (50.0, true), (550.0, true), (200.0, false)]);
+    }
+
+    #[test]
+    fn a_family_lives_from_its_first_nucleation_until_no_member_is_open() {
+        let c = counted_holes(&history(), 1200.0, HoleCounting::Families);
+        assert_eq!(
+            c,
+            [
+                // 0, its joined pocket 1 and its fragment 2: from 100 until 2 closes at 950.
+                CountedHole { duration: 850.0, closed: true, max_area: 700 },
+                CountedHole { duration: 200.0, closed: false, max_area: 80 },
+            ]
+        );
+        // A family with an open member is open, whatever order the links come in.
+        let mut h = history();
+        h[2].closed = None;
+        h.swap(1, 2);
+        let c = counted_holes(&h, 1200.0, HoleCounting::Families);
+        assert_eq!((c[0].duration, c[0].closed), (1100.0, false));
+    }
 }

@@ -25,6 +25,7 @@ use std::sync::Mutex;
 
 use serde::Deserialize;
 
+use crate::analysis::holes::{counted_holes, HoleCounting};
 use crate::analysis::regime::{classify, fitted_lifetime, Regime};
 use crate::model::params::Params;
 use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
@@ -246,11 +247,15 @@ pub struct RunSummary {
     pub steps: u64,
     /// Time units of the active phase the frames cover (first to last frame).
     pub active_time: f64,
+    /// Holes counted as families (`HoleCounting::Families`, the regime criterion's count).
     pub holes_nucleated: usize,
     pub max_hole_area: usize,
     pub time_with_hole_open: f64,
-    /// (duration, closed): closed holes' lifetimes, and for open ones the time they were seen.
+    /// (duration, closed) of each hole counted as a family: closed holes' lifetimes, and for
+    /// open ones the time they were seen.
     pub lifetimes: Vec<(f64, bool)>,
+    /// The same with every tracked void region a hole of its own (`HoleCounting::Regions`).
+    pub region_lifetimes: Vec<(f64, bool)>,
     pub mean_speed: f64,
     /// µm/h per site per time unit, from the run's `time_unit_seconds`.
     pub microns_per_hour: f64,
@@ -303,21 +308,17 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
     let first = ra.frames.first().map(|f| f.time).unwrap_or(0.0);
     let last = ra.frames.last().map(|f| f.time).unwrap_or(0.0);
     s.active_time = last - first;
-    s.holes_nucleated = ra.tracker.holes.len();
+    let counted = |counting| -> Vec<(f64, bool)> {
+        counted_holes(&ra.tracker.holes, last, counting).iter().map(|h| (h.duration, h.closed)).collect()
+    };
+    s.lifetimes = counted(HoleCounting::Families);
+    s.region_lifetimes = counted(HoleCounting::Regions);
+    s.holes_nucleated = s.lifetimes.len();
     s.max_hole_area = ra.tracker.holes.iter().map(|h| h.max_area()).max().unwrap_or(0);
     // The frames sample the active phase evenly: the share of them with a hole open is the share
     // of its time.
     let with_hole = ra.frames.iter().filter(|f| f.open_holes > 0).count() as f64;
     s.time_with_hole_open = s.active_time * with_hole / ra.frames.len().max(1) as f64;
-    s.lifetimes = ra
-        .tracker
-        .holes
-        .iter()
-        .map(|h| match h.lifetime() {
-            Some(t) => (t, true),
-            None => (last - h.nucleated, false),
-        })
-        .collect();
     s.mean_speed = mean(ra.frames.iter().map(|f| f.summary.mean_speed)).unwrap_or(0.0);
     s.aspect_ratio_mean = mean(ra.frames.iter().filter_map(|f| f.summary.aspect_ratio_mean));
     s.aspect_ratio_p90 = mean(ra.frames.iter().filter_map(|f| f.summary.aspect_ratio_p90));
@@ -508,12 +509,17 @@ pub struct RegimePoint {
     pub fitted_lifetime: Option<f64>,
     pub active_time: f64,
     pub regime: Regime,
+    /// The fit and regime with every tracked void region counted as a hole.
+    pub fitted_lifetime_regions: Option<f64>,
+    pub regime_regions: Regime,
 }
 
 /// Pools the seeds of every grid point.
 pub fn regime_map(summaries: &[RunSummary]) -> Vec<RegimePoint> {
     let mut points: Vec<RegimePoint> = Vec::new();
-    let mut pooled: Vec<Vec<(f64, bool)>> = Vec::new();
+    // Per point: the holes counted as families, and as regions.
+    type Pooled = (Vec<(f64, bool)>, Vec<(f64, bool)>);
+    let mut pooled: Vec<Pooled> = Vec::new();
     // Only runs that ended count: a run stopped by the machine, or not yet run, says nothing of
     // the regime.
     for s in summaries.iter().filter(|s| s.status.is_complete()) {
@@ -528,8 +534,10 @@ pub fn regime_map(summaries: &[RunSummary]) -> Vec<RegimePoint> {
                     fitted_lifetime: None,
                     active_time: 0.0,
                     regime: Regime::NoHoles,
+                    fitted_lifetime_regions: None,
+                    regime_regions: Regime::NoHoles,
                 });
-                pooled.push(Vec::new());
+                pooled.push((Vec::new(), Vec::new()));
                 points.len() - 1
             }
         };
@@ -538,11 +546,14 @@ pub fn regime_map(summaries: &[RunSummary]) -> Vec<RegimePoint> {
         p.blew_up += s.blew_up() as usize;
         p.holes += s.holes_nucleated;
         p.active_time = p.active_time.max(s.active_time);
-        pooled[k].extend(&s.lifetimes);
+        pooled[k].0.extend(&s.lifetimes);
+        pooled[k].1.extend(&s.region_lifetimes);
     }
-    for (p, l) in points.iter_mut().zip(&pooled) {
-        p.fitted_lifetime = fitted_lifetime(l);
-        p.regime = classify(l, p.active_time);
+    for (p, (families, regions)) in points.iter_mut().zip(&pooled) {
+        p.fitted_lifetime = fitted_lifetime(families);
+        p.regime = classify(families, p.active_time);
+        p.fitted_lifetime_regions = fitted_lifetime(regions);
+        p.regime_regions = classify(regions, p.active_time);
     }
     points
 }
@@ -562,10 +573,12 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
     runs += "seed,status,blew_up,steps,active_time,holes_nucleated,max_hole_area,time_with_hole_open,\
              hole_lifetimes,max_holes_open,fraction_multiple_holes,mean_speed,mean_speed_um_per_h,\
              mean_speed_um_per_h_at_3.6s,mean_speed_um_per_h_at_5s,velocity_correlation_length,\
-             nematic_correlation_length,min_packing_fraction_without_hole,aspect_ratio_mean,aspect_ratio_p90\n";
+             nematic_correlation_length,min_packing_fraction_without_hole,aspect_ratio_mean,aspect_ratio_p90,\
+             region_lifetimes\n";
+    let list = |l: &[(f64, bool)]| -> String {
+        l.iter().map(|(t, closed)| format!("{t:.1}{}", if *closed { "" } else { "+" })).collect::<Vec<_>>().join(";")
+    };
     for s in summaries {
-        let lifetimes: Vec<String> =
-            s.lifetimes.iter().map(|(t, closed)| format!("{t:.1}{}", if *closed { "" } else { "+" })).collect();
         let status = s.status.to_string().lines().next().unwrap_or("").replace(',', ";");
         let _ = write!(runs, "{},", s.name);
         for (_, v) in &s.values {
@@ -573,7 +586,7 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
         }
         let _ = writeln!(
             runs,
-            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{},{:.4},{:.6},{:.3},{:.3},{:.3},{},{},{},{},{}",
+            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{},{:.4},{:.6},{:.3},{:.3},{:.3},{},{},{},{},{},{}",
             s.seed,
             status,
             s.blew_up(),
@@ -582,7 +595,7 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
             s.holes_nucleated,
             s.max_hole_area,
             s.time_with_hole_open,
-            lifetimes.join(";"),
+            list(&s.lifetimes),
             s.max_holes_open,
             s.fraction_multiple_holes,
             s.mean_speed,
@@ -593,27 +606,32 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
             opt(s.nematic_correlation_length),
             opt(s.min_packing_without_hole),
             opt(s.aspect_ratio_mean),
-            opt(s.aspect_ratio_p90)
+            opt(s.aspect_ratio_p90),
+            list(&s.region_lifetimes)
         );
     }
     let mut regimes = String::new();
     for k in &keys {
         regimes += &format!("{k},");
     }
-    regimes += "runs,blew_up,holes,fitted_lifetime,active_time,regime\n";
+    regimes += "runs,blew_up,holes,fitted_lifetime,active_time,regime,fitted_lifetime_regions,regime_regions\n";
+    let fit =
+        |t: Option<f64>| t.map(|t| if t.is_finite() { format!("{t:.1}") } else { "inf".into() }).unwrap_or_default();
     for p in regime_map(summaries) {
         for (_, v) in &p.values {
             let _ = write!(regimes, "{v},");
         }
         let _ = writeln!(
             regimes,
-            "{},{},{},{},{:.1},{}",
+            "{},{},{},{},{:.1},{},{},{}",
             p.runs,
             p.blew_up,
             p.holes,
-            p.fitted_lifetime.map(|t| if t.is_finite() { format!("{t:.1}") } else { "inf".into() }).unwrap_or_default(),
+            fit(p.fitted_lifetime),
             p.active_time,
-            p.regime.name()
+            p.regime.name(),
+            fit(p.fitted_lifetime_regions),
+            p.regime_regions.name()
         );
     }
     (runs, regimes)
@@ -680,6 +698,37 @@ fn plot_regime_map(base: &Path, points: &[RegimePoint]) -> Result<Vec<PathBuf>, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The regime criterion pools the holes counted as families; the regions' fit is reported
+    /// beside it. One long hole whose fragments break off and close (the pattern of the
+    /// low-friction runs): persistent as a family, short-lived as regions.
+    #[test]
+    fn regimes_pool_families_and_report_regions_beside() {
+        let run = |seed| RunSummary {
+            name: format!("chi0.001_seed{seed}"),
+            values: vec![("chi".into(), "0.001".into())],
+            seed,
+            status: RunStatus::Finished,
+            active_time: 10_000.0,
+            holes_nucleated: 1,
+            lifetimes: vec![(8_000.0, false)],
+            region_lifetimes: vec![(8_000.0, false), (100.0, true), (200.0, true), (300.0, true)],
+            ..RunSummary::default()
+        };
+        let map = regime_map(&[run(1), run(2)]);
+        assert_eq!(map.len(), 1);
+        let p = &map[0];
+        assert_eq!((p.runs, p.holes), (2, 2));
+        assert_eq!((p.fitted_lifetime, p.regime), (Some(f64::INFINITY), Regime::ShortAndLongLived));
+        // Regions: 17,200 time units over 6 closed holes.
+        assert_eq!(p.fitted_lifetime_regions, Some(17_200.0 / 6.0));
+        assert_eq!(p.regime_regions, Regime::OnlyShortLived);
+        let (summary, regimes) = tables(&[run(1)]);
+        assert!(summary.lines().next().unwrap().ends_with(",region_lifetimes"), "{summary}");
+        assert!(summary.lines().nth(1).unwrap().ends_with(",8000.0+;100.0;200.0;300.0"), "{summary}");
+        assert!(regimes.contains(",regime,fitted_lifetime_regions,regime_regions\n"), "{regimes}");
+        assert!(regimes.contains(",short_and_long_lived,2866.7,only_short_lived\n"), "{regimes}");
+    }
 
     #[test]
     fn grid_expands_validates_and_names() {

@@ -13,19 +13,11 @@ use rayon::prelude::*;
 use super::draw::{self, Marker, Panel, Series};
 use super::{Figure, Friction, Plan, Point, CHI_FIG2, CHI_FIG3AB, CHI_FIG3C, CHI_REGIMES, CHI_S1, GAMMAS_S3, ZETAS};
 use crate::analysis::correlations::correlation_length;
+use crate::analysis::holes::{counted_holes, CountedHole, HoleCounting};
 use crate::analysis::precursors::{Precursor, DEPTH};
 use crate::analysis::regime::{classify, fitted_lifetime, Regime};
 use crate::run::files::{read_frame, write_atomic, RunFrames, RunRecord, RunStatus};
 use crate::run::offline::RunAnalysis;
-
-/// One hole of a run: its duration (its lifetime, or how long it was seen when still open at the
-/// end), whether it closed, and its largest area in sites.
-#[derive(Clone, Copy, Debug)]
-pub struct HoleData {
-    pub duration: f64,
-    pub closed: bool,
-    pub max_area: usize,
-}
 
 /// What the figures need of one run.
 #[derive(Clone, Debug)]
@@ -35,7 +27,8 @@ pub struct RunData {
     /// Time from the first to the last frame (the run's t_total, as in the sweep's regime map).
     pub active_time: f64,
     pub box_area: f64,
-    pub holes: Vec<HoleData>,
+    /// The run's holes, counted as the regime criterion counts them (families).
+    pub holes: Vec<CountedHole>,
     pub precursors: Vec<Precursor>,
     /// Strain-rate bin → (sites, sites opening into a new hole), Fig. 2.
     pub probability: BTreeMap<i64, (u64, u64)>,
@@ -106,16 +99,7 @@ fn measure_run(dir: &Path) -> Result<RunData, String> {
     let (first, last) = (ra.frames.first().map_or(0.0, |f| f.time), ra.frames.last().map_or(0.0, |f| f.time));
     data.frames = ra.frames.len();
     data.active_time = last - first;
-    data.holes = ra
-        .tracker
-        .holes
-        .iter()
-        .map(|h| HoleData {
-            duration: h.lifetime().unwrap_or(last - h.nucleated),
-            closed: h.closed.is_some(),
-            max_area: h.max_area(),
-        })
-        .collect();
+    data.holes = counted_holes(&ra.tracker.holes, last, HoleCounting::Families);
     data.precursors = ra.precursors.rows.clone();
     data.probability = ra.hole_probability.bins.clone();
     if let Some(f) = ra.frames.last() {
