@@ -10,7 +10,8 @@
 //! site with), or failing that the hole whose last centroid lies within a cell radius. A hole
 //! whose region breaks in two keeps its identity in the larger part; a part that is itself above
 //! the nucleation threshold becomes a new hole (`split_from`). Holes whose regions join continue
-//! as the oldest of them; the others close (`merged_into`).
+//! as the oldest of them; the others close (`merged_into`). For lifetimes, [`counted_holes`]
+//! counts a hole with its fragments and the holes that joined it ([`HoleCounting`]).
 
 /// A site is void below this Σφ (paper Sec. A).
 pub const VOID_THRESHOLD: f64 = 0.01;
@@ -286,15 +287,6 @@ pub enum HoleCounting {
     Regions,
 }
 
-impl HoleCounting {
-    pub fn name(self) -> &'static str {
-        match self {
-            HoleCounting::Families => "families",
-            HoleCounting::Regions => "regions",
-        }
-    }
-}
-
 /// One counted hole: how long it lived (or was seen, if still open at `end`), whether it closed,
 /// and its largest area (its largest member's, for a family).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -331,25 +323,22 @@ pub fn counted_holes(holes: &[Hole], end: f64, counting: HoleCounting) -> Vec<Co
                     root[a.max(b)] = a.min(b);
                 }
             }
-            let mut families: Vec<(usize, f64, Option<f64>, usize)> = Vec::new(); // root, start, last close, area
+            // Per family, in order of its first member: root, first nucleation, last closing (∞
+            // while a member is open), largest area.
+            let mut families: Vec<(usize, f64, f64, usize)> = Vec::new();
             for h in holes {
                 let r = find(&mut root, h.id);
                 let close = h.closed.unwrap_or(f64::INFINITY);
                 match families.iter_mut().find(|f| f.0 == r) {
-                    Some(f) => {
-                        f.1 = f.1.min(h.nucleated);
-                        f.2 = f.2.map(|c| c.max(close));
-                        f.3 = f.3.max(h.max_area());
-                    }
-                    None => families.push((r, h.nucleated, Some(close), h.max_area())),
+                    Some(f) => *f = (r, f.1.min(h.nucleated), f.2.max(close), f.3.max(h.max_area())),
+                    None => families.push((r, h.nucleated, close, h.max_area())),
                 }
             }
             families
                 .into_iter()
                 .map(|(_, start, close, max_area)| {
-                    let close = close.expect("a family has a member");
                     let closed = close.is_finite();
-                    CountedHole { duration: if closed { close } else { end } - start, closed, max_area }
+                    CountedHole { duration: close.min(end) - start, closed, max_area }
                 })
                 .collect()
         }
