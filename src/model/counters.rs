@@ -13,7 +13,7 @@ pub enum Stage {
     ChemicalPotential,
     /// Shape tensors and force densities.
     Forces,
-    /// The lattice friction solve for V.
+    /// The lattice friction solve for V, with the setup of its operator.
     FrictionSolve,
     /// Per-cell velocities and dφ/dt.
     Velocity,

@@ -26,7 +26,7 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::model::lattice::neighbour_sum8;
+use crate::model::lattice::{neighbour_sum8, neighbour_sum8_row};
 use crate::model::multigrid::{CycleWork, Multigrid, Real};
 use crate::model::par;
 
@@ -68,23 +68,25 @@ pub struct FrictionProblem<'a> {
 #[derive(Clone, Debug)]
 pub struct FrictionSolver {
     l: usize,
-    /// The preconditioner, set up for every solve.
+    /// The preconditioner, set up for every new operator.
     mg: Multigrid,
     /// N(x) = Σ_{N8} n.
     pub weight_nb: Vec<f64>,
+    /// 1/[ξ_s(x) + ξ_c N(x)]: every cell's velocity is its force plus the pull, times this
+    /// (one division per site of the lattice instead of two per site of every patch).
+    pub mobility: Vec<f64>,
     /// The x and y components' CG.
     components: [Component; 2],
     /// u = V/n: the solution, and the warm start of the next solve.
     pub mean_velocity: Vec<C64>,
     /// A copy of the warm start while an out-of-step evaluation runs (see [`Self::hold_warm_start`]).
     held: Vec<C64>,
-    /// V(x) = Σ_j w_j v_j = n u.
-    pub velocity: Vec<C64>,
-    /// S(x) = Σ_{N8} V.
-    pub velocity_nb: Vec<C64>,
-    /// The n, ξ_s and ξ_c the hierarchy was last built for (ξ_c `None` before the first solve):
-    /// an unchanged operator is not built again (with subdomain weights n changes only when the
-    /// patches move, after each step, so Heun's corrector solves with the predictor's hierarchy).
+    /// ξ_c S(x), S = Σ_{N8} V with V = n u: the pull of the neighbouring cells on every cell at x.
+    pub pull: Vec<C64>,
+    /// The n, ξ_s and ξ_c the hierarchy was last built for (ξ_c `None` before the first
+    /// [`Self::prepare`]): an unchanged operator is not built again (with subdomain weights n
+    /// changes only when the patches move, after each step, so Heun's corrector solves with the
+    /// predictor's hierarchy).
     built_n: Vec<f64>,
     built_xi_s: Vec<f64>,
     built_xi_c: Option<f64>,
@@ -97,11 +99,11 @@ impl FrictionSolver {
         FrictionSolver {
             l,
             weight_nb: vec![0.0; n],
+            mobility: vec![0.0; n],
             components: std::array::from_fn(|_| Component::new(l, &mg)),
             mean_velocity: vec![ZERO; n],
             held: vec![ZERO; n],
-            velocity: vec![ZERO; n],
-            velocity_nb: vec![ZERO; n],
+            pull: vec![ZERO; n],
             built_n: Vec::new(),
             built_xi_s: Vec::new(),
             built_xi_c: None,
@@ -125,61 +127,104 @@ impl FrictionSolver {
         self.mean_velocity.copy_from_slice(&self.held);
     }
 
-    /// Solves for u, then V = n u and S = Σ_{N8} V; `self.mean_velocity` on entry is the
-    /// initial guess.
+    /// [`Self::prepare`], then [`Self::solve_prepared`].
     pub fn solve(&mut self, pb: &FrictionProblem) -> Result<SolveStats, SolveError> {
-        let l = self.l;
-        let built = self.built_xi_c == Some(pb.xi_c) && self.built_n == pb.weight && self.built_xi_s == pb.xi_s;
-        if !built {
-            neighbour_sum8(pb.weight, &mut self.weight_nb, l);
-            self.mg.setup(pb.weight, &self.weight_nb, pb.xi_s, pb.xi_c);
-            self.built_n.clear();
-            self.built_n.extend_from_slice(pb.weight);
-            self.built_xi_s.clear();
-            self.built_xi_s.extend_from_slice(pb.xi_s);
-            self.built_xi_c = Some(pb.xi_c);
+        self.prepare(pb.weight, pb.xi_s, pb.xi_c);
+        self.solve_prepared(pb.force, pb.tolerance, pb.max_iterations)
+    }
+
+    /// Sets up the operator C for n, ξ_s and ξ_c (unless it is the one last set up): N, the
+    /// mobility and the multigrid hierarchy. It needs n but not the forces, so the monolayer
+    /// runs it beside the per-cell force stage.
+    pub fn prepare(&mut self, weight: &[f64], xi_s: &[f64], xi_c: f64) {
+        if self.built_xi_c == Some(xi_c) && self.built_n == weight && self.built_xi_s == xi_s {
+            return;
         }
-        // Each component takes its part of F and of the initial guess, zero outside the solve
-        // (where C's diagonal is zero).
-        let (u, diag) = (&self.mean_velocity, self.mg.diagonal());
-        let [cx, cy] = &mut self.components;
-        cx.load(pb.force, u, diag, |z| z.re);
-        cy.load(pb.force, u, diag, |z| z.im);
-        let stats = self.pcg(pb);
-        let [cx, cy] = &self.components;
-        for (x, u) in self.mean_velocity.iter_mut().enumerate() {
-            *u = C64::new(cx.x[x], cy.x[x]);
+        neighbour_sum8(weight, &mut self.weight_nb, self.l);
+        for ((mob, &xs), &nb) in self.mobility.iter_mut().zip(xi_s).zip(&self.weight_nb) {
+            *mob = 1.0 / (xs + xi_c * nb);
         }
-        let u = &self.mean_velocity;
-        for ((v, u), n) in self.velocity.iter_mut().zip(u).zip(pb.weight) {
-            *v = u * n;
-        }
-        neighbour_sum8(&self.velocity, &mut self.velocity_nb, l);
+        self.mg.setup(weight, &self.weight_nb, xi_s, xi_c);
+        self.built_n.clear();
+        self.built_n.extend_from_slice(weight);
+        self.built_xi_s.clear();
+        self.built_xi_s.extend_from_slice(xi_s);
+        self.built_xi_c = Some(xi_c);
+    }
+
+    /// Solves C u = F for the operator last prepared, then the pull ξ_c S; `self.mean_velocity`
+    /// on entry is the initial guess.
+    pub fn solve_prepared(
+        &mut self,
+        force: &[C64],
+        tolerance: f64,
+        max_iterations: usize,
+    ) -> Result<SolveStats, SolveError> {
+        let xi_c = self.built_xi_c.expect("FrictionSolver::prepare runs before a solve");
+        let stats = self.pcg(force, tolerance, max_iterations);
+        self.pull_from_solution(xi_c);
         stats
     }
 
-    /// Both components' CG, side by side.
-    fn pcg(&mut self, pb: &FrictionProblem) -> Result<SolveStats, SolveError> {
+    /// Both components' CG, side by side: each loads its part of F and of the initial guess,
+    /// and stops at ‖F_c − C u_c‖ ≤ tolerance·‖F‖/√2.
+    fn pcg(&mut self, force: &[C64], tolerance: f64, max_iterations: usize) -> Result<SolveStats, SolveError> {
+        let (mg, u) = (&self.mg, &self.mean_velocity);
         let [cx, cy] = &mut self.components;
-        let b_norm = (dot(&cx.rhs, &cx.rhs) + dot(&cy.rhs, &cy.rhs)).sqrt();
-        let error = |iterations, residual, detail| SolveError { iterations, residual, tolerance: pb.tolerance, detail };
-        if b_norm == 0.0 {
-            cx.x.fill(0.0);
-            cy.x.fill(0.0);
-            return Ok(SolveStats { iterations: 0, residual: 0.0 });
-        }
-        if !b_norm.is_finite() {
-            return Err(error(0, f64::NAN, ": the force density is not finite"));
-        }
-        let target = pb.tolerance * b_norm / std::f64::consts::SQRT_2;
-        let mg = &self.mg;
-        let (ox, oy) = par::join(|| cx.pcg(mg, target, pb.max_iterations), || cy.pcg(mg, target, pb.max_iterations));
+        let run = |c: &mut Component, part: fn(C64) -> f64| {
+            let b_norm = c.load(force, u, mg.diagonal(), part).sqrt();
+            let outcome = if b_norm == 0.0 {
+                c.x.fill(0.0);
+                Outcome { iterations: 0, residual_sq: 0.0, failure: None }
+            } else if !b_norm.is_finite() {
+                Outcome { iterations: 0, residual_sq: f64::NAN, failure: Some(": the force density is not finite") }
+            } else {
+                c.pcg(mg, tolerance * b_norm / std::f64::consts::SQRT_2, max_iterations)
+            };
+            (outcome, b_norm)
+        };
+        let ((ox, b_norm), (oy, _)) = par::join(|| run(cx, |z| z.re), || run(cy, |z| z.im));
         let iterations = ox.iterations.max(oy.iterations);
-        let residual = (ox.residual_sq + oy.residual_sq).sqrt() / b_norm;
+        let residual = if b_norm == 0.0 { 0.0 } else { (ox.residual_sq + oy.residual_sq).sqrt() / b_norm };
         match ox.failure.or(oy.failure) {
             None => Ok(SolveStats { iterations, residual }),
-            Some(detail) => Err(error(iterations, residual, detail)),
+            Some(detail) => Err(SolveError { iterations, residual, tolerance, detail }),
         }
+    }
+
+    /// u from the two components, and the pull ξ_c S with S = Σ_{N8} V, V = n u, in one pass
+    /// split into row bands. Each band forms V row by row as S first needs it, in a ring of three
+    /// rows, so V is never stored whole (the same bits as storing it).
+    fn pull_from_solution(&mut self, xi_c: f64) {
+        let l = self.l;
+        let (n, [cx, cy]) = (&self.built_n, &self.components);
+        let velocity_row = |y: usize, out: &mut [C64]| {
+            let (ux, uy, n) = (&cx.x[y * l..][..l], &cy.x[y * l..][..l], &n[y * l..][..l]);
+            for (v, ((&ux, &uy), &n)) in out.iter_mut().zip(ux.iter().zip(uy).zip(n)) {
+                *v = C64::new(ux, uy) * n;
+            }
+        };
+        let rows = par::band_rows(l);
+        par::for_each_chunk_pair_mut(&mut self.mean_velocity, &mut self.pull, rows * l, |band, u, pull| {
+            let y0 = band * rows;
+            let mut ring = vec![ZERO; 3 * l];
+            let slot = |y: usize| (y % 3) * l..(y % 3 + 1) * l;
+            // Rows y − 1 and y of V, as y + l − 1 and y + l, so that no index goes below zero.
+            velocity_row((y0 + l - 1) % l, &mut ring[slot(y0 + l - 1)]);
+            velocity_row(y0, &mut ring[slot(y0 + l)]);
+            for (k, (u, pull)) in u.chunks_mut(l).zip(pull.chunks_mut(l)).enumerate() {
+                let y = y0 + k;
+                velocity_row((y + 1) % l, &mut ring[slot(y + l + 1)]);
+                let row = |y: usize| &ring[slot(y)];
+                neighbour_sum8_row([row(y + l - 1), row(y + l), row(y + l + 1)], pull);
+                for (p, (u, (&ux, &uy))) in
+                    pull.iter_mut().zip(u.iter_mut().zip(cx.x[y * l..][..l].iter().zip(&cy.x[y * l..][..l])))
+                {
+                    *p *= xi_c;
+                    *u = C64::new(ux, uy);
+                }
+            }
+        });
     }
 
     /// ‖F − C u‖/‖F‖ of the current solution for the problem last solved (for tests).
@@ -223,11 +268,18 @@ impl Component {
         Component { rhs: v(), x: v(), r: v(), p: v(), q: v(), column: vec![0.0; l], work: mg.work() }
     }
 
-    /// rhs = part(F) and x = part(u) on the sites in the solve, 0 elsewhere.
-    fn load(&mut self, force: &[C64], u: &[C64], diag: &[f64], part: impl Fn(C64) -> f64) {
+    /// rhs = part(F) and x = part(u) on the sites in the solve, 0 elsewhere; returns ‖F‖² over
+    /// those sites, both parts (each component computes it, so that neither waits for the
+    /// other: the sums are made in site order, the same bits in both).
+    fn load(&mut self, force: &[C64], u: &[C64], diag: &[f64], part: fn(C64) -> f64) -> f64 {
+        let (mut re2, mut im2) = (0.0, 0.0);
         for (x, (rhs, sol)) in self.rhs.iter_mut().zip(self.x.iter_mut()).enumerate() {
-            (*rhs, *sol) = if diag[x] > 0.0 { (part(force[x]), part(u[x])) } else { (0.0, 0.0) };
+            let f = if diag[x] > 0.0 { force[x] } else { ZERO };
+            (*rhs, *sol) = if diag[x] > 0.0 { (part(f), part(u[x])) } else { (0.0, 0.0) };
+            re2 += f.re * f.re;
+            im2 += f.im * f.im;
         }
+        re2 + im2
     }
 
     /// Conjugate gradients on C x = rhs, preconditioned by one multigrid cycle, until
@@ -327,10 +379,12 @@ mod tests {
         let st2 = s.solve(&pb).unwrap();
         assert!(st2.iterations <= 1, "{st2:?}");
         // Sites with no cell carry no velocity.
-        assert_eq!(s.velocity[12 * l + 10], ZERO);
-        // V solves the original (unsymmetrised) balance [ξ_s + ξ_c N] V − ξ_c n S = F.
+        assert_eq!(s.mean_velocity[12 * l + 10], ZERO);
+        // V = n u solves the original (unsymmetrised) balance [ξ_s + ξ_c N] V − ξ_c n S = F
+        // (ξ_c = 1 here, so the pull is S).
         for x in 0..l * l {
-            let lhs = s.velocity[x] * (xi_s[x] + s.weight_nb[x]) - s.velocity_nb[x] * n[x];
+            let v = s.mean_velocity[x] * n[x];
+            let lhs = v * (xi_s[x] + s.weight_nb[x]) - s.pull[x] * n[x];
             assert!((lhs - f[x]).norm() < 1e-7, "site {x}: {lhs} vs {}", f[x]);
         }
     }
@@ -379,7 +433,8 @@ mod tests {
             let b = fresh.solve(&pb).unwrap();
             assert_eq!(a, b);
             let bits = |v: &[C64]| v.iter().flat_map(|z| [z.re.to_bits(), z.im.to_bits()]).collect::<Vec<_>>();
-            assert_eq!(bits(&reused.velocity), bits(&fresh.velocity));
+            assert_eq!(bits(&reused.mean_velocity), bits(&fresh.mean_velocity));
+            assert_eq!(bits(&reused.pull), bits(&fresh.pull));
         }
     }
 
@@ -439,7 +494,7 @@ mod tests {
             let expected = if nx > 0.0 { u0 } else { ZERO };
             assert!((s.mean_velocity[x] - expected).norm() < 1e-8, "site {x}: u = {}", s.mean_velocity[x]);
             if nx > 0.0 {
-                let v = (u0 * xi_s + s.velocity_nb[x]) / (xi_s + s.weight_nb[x]);
+                let v = (u0 * xi_s + s.pull[x]) * s.mobility[x];
                 assert!((v - u0).norm() < 1e-8, "site {x}: a cell moves with {v}");
             }
         }

@@ -161,17 +161,16 @@ pub fn wrap(x: i64, l: usize) -> usize {
 pub fn neighbour_sum8<T: Copy + Add<Output = T>>(src: &[T], dst: &mut [T], l: usize) {
     debug_assert_eq!(src.len(), l * l);
     debug_assert_eq!(dst.len(), l * l);
-    for (y, row) in dst.chunks_mut(l).enumerate() {
-        neighbour_sum8_row(src, row, y, l);
+    let row = |y: usize| &src[y * l..][..l];
+    for (y, out) in dst.chunks_mut(l).enumerate() {
+        neighbour_sum8_row([row((y + l - 1) % l), row(y), row((y + 1) % l)], out);
     }
 }
 
-/// One row of [`neighbour_sum8`].
+/// One row of [`neighbour_sum8`], given the rows above, at and below it.
 #[inline]
-fn neighbour_sum8_row<T: Copy + Add<Output = T>>(src: &[T], out: &mut [T], y: usize, l: usize) {
-    let up = &src[((y + l - 1) % l) * l..][..l];
-    let mid = &src[y * l..][..l];
-    let dn = &src[((y + 1) % l) * l..][..l];
+pub fn neighbour_sum8_row<T: Copy + Add<Output = T>>([up, mid, dn]: [&[T]; 3], out: &mut [T]) {
+    let l = out.len();
     // Column sums of the three rows, then a horizontal 3-sum, minus the centre.
     let col = |x: usize| up[x] + mid[x] + dn[x];
     let vert = |x: usize| up[x] + dn[x];

@@ -2,10 +2,13 @@
 //! the paper's protocol (relaxation, then activity with cell–cell friction).
 //!
 //! One evaluation of the right-hand side R(φ) runs these stages (see [`crate::model::counters`]):
-//! 1. gather Σ_j φ_j² onto the lattice (for the repulsion term);
+//! 1. gather Σ_j φ_j² onto the lattice (for the repulsion term), and n = Σ_j w_j (the friction
+//!    weights);
 //! 2. per cell: A_i and μ_i ([`crate::model::free_energy`]), then Q_i, Q̂_i ([`crate::model::shape`]) and f_i
-//!    ([`crate::model::forces`]);
-//! 3. the friction solve for V ([`crate::model::friction`]) — active phase only;
+//!    ([`crate::model::forces`]); beside them, on one thread, the friction operator is set up
+//!    for n (it does not need the forces);
+//! 3. gather F = Σ_j w_j f_j, and the friction solve for V ([`crate::model::friction`]) — both
+//!    active phase only;
 //! 4. per cell: v_i and ∂_t φ_i ([`crate::model::motion`]), then the cell's Heun update.
 //!
 //! A step is φ* = φ + Δt R(φ), φ' = φ + ½Δt [R(φ) + R(φ*)], then the patches follow the cells.
@@ -23,7 +26,7 @@ use crate::model::counters::{Counters, Stage};
 use crate::model::error::SimError;
 use crate::model::forces::force_density;
 use crate::model::free_energy::{area, FreeEnergy};
-use crate::model::friction::{FrictionProblem, FrictionSolver, SolveStats};
+use crate::model::friction::{FrictionSolver, SolveStats};
 use crate::model::init::random_disks;
 use crate::model::lattice::{wrap, Patch};
 use crate::model::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
@@ -52,10 +55,10 @@ pub struct LatticeFields {
     pub weight: Vec<f64>,
     /// F(x) = Σ_j w_j f_j.
     pub force: Vec<C64>,
-    /// 1/[ξ_s(x) + ξ_c N(x)]: every cell's velocity is its force plus the pull, times this
-    /// (one division per site of the lattice instead of two per site of every patch).
+    /// 1/ξ_s(x) (active, without cell–cell friction) or 1/ξ_relax (relaxation); with cell–cell
+    /// friction the solver's [`FrictionSolver::mobility`] takes its place.
     pub mobility: Vec<f64>,
-    /// ξ_c S(x).
+    /// Zero: the pull without cell–cell friction (with it, [`FrictionSolver::pull`]).
     pub pull: Vec<C64>,
     /// Per-site multiplier of ξ_s (soft < 1 < stiff substrate); 1 everywhere by default.
     pub substrate: Vec<f64>,
@@ -65,23 +68,6 @@ pub struct LatticeFields {
     pub phi_sum: Vec<f64>,
     /// Σ_i φ_i v_i (Eq. S4), filled on request.
     pub velocity: Vec<C64>,
-    /// n and F gathered together (then copied into `weight` and `force`).
-    weighted_force: Vec<WeightedForce>,
-}
-
-/// A cell's friction weight and weighted force at one site: summed over the cells in one walk
-/// over their patches, each in the same order as on its own.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct WeightedForce {
-    n: f64,
-    f: C64,
-}
-
-impl std::ops::AddAssign for WeightedForce {
-    fn add_assign(&mut self, o: Self) {
-        self.n += o.n;
-        self.f += o.f;
-    }
 }
 
 impl LatticeFields {
@@ -97,7 +83,6 @@ impl LatticeFields {
             xi_s: vec![0.0; n],
             phi_sum: vec![0.0; n],
             velocity: vec![ZERO; n],
-            weighted_force: vec![WeightedForce::default(); n],
         }
     }
 }
@@ -176,19 +161,51 @@ where
     let rows = par::band_rows(l);
     par::for_each_chunk_mut(out, rows * l, |band, chunk| {
         chunk.fill(zero);
-        let y0 = band * rows;
-        let y1 = y0 + chunk.len() / l;
-        for cell in cells {
-            let p = cell.patch;
-            for gy in y0..y1 {
-                let Some(b) = p.row_of(gy, l) else { continue };
-                for run in p.row_runs(b, l).into_iter().flatten() {
-                    let start = (gy - y0) * l + run.global % l;
-                    add(cell, run.padded..run.padded + run.len, &mut chunk[start..start + run.len]);
-                }
+        for_each_run(cells, band * rows, chunk.len() / l, l, |cell, padded, run| add(cell, padded, &mut chunk[run]));
+    });
+}
+
+/// [`gather`] onto two lattice arrays in one walk over the patches.
+fn gather_pair<A, B>(
+    (a, b): (&mut [A], &mut [B]),
+    (zero_a, zero_b): (A, B),
+    cells: &[Cell],
+    l: usize,
+    add: impl Fn(&Cell, Range<usize>, &mut [A], &mut [B]) + Sync,
+) where
+    A: Copy + Send + Sync,
+    B: Copy + Send + Sync,
+{
+    let rows = par::band_rows(l);
+    par::for_each_chunk_pair_mut(a, b, rows * l, |band, a, b| {
+        a.fill(zero_a);
+        b.fill(zero_b);
+        for_each_run(cells, band * rows, a.len() / l, l, |cell, padded, run| {
+            add(cell, padded, &mut a[run.clone()], &mut b[run])
+        });
+    });
+}
+
+/// Calls `visit(cell, padded, run)` for every run of every cell's patch within the `rows` lattice
+/// rows from `y0`, cell by cell in order: `padded` indexes the cell's padded storage, `run` the
+/// band (of `rows` rows from y0).
+fn for_each_run(
+    cells: &[Cell],
+    y0: usize,
+    rows: usize,
+    l: usize,
+    mut visit: impl FnMut(&Cell, Range<usize>, Range<usize>),
+) {
+    for cell in cells {
+        let p = cell.patch;
+        for gy in y0..y0 + rows {
+            let Some(b) = p.row_of(gy, l) else { continue };
+            for run in p.row_runs(b, l).into_iter().flatten() {
+                let start = (gy - y0) * l + run.global % l;
+                visit(cell, run.padded..run.padded + run.len, start..start + run.len);
             }
         }
-    });
+    }
 }
 
 /// `out += value` site by site over a run.
@@ -450,86 +467,94 @@ impl Monolayer {
         let cells = &mut self.cells;
         let lat = &mut self.lattice;
 
+        let solver = &mut self.solver;
+        let friction = xi_c > 0.0;
+        // Σφ², and with cell–cell friction n = Σ_j w_j, in one walk over the patches. One loop
+        // per reading, each with its reading a constant, so that none tests it site by site.
         counters.time(Stage::Gather, || {
-            gather(&mut lat.sum_phi2, 0.0, cells, l, |c, r, out| add_each(out, c.phi[r].iter().map(|p| p * p)))
+            let (phi2, n) = (&mut lat.sum_phi2, &mut lat.weight);
+            let mut with_weights = |kind| {
+                gather_pair((phi2, n), (0.0, 0.0), cells, l, |c, r, phi2, n| {
+                    add_each(phi2, c.phi[r.clone()].iter().map(|p| p * p));
+                    add_each(n, c.phi[r].iter().map(|&p| friction_weight(kind, p, threshold)));
+                })
+            };
+            match (friction, weights) {
+                (false, _) => gather(phi2, 0.0, cells, l, |c, r, out| add_each(out, c.phi[r].iter().map(|p| p * p))),
+                (true, FrictionWeights::Phi) => with_weights(FrictionWeights::Phi),
+                (true, FrictionWeights::Presence) => with_weights(FrictionWeights::Presence),
+                (true, FrictionWeights::Subdomain) => with_weights(FrictionWeights::Subdomain),
+            }
         });
-        // Cell by cell in one loop, so that each patch is still in cache for its forces.
-        counters.time_laps([Stage::ChemicalPotential, Stage::Forces], |laps| {
+        // Cell by cell in one loop, so that each patch is still in cache for its forces. The
+        // friction operator needs n but not the forces: it is set up beside this loop, on one
+        // thread while the others take the cells (and takes cells itself once done).
+        counters.time_laps([Stage::ChemicalPotential, Stage::Forces, Stage::FrictionSolve], |laps| {
             let sum_phi2 = &lat.sum_phi2;
-            par::for_each_mut(cells, |_, c| {
-                laps.lap(0, || {
-                    c.area = area(&c.phi);
-                    fe.chemical_potential(c.patch, &c.phi, c.area, sum_phi2, l, &mut c.mu);
-                });
-                laps.lap(1, || {
-                    c.shape = shape_tensor(c.patch, &c.phi);
-                    c.q_hat = normalise(c.shape, q_mag, q_eps);
-                    force_density(c.patch, &c.phi, &c.mu, c.q_hat, zeta, passive, &mut c.fx, &mut c.fy);
-                });
-            })
+            let mut per_cell = || {
+                par::for_each_mut(cells, |_, c| {
+                    laps.lap(0, || {
+                        c.area = area(&c.phi);
+                        fe.chemical_potential(c.patch, &c.phi, c.area, sum_phi2, l, &mut c.mu);
+                    });
+                    laps.lap(1, || {
+                        c.shape = shape_tensor(c.patch, &c.phi);
+                        c.q_hat = normalise(c.shape, q_mag, q_eps);
+                        force_density(c.patch, &c.phi, &c.mu, c.q_hat, zeta, passive, &mut c.fx, &mut c.fy);
+                    });
+                })
+            };
+            if friction {
+                let (n, xi_s) = (&lat.weight, &lat.xi_s);
+                par::join(|| laps.lap(2, || solver.prepare(n, xi_s, xi_c)), per_cell);
+            } else {
+                per_cell();
+            }
         });
 
-        if xi_c > 0.0 {
+        let drag = if friction {
             counters.time(Stage::Gather, || {
-                gather(&mut lat.weighted_force, WeightedForce::default(), cells, l, |c, r, out| {
+                gather(&mut lat.force, ZERO, cells, l, |c, r, out| {
                     let (phi, fx, fy) = (&c.phi[r.clone()], &c.fx[r.clone()], &c.fy[r]);
-                    let wf = |n: f64, fx: f64, fy: f64| WeightedForce { n, f: C64::new(n * fx, n * fy) };
                     let sites = phi.iter().zip(fx.iter().zip(fy));
-                    let add =
-                        |kind| add_each(out, sites.map(|(&p, (&x, &y))| wf(friction_weight(kind, p, threshold), x, y)));
-                    // One loop per reading, each with its reading a constant, so that none tests
-                    // the reading site by site.
+                    let add = |kind| {
+                        add_each(
+                            out,
+                            sites.map(|(&p, (&x, &y))| {
+                                let w = friction_weight(kind, p, threshold);
+                                C64::new(w * x, w * y)
+                            }),
+                        )
+                    };
                     match weights {
                         FrictionWeights::Phi => add(FrictionWeights::Phi),
                         FrictionWeights::Presence => add(FrictionWeights::Presence),
                         FrictionWeights::Subdomain => add(FrictionWeights::Subdomain),
                     }
-                });
-                for ((n, f), wf) in lat.weight.iter_mut().zip(lat.force.iter_mut()).zip(&lat.weighted_force) {
-                    (*n, *f) = (wf.n, wf.f);
-                }
+                })
             });
-            let solver = &mut self.solver;
-            let problem = FrictionProblem {
-                weight: &lat.weight,
-                force: &lat.force,
-                xi_s: &lat.xi_s,
-                xi_c,
-                tolerance: p.friction_tolerance,
-                max_iterations: p.friction_max_iterations,
-            };
+            let (tolerance, max_iterations) = (p.friction_tolerance, p.friction_max_iterations);
             let stats = counters
-                .time(Stage::FrictionSolve, || solver.solve(&problem))
+                .time(Stage::FrictionSolve, || solver.solve_prepared(&lat.force, tolerance, max_iterations))
                 .map_err(|source| SimError::Friction { step: self.step, source })?;
             counters.solves += 1;
             counters.iterations += stats.iterations as u64;
             counters.max_residual = counters.max_residual.max(stats.residual);
             self.last_solve = stats;
-            for (((mob, pl), (&xs, &nb)), &s) in lat
-                .mobility
-                .iter_mut()
-                .zip(lat.pull.iter_mut())
-                .zip(lat.xi_s.iter().zip(&solver.weight_nb))
-                .zip(&solver.velocity_nb)
-            {
-                *mob = 1.0 / (xs + xi_c * nb);
-                *pl = s * xi_c;
-            }
-        } else if active {
-            for (mob, xs) in lat.mobility.iter_mut().zip(&lat.xi_s) {
-                *mob = 1.0 / xs;
-            }
-            lat.pull.fill(ZERO);
+            Drag { mobility: &solver.mobility, pull: &solver.pull }
         } else {
-            lat.mobility.fill(1.0 / p.xi_relax);
+            let mobility = if active { None } else { Some(1.0 / p.xi_relax) };
+            for (mob, xs) in lat.mobility.iter_mut().zip(&lat.xi_s) {
+                *mob = mobility.unwrap_or(1.0 / xs);
+            }
             lat.pull.fill(ZERO);
-        }
+            Drag { mobility: &lat.mobility, pull: &lat.pull }
+        };
 
         // Each cell takes its Heun update as soon as its rate is known, while its patch is in
         // cache: no cell's update reads another's fields.
         let keep_velocity = !matches!(then, Then::Predict { .. });
         counters.time_laps([Stage::Velocity, Stage::Update], |laps| {
-            let drag = Drag { mobility: &lat.mobility, pull: &lat.pull };
             par::for_each_mut(cells, |_, c| {
                 laps.lap(0, || {
                     let fields = MotionFields {

@@ -24,9 +24,10 @@
 //! product and vectors stay f64, so the solution meets the stated residual all the same. f32
 //! halves the memory the cycle streams and doubles its SIMD lanes.
 //!
-//! Threads: the hierarchy is built once per solve, on one thread (it is too short a pass to
-//! pay for waking a second worker, see `par`); it is then read-only, and the cycles of the two velocity
-//! components run side by side, each with its own [`CycleWork`].
+//! Threads: the hierarchy is built whenever n changes, on one thread (split into row bands it
+//! took longer, see `par`), beside the per-cell force stage that the other threads run
+//! (`monolayer`); it is then read-only, and the cycles of the two velocity components run side
+//! by side, each with its own [`CycleWork`].
 
 use std::ops::{Add, Mul, Sub};
 

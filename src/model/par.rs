@@ -7,9 +7,10 @@
 //!
 //! What is worth a parallel loop: starting one wakes the other workers, which costs tens of
 //! microseconds (docs/performance.md has the measurement). Passes over the lattice that take
-//! that long (neighbour sums, the friction solve's element-wise passes, the multigrid setup)
-//! therefore run on one thread; the per-cell stages, the gathers onto the lattice and the two
-//! components of the friction solve, each 0.1 ms or more, run across threads.
+//! that long run on one thread, or inside a parallel loop that runs anyway: the multigrid setup
+//! runs beside the per-cell force stage, each velocity component's loading inside its own CG.
+//! The per-cell stages, the gathers onto the lattice, the two components of the friction solve
+//! and the pass that turns its solution into the pull, each 0.1 ms or more, run across threads.
 
 /// Runs `f(i, item)` for every item, in parallel where threads are available.
 pub fn for_each_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {
@@ -34,6 +35,26 @@ pub fn for_each_chunk_mut<T: Send>(data: &mut [T], chunk: usize, f: impl Fn(usiz
     #[cfg(not(feature = "parallel"))]
     for (k, c) in data.chunks_mut(chunk).enumerate() {
         f(k, c);
+    }
+}
+
+/// Runs `f(k, a_chunk, b_chunk)` over the k-th chunks of `chunk` elements of `a` and of `b` (two
+/// arrays of one lattice, split alike).
+pub fn for_each_chunk_pair_mut<A: Send, B: Send>(
+    a: &mut [A],
+    b: &mut [B],
+    chunk: usize,
+    f: impl Fn(usize, &mut [A], &mut [B]) + Sync + Send,
+) {
+    debug_assert_eq!(a.len(), b.len());
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        a.par_chunks_mut(chunk).zip(b.par_chunks_mut(chunk)).enumerate().for_each(|(k, (a, b))| f(k, a, b));
+    }
+    #[cfg(not(feature = "parallel"))]
+    for (k, (a, b)) in a.chunks_mut(chunk).zip(b.chunks_mut(chunk)).enumerate() {
+        f(k, a, b);
     }
 }
 
