@@ -80,11 +80,8 @@ impl Counters {
     pub fn time_laps<R, const N: usize>(&mut self, stages: [Stage; N], f: impl FnOnce(&Laps<N>) -> R) -> R {
         let laps = Laps::default();
         let (r, wall) = wall_time(|| f(&laps));
-        let shares = laps.nanos();
-        let total: u64 = shares.iter().sum();
-        for (stage, share) in stages.iter().zip(shares) {
-            let part = if total > 0 { share as f64 / total as f64 } else { 1.0 / N as f64 };
-            self.seconds[*stage as usize] += wall * part;
+        for (stage, part) in stages.iter().zip(shares_of(wall, laps.nanos())) {
+            self.seconds[*stage as usize] += part;
         }
         r
     }
@@ -118,6 +115,12 @@ impl Counters {
         }
         s
     }
+}
+
+/// `wall` shared in proportion to the laps' times (equally if none took any time).
+fn shares_of<const N: usize>(wall: f64, laps: [u64; N]) -> [f64; N] {
+    let total: u64 = laps.iter().sum();
+    laps.map(|lap| wall * if total > 0 { lap as f64 / total as f64 } else { 1.0 / N as f64 })
 }
 
 /// `f`'s result and its wall time in seconds (zero in wasm, which has no `std` clock).
@@ -186,9 +189,18 @@ impl<const N: usize> Laps<N> {
 mod tests {
     use super::*;
 
-    /// A loop's wall time goes to its stages in proportion to their laps, and all of it.
+    /// A loop's wall time goes to its stages in proportion to their laps.
     #[test]
-    fn laps_share_the_wall_time() {
+    fn wall_time_is_shared_in_proportion_to_the_laps() {
+        assert_eq!(shares_of(2.0, [1, 3]), [0.5, 1.5]);
+        assert_eq!(shares_of(2.0, [0, 0, 0, 0]), [0.5; 4]);
+        assert_eq!(shares_of(1.0, [0, 7]), [0.0, 1.0]);
+    }
+
+    /// Every lap is timed, and all of the loop's wall time goes to its stages. (Which stage
+    /// gets more is the pure sharing above: sleeps are only lower bounds on a loaded machine.)
+    #[test]
+    fn laps_share_all_the_wall_time() {
         let mut c = Counters::default();
         let sleep = |ms| std::thread::sleep(std::time::Duration::from_millis(ms));
         c.time_laps([Stage::Velocity, Stage::Update], |laps| {
@@ -196,7 +208,8 @@ mod tests {
             laps.lap(1, || sleep(20));
         });
         let (v, u) = (c.seconds[Stage::Velocity as usize], c.seconds[Stage::Update as usize]);
-        assert!(u > 5.0 * v && v > 0.0, "velocity {v} s, update {u} s");
-        assert!(v + u >= 0.021 && v + u == c.total_seconds());
+        assert!(v > 0.0 && u > 0.0, "velocity {v} s, update {u} s");
+        assert!(v + u >= 0.021, "the loop slept 21 ms: {} s", v + u);
+        assert!((v + u - c.total_seconds()).abs() <= 1e-15);
     }
 }
