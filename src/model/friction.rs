@@ -274,8 +274,8 @@ impl Component {
     fn load(&mut self, force: &[C64], u: &[C64], diag: &[f64], part: fn(C64) -> f64) -> f64 {
         let (mut re2, mut im2) = (0.0, 0.0);
         for (x, (rhs, sol)) in self.rhs.iter_mut().zip(self.x.iter_mut()).enumerate() {
-            let f = if diag[x] > 0.0 { force[x] } else { ZERO };
-            (*rhs, *sol) = if diag[x] > 0.0 { (part(f), part(u[x])) } else { (0.0, 0.0) };
+            let (f, guess) = if diag[x] > 0.0 { (force[x], u[x]) } else { (ZERO, ZERO) };
+            (*rhs, *sol) = (part(f), part(guess));
             re2 += f.re * f.re;
             im2 += f.im * f.im;
         }

@@ -58,7 +58,7 @@ pub struct LatticeFields {
     /// 1/ξ_s(x) (active, without cell–cell friction) or 1/ξ_relax (relaxation); with cell–cell
     /// friction the solver's [`FrictionSolver::mobility`] takes its place.
     pub mobility: Vec<f64>,
-    /// Zero: the pull without cell–cell friction (with it, [`FrictionSolver::pull`]).
+    /// Zero, never written: the pull without cell–cell friction (with it, [`FrictionSolver::pull`]).
     pub pull: Vec<C64>,
     /// Per-site multiplier of ξ_s (soft < 1 < stiff substrate); 1 everywhere by default.
     pub substrate: Vec<f64>,
@@ -543,11 +543,13 @@ impl Monolayer {
             self.last_solve = stats;
             Drag { mobility: &solver.mobility, pull: &solver.pull }
         } else {
-            let mobility = if active { None } else { Some(1.0 / p.xi_relax) };
-            for (mob, xs) in lat.mobility.iter_mut().zip(&lat.xi_s) {
-                *mob = mobility.unwrap_or(1.0 / xs);
+            if active {
+                for (mob, xs) in lat.mobility.iter_mut().zip(&lat.xi_s) {
+                    *mob = 1.0 / xs;
+                }
+            } else {
+                lat.mobility.fill(1.0 / p.xi_relax);
             }
-            lat.pull.fill(ZERO);
             Drag { mobility: &lat.mobility, pull: &lat.pull }
         };
 
