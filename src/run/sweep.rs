@@ -27,6 +27,7 @@ use serde::Deserialize;
 
 use crate::analysis::holes::{counted_holes, HoleCounting};
 use crate::analysis::regime::{classify, fitted_lifetime, Regime};
+use crate::analysis::FrameSummary;
 use crate::model::params::Params;
 use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
 use crate::run::files::{check_frame, read_frame, RunFrames};
@@ -261,8 +262,14 @@ pub struct RunSummary {
     pub microns_per_hour: f64,
     pub velocity_correlation_length: Option<f64>,
     pub nematic_correlation_length: Option<f64>,
-    /// Minimum packing fraction over the frames with no hole open.
+    /// Minimum packing fraction (sites with Σφ ≥ ½) over the frames with no hole open.
     pub min_packing_without_hole: Option<f64>,
+    /// The other reading of the paper's packing fraction (docs/reading.md §7): the minimum
+    /// share of sites that are not void (Σφ ≥ 0.01) over the frames with no hole open.
+    pub min_nonvoid_without_hole: Option<f64>,
+    /// The most void regions of any size in one frame while a hole is open: 1 where, as the
+    /// paper says, "no other gaps appear in the monolayer" once a hole has formed.
+    pub max_void_regions_with_hole: usize,
     /// Cells' aspect ratio (shape tensor): the per-frame mean and 90th percentile, averaged
     /// over the frames.
     pub aspect_ratio_mean: Option<f64>,
@@ -277,6 +284,39 @@ pub struct RunSummary {
 impl RunSummary {
     pub fn blew_up(&self) -> bool {
         self.status.blew_up()
+    }
+}
+
+fn minimum(v: impl Iterator<Item = f64>) -> Option<f64> {
+    v.fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.min(x))))
+}
+
+/// The paper's "when no hole is present the packing fraction is always above 95 % and, when a
+/// hole is formed, no other gaps appear" measured over a run's frames, under both readings of
+/// the packing fraction (docs/reading.md §7).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PackingReadings {
+    /// Covered: the share of sites with Σφ ≥ ½, least over the frames with no hole open.
+    min_covered_without_hole: Option<f64>,
+    /// Not void: the share of sites with Σφ ≥ 0.01, least over the same frames.
+    min_nonvoid_without_hole: Option<f64>,
+    /// The most void regions of any size in one frame with a hole open (1: no other gap).
+    max_void_regions_with_hole: usize,
+}
+
+impl PackingReadings {
+    /// From each frame's open holes (as tracked) and its summary.
+    fn of<'a>(frames: impl Iterator<Item = (usize, &'a FrameSummary)> + Clone) -> Self {
+        let without_hole = frames.clone().filter(|(open, _)| *open == 0).map(|(_, f)| f);
+        PackingReadings {
+            min_covered_without_hole: minimum(without_hole.clone().map(|f| f.packing_fraction)),
+            min_nonvoid_without_hole: minimum(without_hole.map(|f| 1.0 - f.void_fraction)),
+            max_void_regions_with_hole: frames
+                .filter(|(open, _)| *open > 0)
+                .map(|(_, f)| f.void_regions)
+                .max()
+                .unwrap_or(0),
+        }
     }
 }
 
@@ -327,12 +367,10 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
     s.fraction_multiple_holes = multiple / ra.frames.len().max(1) as f64;
     s.velocity_correlation_length = mean(ra.frames.iter().filter_map(|f| f.summary.velocity_correlation_length));
     s.nematic_correlation_length = mean(ra.frames.iter().filter_map(|f| f.summary.nematic_correlation_length));
-    s.min_packing_without_hole = ra
-        .frames
-        .iter()
-        .filter(|f| f.open_holes == 0)
-        .map(|f| f.summary.packing_fraction)
-        .fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.min(x))));
+    let packing = PackingReadings::of(ra.frames.iter().map(|f| (f.open_holes, &f.summary)));
+    s.min_packing_without_hole = packing.min_covered_without_hole;
+    s.min_nonvoid_without_hole = packing.min_nonvoid_without_hole;
+    s.max_void_regions_with_hole = packing.max_void_regions_with_hole;
     Ok(s)
 }
 
@@ -573,8 +611,8 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
     runs += "seed,status,blew_up,steps,active_time,holes_nucleated,max_hole_area,time_with_hole_open,\
              hole_lifetimes,max_holes_open,fraction_multiple_holes,mean_speed,mean_speed_um_per_h,\
              mean_speed_um_per_h_at_3.6s,mean_speed_um_per_h_at_5s,velocity_correlation_length,\
-             nematic_correlation_length,min_packing_fraction_without_hole,aspect_ratio_mean,aspect_ratio_p90,\
-             region_lifetimes\n";
+             nematic_correlation_length,min_packing_fraction_without_hole,min_nonvoid_fraction_without_hole,\
+             max_void_regions_with_hole,aspect_ratio_mean,aspect_ratio_p90,region_lifetimes\n";
     let list = |l: &[(f64, bool)]| -> String {
         l.iter().map(|(t, closed)| format!("{t:.1}{}", if *closed { "" } else { "+" })).collect::<Vec<_>>().join(";")
     };
@@ -586,7 +624,7 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
         }
         let _ = writeln!(
             runs,
-            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{},{:.4},{:.6},{:.3},{:.3},{:.3},{},{},{},{},{},{}",
+            "{},\"{}\",{},{},{:.1},{},{},{:.1},{},{},{:.4},{:.6},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{}",
             s.seed,
             status,
             s.blew_up(),
@@ -605,6 +643,8 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
             opt(s.velocity_correlation_length),
             opt(s.nematic_correlation_length),
             opt(s.min_packing_without_hole),
+            opt(s.min_nonvoid_without_hole),
+            s.max_void_regions_with_hole,
             opt(s.aspect_ratio_mean),
             opt(s.aspect_ratio_p90),
             list(&s.region_lifetimes)
@@ -728,6 +768,38 @@ mod tests {
         assert!(summary.lines().nth(1).unwrap().ends_with(",8000.0+;100.0;200.0;300.0"), "{summary}");
         assert!(regimes.contains(",regime,fitted_lifetime_regions,regime_regions\n"), "{regimes}");
         assert!(regimes.contains(",short_and_long_lived,2866.7,only_short_lived\n"), "{regimes}");
+    }
+
+    /// Both packing readings count only the frames with no hole open; the gaps beside a hole
+    /// count every void region of the frames with one open.
+    #[test]
+    fn packing_readings_keep_frames_with_and_without_a_hole_apart() {
+        let frame = |packing_fraction, void_fraction, void_regions| FrameSummary {
+            packing_fraction,
+            void_fraction,
+            void_regions,
+            holes: 0,
+            largest_void: 0,
+            plus_half_defects: 0,
+            minus_half_defects: 0,
+            spiral_cores: 0,
+            max_strain_rate: 0.0,
+            velocity_correlation_length: None,
+            nematic_correlation_length: None,
+            aspect_ratio_mean: None,
+            aspect_ratio_p90: None,
+            mean_speed: 0.0,
+        };
+        // No hole: a tissue with small gaps at its vertices (covered 0.93, not void 0.999),
+        // then one nearly whole; a hole open with two other gaps beside it (its own low
+        // packing is not counted).
+        let frames = [(0, frame(0.93, 0.001, 2)), (0, frame(0.97, 0.0, 0)), (1, frame(0.70, 0.2, 3))];
+        let r = PackingReadings::of(frames.iter().map(|(o, f)| (*o, f)));
+        assert_eq!(r.min_covered_without_hole, Some(0.93));
+        assert_eq!(r.min_nonvoid_without_hole, Some(1.0 - 0.001));
+        assert_eq!(r.max_void_regions_with_hole, 3);
+        let never = PackingReadings::of(frames[2..].iter().map(|(o, f)| (*o, f)));
+        assert_eq!((never.min_covered_without_hole, never.min_nonvoid_without_hole), (None, None));
     }
 
     #[test]
