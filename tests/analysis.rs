@@ -284,6 +284,33 @@ fn hole_probability_counts_the_sites_that_open_next() {
     assert!((rows[1].0 - bin as f64 * STRAIN_RATE_BIN).abs() < 1e-15);
 }
 
+/// Fig. 2's exclusion as the paper words it: once a hole has grown above half a cell, no frame
+/// counts "until the hole closes", also after it has shrunk back below πR²/2; the frame after it
+/// closed counts again, and the hole that opens next is a new one.
+#[test]
+fn hole_probability_excludes_frames_until_a_large_hole_closes() {
+    let l = 140;
+    let small = (40.0, 40.0, 5.0);
+    let large = (40.0, 40.0, 10.0);
+    let b = (100.0, 100.0, 5.0);
+    // πR²/4 ≈ 50 < a disk of radius 5 (≈ 81 sites) < πR²/2 ≈ 101 < a disk of radius 10.
+    let frames: [Vec<(f64, f64, f64)>; 6] = [vec![], vec![small], vec![large], vec![small], vec![], vec![b]];
+    let strain: Vec<f64> = tissue_with_holes(l, &[b]).iter().map(|&s| if s == 0.0 { 0.0011 } else { 0.0 }).collect();
+    let mut voids = VoidRegions::default();
+    let mut tracker = HoleTracker::new(8.0);
+    let mut p = HoleProbability::default();
+    for (t, disks) in frames.iter().enumerate() {
+        voids.find(&tissue_with_holes(l, disks), l);
+        tracker.update(&voids, t as f64);
+        p.push(&strain, &voids, &tracker, 8.0);
+    }
+    // Counted: frames 0, 1 and 4; skipped: 2 (A large) and 3 (A shrunk below πR²/2, still open).
+    assert_eq!((p.frames_counted, p.frames_skipped), (3, 2), "frame 3 must be skipped: hole A has not closed");
+    let bin = (0.0011 / STRAIN_RATE_BIN).floor() as i64;
+    let b_sites = strain.iter().filter(|&&e| e > 0.0).count() as u64;
+    assert_eq!(p.bins[&bin], (3 * b_sites, b_sites), "B opens after A closed and counts");
+}
+
 /// Before a hole: the distances from its nucleation centroid to the spiral core and the two
 /// nearest +½ defects (in R; −½ defects ignored) and the strain rate near it over the frame's
 /// largest, in the frame of nucleation and the frames before.

@@ -183,6 +183,21 @@ impl HoleTracker {
         })
     }
 
+    /// Whether a hole family ([`HoleCounting::Families`]) with a member that ever grew above
+    /// `area` sites is still open: Fig. 2's exclusion, "if a hole grows above a threshold size
+    /// … lattice sites are not counted … until the hole closes". The hole closes when the
+    /// family does (no member open), not when its area falls back below the threshold.
+    pub fn large_family_open(&self, area: f64) -> bool {
+        let root = family_roots(&self.holes);
+        let mut large = vec![false; self.holes.len()];
+        let mut open = vec![false; self.holes.len()];
+        for (h, &r) in self.holes.iter().zip(&root) {
+            large[r] |= h.max_area() as f64 > area;
+            open[r] |= h.closed.is_none();
+        }
+        large.iter().zip(&open).any(|(&l, &o)| l && o)
+    }
+
     /// Takes the void regions of the next frame, at time `time`.
     pub fn update(&mut self, voids: &VoidRegions, time: f64) {
         let l = voids.l;
@@ -307,27 +322,12 @@ pub fn counted_holes(holes: &[Hole], end: f64, counting: HoleCounting) -> Vec<Co
     match counting {
         HoleCounting::Regions => holes.iter().map(one).collect(),
         HoleCounting::Families => {
-            // Union–find over the split and merge links; ids are indices into `holes`.
-            let mut root: Vec<usize> = (0..holes.len()).collect();
-            fn find(root: &mut [usize], mut a: usize) -> usize {
-                while root[a] != a {
-                    root[a] = root[root[a]];
-                    a = root[a];
-                }
-                a
-            }
-            for h in holes {
-                for other in [h.split_from, h.merged_into].into_iter().flatten() {
-                    let (a, b) = (find(&mut root, h.id), find(&mut root, other));
-                    // The older hole (smaller id) stands for the family.
-                    root[a.max(b)] = a.min(b);
-                }
-            }
+            let root = family_roots(holes);
             // Per family, in order of its first member: root, first nucleation, last closing (∞
             // while a member is open), largest area.
             let mut families: Vec<(usize, f64, f64, usize)> = Vec::new();
             for h in holes {
-                let r = find(&mut root, h.id);
+                let r = root[h.id];
                 let close = h.closed.unwrap_or(f64::INFINITY);
                 match families.iter_mut().find(|f| f.0 == r) {
                     Some(f) => *f = (r, f.1.min(h.nucleated), f.2.max(close), f.3.max(h.max_area())),
@@ -343,6 +343,27 @@ pub fn counted_holes(holes: &[Hole], end: f64, counting: HoleCounting) -> Vec<Co
                 .collect()
         }
     }
+}
+
+/// The family of each hole ([`HoleCounting::Families`]): the id of its oldest member, by
+/// union–find over the split and merge links (ids are indices into `holes`).
+pub fn family_roots(holes: &[Hole]) -> Vec<usize> {
+    let mut root: Vec<usize> = (0..holes.len()).collect();
+    fn find(root: &mut [usize], mut a: usize) -> usize {
+        while root[a] != a {
+            root[a] = root[root[a]];
+            a = root[a];
+        }
+        a
+    }
+    for h in holes {
+        for other in [h.split_from, h.merged_into].into_iter().flatten() {
+            let (a, b) = (find(&mut root, h.id), find(&mut root, other));
+            // The older hole (smaller id) stands for the family.
+            root[a.max(b)] = a.min(b);
+        }
+    }
+    (0..holes.len()).map(|h| find(&mut root, h)).collect()
 }
 
 /// Distance between two points on the periodic L×L box.

@@ -1,8 +1,11 @@
 //! The conditional probability of a hole given the local strain rate, P(hole | ε̇) (paper Fig. 2,
 //! docs/reading.md §6): for every site of every frame, in bins of ε̇ of width Δε̇ = 0.000125, how many
 //! sites there were (N_ε̇) and how many of them lie in a hole that nucleates in the next frame
-//! (N_hole,ε̇); P = N_hole,ε̇ / N_ε̇. A frame is not counted while a hole larger than half a cell
-//! (πR²/2) is open: the box holds one hole at a time, so such a frame cannot nucleate another.
+//! (N_hole,ε̇); P = N_hole,ε̇ / N_ε̇. The paper's exclusion: "if a hole grows above a threshold size,
+//! corresponding to half of a single cell area, lattice sites are not counted … until the hole
+//! closes". Once a hole has grown above πR²/2, no frame is counted until it has closed, as a
+//! family ([`super::holes::HoleCounting::Families`]): its fragments and the holes that joined it
+//! closed too. A hole that shrinks back below πR²/2 is still excluded.
 
 use std::collections::BTreeMap;
 
@@ -10,6 +13,11 @@ use super::holes::{HoleTracker, VoidRegions};
 
 /// The paper's bin width Δε̇.
 pub const STRAIN_RATE_BIN: f64 = 0.000125;
+
+/// Half a cell's area, πR²/2: the size above which a hole excludes the frames until it closes.
+pub fn half_cell_area(radius: f64) -> f64 {
+    0.5 * std::f64::consts::PI * radius * radius
+}
 
 /// Counts of sites and of sites that open into a new hole, per strain-rate bin.
 #[derive(Clone, Debug, Default)]
@@ -50,8 +58,7 @@ impl HoleProbability {
                 }
             }
         }
-        let half_cell = 0.5 * std::f64::consts::PI * radius * radius;
-        let large_open = tracker.open().any(|h| h.history.last().is_some_and(|p| p.1 as f64 > half_cell));
+        let large_open = tracker.large_family_open(half_cell_area(radius));
         self.previous.clear();
         self.previous.extend_from_slice(strain_rate);
         self.previous_skipped = Some(large_open);
