@@ -183,6 +183,11 @@ impl HoleTracker {
         })
     }
 
+    /// Per region of the last frame (indexed by its label), whether it holds an open hole.
+    pub fn open_regions(&self) -> Vec<bool> {
+        self.prev_hole.iter().map(Option::is_some).collect()
+    }
+
     /// Whether a hole family ([`HoleCounting::Families`]) with a member that ever grew above
     /// `area` sites is still open: Fig. 2's exclusion, "if a hole grows above a threshold size
     /// … lattice sites are not counted … until the hole closes". The hole closes when the

@@ -15,10 +15,13 @@
 //!   flag one defect merged) and sub-site core positions, shared by defects and spirals.
 //!
 //! [`Analysis`] owns every buffer: after the first call, measuring a frame allocates nothing.
+//! - [`alignment`]: the mechanism's unmeasured claims: antiparallel +½ pairs, cells tangential
+//!   to a hole's edge, no holes at −½ defects.
 //! - [`regime`]: the paper's regime criterion (Fig. 3c–d) from hole lifetimes.
 //!
 //! Reading a run's frames, its tables and plots are native and live in `run`.
 
+pub mod alignment;
 pub mod correlations;
 pub mod defects;
 pub mod elongation;
@@ -35,12 +38,15 @@ use num_complex::Complex64 as C64;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
+use alignment::cell_centroid;
 use correlations::{correlation_length, Correlator};
 use defects::{Defect, DefectFinder};
 use elongation::{cell_aspect_ratio, mean_and_p90};
 use fields::{divergence, strain_rate, CoarseFields};
 use holes::{nucleation_area, VoidRegions};
 use spirals::{PlusOne, SpiralFinder};
+
+use crate::model::shape::{axis_angle, shape_tensor};
 
 /// The scalar measurements of one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -96,6 +102,9 @@ pub struct Analysis {
     pub voids: VoidRegions,
     /// Each cell's aspect ratio, in cell order ([`elongation::cell_aspect_ratio`]).
     pub aspect_ratios: Vec<f64>,
+    /// Each cell's centroid and elongation axis angle (main axis of its shape tensor), in cell
+    /// order, for the tangential alignment at holes ([`alignment`]).
+    pub cell_axes: Vec<(f64, f64, f64)>,
     /// The same, sorted, for the frame's percentile (kept so that no frame allocates).
     aspect_sorted: Vec<f64>,
     /// C_v(r), C_Q(r) for r = 0..=L/2 (unsmoothed fields).
@@ -129,6 +138,7 @@ impl Analysis {
             plus_ones: Vec::new(),
             voids: VoidRegions::default(),
             aspect_ratios: Vec::new(),
+            cell_axes: Vec::new(),
             aspect_sorted: Vec::new(),
             velocity_correlation: Vec::new(),
             nematic_correlation: Vec::new(),
@@ -149,10 +159,12 @@ impl Analysis {
         self.zeta = m.params().zeta;
         self.raw.clear();
         self.aspect_ratios.clear();
+        self.cell_axes.clear();
         for c in m.cells() {
             let (vx, vy) = c.velocity();
             self.raw.add_cell(c.patch(), c.phi().data, c.q_hat(), self.zeta, Some((vx.data, vy.data)));
             self.aspect_ratios.extend(cell_aspect_ratio(c.patch(), c.phi().data));
+            self.push_axis(c.patch(), c.phi().data);
         }
         self.derive();
     }
@@ -163,12 +175,20 @@ impl Analysis {
         assert_eq!(velocity.len(), self.l * self.l, "velocity field of another lattice size");
         self.raw.clear();
         self.aspect_ratios.clear();
+        self.cell_axes.clear();
         for (patch, phi, q_hat) in cells {
             self.raw.add_cell(patch, phi, q_hat, self.zeta, None);
             self.aspect_ratios.extend(cell_aspect_ratio(patch, phi));
+            self.push_axis(patch, phi);
         }
         self.raw.set_velocity(velocity);
         self.derive();
+    }
+
+    fn push_axis(&mut self, patch: Patch, phi: &[f64]) {
+        if let Some((x, y)) = cell_centroid(patch, phi, self.l) {
+            self.cell_axes.push((x, y, axis_angle(shape_tensor(patch, phi))));
+        }
     }
 
     /// Everything that follows from the raw fields and the cells' aspect ratios.
