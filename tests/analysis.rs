@@ -11,7 +11,7 @@ use monolayer::analysis::defects::DefectFinder;
 use monolayer::analysis::fields::{divergence, window_mean};
 use monolayer::analysis::holes::{periodic_distance, HoleTracker, VoidRegions};
 use monolayer::analysis::nucleation::{HoleProbability, STRAIN_RATE_BIN};
-use monolayer::analysis::precursors::Precursors;
+use monolayer::analysis::precursors::{Precursor, Precursors, CHANCE_SITES};
 use monolayer::analysis::spirals::PlusOne;
 use monolayer::analysis::spirals::SpiralFinder;
 use monolayer::analysis::Analysis;
@@ -348,6 +348,60 @@ fn precursors_of_a_hole() {
     assert!(before.spiral_core.unwrap() < 1e-9, "the sink at (90, 90) is not a spiral core: {before:?}");
     assert!((before.plus_half[0].unwrap() - 1.0).abs() < 1e-9 && (before.plus_half[1].unwrap() - 2.0).abs() < 1e-9);
     assert_eq!(before.strain_rate, 0.5);
+    // The −½ defect 2 sites away; the two +½ of frame 0 both point along x: parallel.
+    assert!((before.minus_half.unwrap() - 2.0 / r).abs() < 1e-9, "{before:?}");
+    assert_eq!(before.plus_half_angle, Some(0.0));
+    assert_eq!((now.minus_half, now.plus_half_angle), (None, None));
+    // The chance baseline: CHANCE_SITES random sites in each of the same two frames, measured alike.
+    assert_eq!(pre.chance.len(), 2 * CHANCE_SITES);
+    assert!(pre.chance.iter().all(|c| c.hole == 0 && c.frames_before <= 1));
+    let frame1: Vec<_> = pre.chance.iter().filter(|c| c.frames_before == 0).collect();
+    assert_eq!(frame1.len(), CHANCE_SITES);
+    assert!(frame1.iter().all(|c| c.strain_rate == 1.0 && c.plus_half == [None, None]));
+    // Random sites are mostly far from the one spiral core: their mean distance is many R.
+    let mean = frame1.iter().map(|c| c.spiral_core.unwrap()).sum::<f64>() / CHANCE_SITES as f64;
+    assert!(mean > 2.0, "the chance baseline sits near the core: {mean}");
+    // Seeded: the same frames give the same baseline.
+    let again = {
+        let mut pre2 = Precursors::default();
+        let mut t2 = HoleTracker::new(r);
+        let mut b = Analysis::new(&p);
+        b.plus_ones = a.plus_ones.clone();
+        b.strain_rate = vec![1.0; l * l];
+        b.voids.find(&tissue_with_holes(l, &[]), l);
+        t2.update(&b.voids, 0.0);
+        pre2.push(&b, &t2);
+        b.voids.find(&tissue_with_holes(l, &[(50.0, 50.0, 6.0)]), l);
+        t2.update(&b.voids, 1.0);
+        pre2.push(&b, &t2);
+        pre2.chance
+    };
+    let sites = |c: &[Precursor]| c.iter().map(|c| c.spiral_core).collect::<Vec<_>>();
+    assert_eq!(sites(&again)[..CHANCE_SITES], sites(&pre.chance)[..CHANCE_SITES]);
+}
+
+/// The antiparallel +½ pair: two comets facing each other about a nucleation site give π, and
+/// the random sites of the same frame see the same pair (the nearest two of only two).
+#[test]
+fn antiparallel_plus_half_pair_at_a_nucleation() {
+    let p = Params::default();
+    let (l, r) = (p.box_size, p.radius);
+    let mut a = Analysis::new(&p);
+    let mut tracker = HoleTracker::new(r);
+    let mut pre = Precursors::default();
+    let defect = |x, y, psi| Defect { x, y, twice_charge: 1, orientation: psi };
+    a.defects = vec![defect(45.0, 50.0, 0.3), defect(55.0, 50.0, 0.3 - std::f64::consts::PI)];
+    a.strain_rate = vec![1.0; l * l];
+    a.voids.find(&tissue_with_holes(l, &[]), l);
+    tracker.update(&a.voids, 0.0);
+    pre.push(&a, &tracker);
+    a.voids.find(&tissue_with_holes(l, &[(50.0, 50.0, 6.0)]), l);
+    tracker.update(&a.voids, 1.0);
+    pre.push(&a, &tracker);
+    let before = pre.rows.iter().find(|p| p.frames_before == 1).unwrap();
+    assert!((before.plus_half_angle.unwrap() - std::f64::consts::PI).abs() < 1e-12, "{before:?}");
+    assert!((before.plus_half[0].unwrap() - 5.0 / r).abs() < 1e-9);
+    assert!(pre.chance.iter().all(|c| (c.plus_half_angle.unwrap() - std::f64::consts::PI).abs() < 1e-12));
 }
 
 /// The O(L²) sliding window equals the brute-force (2h+1)² window sum, periodic.

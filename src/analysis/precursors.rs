@@ -2,17 +2,32 @@
 //! frames up to [`DEPTH`] before (0 is the nucleation frame), the distance from the hole's
 //! nucleation centroid to the nearest spiral core and to the nearest and second-nearest +½
 //! defects, in units of R, and the largest strain rate within R/2 of that centroid over the
-//! frame's largest (the paper's per-frame normalisation).
-
+//! frame's largest (the paper's per-frame normalisation). With them, for the mechanism's claims
+//! ([`super::alignment`]): the angle between the two nearest +½ defects' orientations, and the
+//! distance to the nearest −½ defect.
+//!
+//! **Chance.** At a nucleation, frame 0 is nearly a spiral core by construction (an opening hole
+//! is a source of the flow). Each curve therefore has a baseline: the same measures about
+//! [`CHANCE_SITES`] random sites of every frame (uniform on the box, from a ChaCha8 generator
+//! seeded with [`CHANCE_SEED`], so the same frames give the same sites), kept for each
+//! nucleation in the same frames before it as its own rows ([`Precursors::chance`]).
 use std::collections::VecDeque;
 
+use rand_chacha::rand_core::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::alignment::polar_angle_between;
 use super::holes::{periodic_distance, HoleTracker};
 use super::Analysis;
 
 /// Frames before nucleation that are looked back on.
 pub const DEPTH: usize = 10;
+/// Random sites per frame for the chance baseline.
+pub const CHANCE_SITES: usize = 16;
+/// Seed of the chance baseline's generator.
+pub const CHANCE_SEED: u64 = 0x5EED_C4A7_CE00_0023;
 
-/// One hole, one frame before its nucleation.
+/// One hole (or one random site), one frame before its nucleation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Precursor {
     pub hole: usize,
@@ -21,23 +36,72 @@ pub struct Precursor {
     pub spiral_core: Option<f64>,
     /// Distances to the nearest and second-nearest +½ defects / R.
     pub plus_half: [Option<f64>; 2],
+    /// Angle (radians, [0, π]) between the orientations of those two +½ defects: π antiparallel.
+    pub plus_half_angle: Option<f64>,
+    /// Distance to the nearest −½ defect / R.
+    pub minus_half: Option<f64>,
     /// max ε̇ within R/2 of the nucleation centroid / max ε̇ over the box.
     pub strain_rate: f64,
 }
 
-/// The points and strain rate of one frame.
+/// The points and strain rate of one frame, and its random sites.
 #[derive(Clone, Debug, Default)]
 struct Past {
     spiral_cores: Vec<(f64, f64)>,
-    plus_half: Vec<(f64, f64)>,
+    /// (x, y, orientation ψ).
+    plus_half: Vec<(f64, f64, f64)>,
+    minus_half: Vec<(f64, f64)>,
     strain_rate: Vec<f64>,
+    chance: Vec<(f64, f64)>,
+}
+
+impl Past {
+    /// The measures about (cx, cy), as a row of hole `hole`, `k` frames before.
+    fn measure(&self, hole: usize, k: usize, cx: f64, cy: f64, l: usize, r: f64) -> Precursor {
+        let mut d: Vec<(f64, f64)> =
+            self.plus_half.iter().map(|&(x, y, psi)| (periodic_distance(x, y, cx, cy, l) / r, psi)).collect();
+        d.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let nearest = |pts: &[(f64, f64)]| {
+            pts.iter().map(|&(x, y)| periodic_distance(x, y, cx, cy, l) / r).min_by(f64::total_cmp)
+        };
+        let near = max_within(&self.strain_rate, l, cx, cy, 0.5 * r);
+        let all = self.strain_rate.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        Precursor {
+            hole,
+            frames_before: k,
+            spiral_core: nearest(&self.spiral_cores),
+            plus_half: [d.first().map(|p| p.0), d.get(1).map(|p| p.0)],
+            plus_half_angle: match (d.first(), d.get(1)) {
+                (Some(a), Some(b)) if a.1.is_finite() && b.1.is_finite() => Some(polar_angle_between(a.1, b.1)),
+                _ => None,
+            },
+            minus_half: nearest(&self.minus_half),
+            strain_rate: near / all,
+        }
+    }
 }
 
 /// Keeps the last [`DEPTH`] + 1 frames and measures each nucleation against them.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct Precursors {
     past: VecDeque<Past>,
+    rng: ChaCha8Rng,
+    /// Per nucleation and frame before it, the measures about the nucleation centroid.
     pub rows: Vec<Precursor>,
+    /// The same about each of the [`CHANCE_SITES`] random sites of the same frames, with the
+    /// nucleation's hole and frames before.
+    pub chance: Vec<Precursor>,
+}
+
+impl Default for Precursors {
+    fn default() -> Self {
+        Precursors {
+            past: VecDeque::new(),
+            rng: ChaCha8Rng::seed_from_u64(CHANCE_SEED),
+            rows: Vec::new(),
+            chance: Vec::new(),
+        }
+    }
 }
 
 impl Precursors {
@@ -48,33 +112,35 @@ impl Precursors {
         now.spiral_cores.clear();
         now.spiral_cores.extend(a.spiral_cores().map(|p| (p.x, p.y)));
         now.plus_half.clear();
-        now.plus_half.extend(a.defects.iter().filter(|d| d.twice_charge > 0).map(|d| (d.x, d.y)));
+        now.plus_half.extend(a.defects.iter().filter(|d| d.twice_charge > 0).map(|d| (d.x, d.y, d.orientation)));
+        now.minus_half.clear();
+        now.minus_half.extend(a.defects.iter().filter(|d| d.twice_charge < 0).map(|d| (d.x, d.y)));
         now.strain_rate.clone_from(&a.strain_rate);
-        self.past.push_front(now);
         let (l, r) = (a.l, a.radius);
+        let lf = l as f64;
+        now.chance.clear();
+        for _ in 0..CHANCE_SITES {
+            let x = uniform(&mut self.rng) * lf;
+            let y = uniform(&mut self.rng) * lf;
+            now.chance.push((x, y));
+        }
+        self.past.push_front(now);
         for h in tracker.nucleated_holes() {
             let &(_, _, cx, cy) = &tracker.holes[h].history[0];
+            let id = tracker.holes[h].id;
             for (k, past) in self.past.iter().enumerate() {
-                let mut d: Vec<f64> =
-                    past.plus_half.iter().map(|&(x, y)| periodic_distance(x, y, cx, cy, l) / r).collect();
-                d.sort_by(f64::total_cmp);
-                let spiral = past
-                    .spiral_cores
-                    .iter()
-                    .map(|&(x, y)| periodic_distance(x, y, cx, cy, l) / r)
-                    .min_by(f64::total_cmp);
-                let near = max_within(&past.strain_rate, l, cx, cy, 0.5 * r);
-                let all = past.strain_rate.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                self.rows.push(Precursor {
-                    hole: tracker.holes[h].id,
-                    frames_before: k,
-                    spiral_core: spiral,
-                    plus_half: [d.first().copied(), d.get(1).copied()],
-                    strain_rate: near / all,
-                });
+                self.rows.push(past.measure(id, k, cx, cy, l, r));
+                for &(x, y) in &past.chance {
+                    self.chance.push(past.measure(id, k, x, y, l, r));
+                }
             }
         }
     }
+}
+
+/// A uniform number in [0, 1) from 53 random bits: the same on every platform.
+fn uniform(rng: &mut ChaCha8Rng) -> f64 {
+    (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
 /// The largest value of `f` at sites within `radius` of (cx, cy) on the periodic box.

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use super::files::{check_frame, read_frame, Frame, RunFrames};
 use super::plots::{self, Background};
+use crate::analysis::alignment::{boundary_sites, tangential_angles, AWAY_RADII, BORDER_RADII};
 use crate::analysis::correlations::correlation_length;
 use crate::analysis::holes::HoleTracker;
 use crate::analysis::nucleation::HoleProbability;
@@ -42,6 +43,10 @@ pub struct RunAnalysis {
     pub frames: Vec<FrameRecord>,
     pub hole_probability: HoleProbability,
     pub precursors: Precursors,
+    /// Tangential alignment at holes ([`crate::analysis::alignment`]): per frame with a hole
+    /// open, (step, angles of the cells bordering a hole, angles of the cells away from holes).
+    pub alignment: Vec<(u64, Vec<f64>, Vec<f64>)>,
+    boundary: Vec<(f64, f64)>,
 }
 
 impl RunAnalysis {
@@ -52,6 +57,8 @@ impl RunAnalysis {
             frames: Vec::new(),
             hole_probability: HoleProbability::default(),
             precursors: Precursors::default(),
+            alignment: Vec::new(),
+            boundary: Vec::new(),
         }
     }
 
@@ -72,6 +79,21 @@ impl RunAnalysis {
         self.tracker.update(&a.voids, time);
         self.hole_probability.push(&a.strain_rate, &a.voids, &self.tracker, a.radius);
         self.precursors.push(a, &self.tracker);
+        boundary_sites(&a.voids.labels, &self.tracker.open_regions(), a.l, &mut self.boundary);
+        if !self.boundary.is_empty() {
+            let (mut near, mut away) = (Vec::new(), Vec::new());
+            let r = a.radius;
+            tangential_angles(
+                &a.cell_axes,
+                &self.boundary,
+                a.l,
+                BORDER_RADII * r,
+                AWAY_RADII * r,
+                &mut near,
+                &mut away,
+            );
+            self.alignment.push((step, near, away));
+        }
         let mut points: Vec<(&'static str, f64, f64, f64)> = a
             .defects
             .iter()
@@ -177,25 +199,44 @@ impl RunAnalysis {
             let hi = lo + crate::analysis::nucleation::STRAIN_RATE_BIN;
             let _ = writeln!(probability, "{lo:.6},{hi:.6},{n},{h},{p:.6e}");
         }
-        let mut precursors = String::from(
-            "hole,frames_before,spiral_core_distance_over_r,plus_half_distance_over_r,\
-             second_plus_half_distance_over_r,max_strain_rate_within_r_half_over_max\n",
-        );
-        for p in &self.precursors.rows {
-            let _ = writeln!(
-                precursors,
-                "{},{},{},{},{},{:.6}",
-                p.hole,
-                p.frames_before,
-                opt(p.spiral_core),
-                opt(p.plus_half[0]),
-                opt(p.plus_half[1]),
-                p.strain_rate
+        let precursor_table = |rows: &[crate::analysis::precursors::Precursor]| {
+            let mut t = String::from(
+                "hole,frames_before,spiral_core_distance_over_r,plus_half_distance_over_r,\
+                 second_plus_half_distance_over_r,max_strain_rate_within_r_half_over_max,\
+                 plus_half_pair_angle,minus_half_distance_over_r\n",
             );
+            for p in rows {
+                let _ = writeln!(
+                    t,
+                    "{},{},{},{},{},{:.6},{},{}",
+                    p.hole,
+                    p.frames_before,
+                    opt(p.spiral_core),
+                    opt(p.plus_half[0]),
+                    opt(p.plus_half[1]),
+                    p.strain_rate,
+                    opt(p.plus_half_angle),
+                    opt(p.minus_half)
+                );
+            }
+            t
+        };
+        let precursors = precursor_table(&self.precursors.rows);
+        let chance = precursor_table(&self.precursors.chance);
+        let mut alignment = String::from("step,cells,where,mean_angle_to_tangent\n");
+        for (step, near, away) in &self.alignment {
+            for (kind, v) in [("bordering_a_hole", near), ("away_from_holes", away)] {
+                if !v.is_empty() {
+                    let m = v.iter().sum::<f64>() / v.len() as f64;
+                    let _ = writeln!(alignment, "{step},{},{kind},{m:.6}", v.len());
+                }
+            }
         }
         vec![
             ("frames.csv", frames),
             ("hole_precursors.csv", precursors),
+            ("hole_precursors_chance.csv", chance),
+            ("hole_alignment.csv", alignment),
             ("hole_probability.csv", probability),
             ("holes.csv", holes),
             ("hole_areas.csv", areas),
