@@ -5,6 +5,7 @@ mod common;
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
+use monolayer::analysis::alignment::{boundary_sites, tangential_angles, AWAY_RADII, BORDER_RADII};
 use monolayer::analysis::correlations::{correlation_length, Correlator};
 use monolayer::analysis::defects::Defect;
 use monolayer::analysis::defects::DefectFinder;
@@ -15,7 +16,9 @@ use monolayer::analysis::precursors::{Precursor, Precursors, CHANCE_SITES};
 use monolayer::analysis::spirals::PlusOne;
 use monolayer::analysis::spirals::SpiralFinder;
 use monolayer::analysis::Analysis;
+use monolayer::model::lattice::Patch;
 use monolayer::Params;
+use num_complex::Complex64 as C64;
 
 /// A deterministic pseudo-random number in [−1, 1) (no RNG crate needed for test fields).
 fn noise(k: usize, seed: u64) -> f64 {
@@ -402,6 +405,69 @@ fn antiparallel_plus_half_pair_at_a_nucleation() {
     assert!((before.plus_half_angle.unwrap() - std::f64::consts::PI).abs() < 1e-12, "{before:?}");
     assert!((before.plus_half[0].unwrap() - 5.0 / r).abs() < 1e-9);
     assert!(pre.chance.iter().all(|c| (c.plus_half_angle.unwrap() - std::f64::consts::PI).abs() < 1e-12));
+}
+
+/// A smooth ellipse (tanh interface of width 2) with semi-axes (a, b), its long axis at angle
+/// θ, centred at (cx, cy): a cell's (patch, φ on the padded patch).
+fn elliptic_cell(cx: f64, cy: f64, a: f64, b: f64, theta: f64) -> (Patch, Vec<f64>) {
+    let w = 2 * (a.ceil() as usize + 4);
+    let (x0, y0) = (cx.round() as usize - w / 2, cy.round() as usize - w / 2);
+    let patch = Patch { x0, y0, w, h: w };
+    let mut phi = vec![0.0; patch.padded_len()];
+    for j in 0..w {
+        for i in 0..w {
+            let (dx, dy) = ((x0 + i) as f64 - cx, (y0 + j) as f64 - cy);
+            let (u, v) = (dx * theta.cos() + dy * theta.sin(), -dx * theta.sin() + dy * theta.cos());
+            let r = (u * u / (a * a) + v * v / (b * b)).sqrt().max(1e-9);
+            let grad = ((u / (a * a)).powi(2) + (v / (b * b)).powi(2)).sqrt() / r;
+            let d = (r - 1.0) / grad.max(1e-9);
+            phi[patch.idx(i, j)] = 0.5 * (1.0 - (d / 2.0).tanh());
+        }
+    }
+    (patch, phi)
+}
+
+/// Tangential alignment on a synthetic hole: elliptic cells about a round hole, long axes along
+/// the boundary, measured from their φ (centroid and shape tensor) give angles near 0 to the
+/// tangent; the same cells turned radial give angles near π/2.
+#[test]
+fn cells_tangential_to_a_hole_measure_zero_and_radial_ones_a_right_angle() {
+    let p = Params::default();
+    let l = p.box_size;
+    let (hx, hy, hr) = (70.0, 70.0, 10.0);
+    let labels: Vec<u32> =
+        (0..l * l).map(|k| if ((k % l) as f64 - hx).hypot((k / l) as f64 - hy) <= hr { 0 } else { u32::MAX }).collect();
+    let mut boundary = Vec::new();
+    boundary_sites(&labels, &[true], l, &mut boundary);
+    let velocity = vec![C64::new(0.0, 0.0); l * l];
+    for (turn, expect_tangential) in [(FRAC_PI_2, true), (0.0, false)] {
+        let cells: Vec<(Patch, Vec<f64>)> = (0..12)
+            .map(|k| {
+                let t = k as f64 * PI / 6.0;
+                elliptic_cell(hx + 20.0 * t.cos(), hy + 20.0 * t.sin(), 9.0, 4.0, t + turn)
+            })
+            .collect();
+        let mut a = Analysis::new(&p);
+        a.measure_cells(cells.iter().map(|(patch, phi)| (*patch, phi.as_slice(), [0.0, 0.0])), &velocity);
+        assert_eq!(a.cell_axes.len(), 12);
+        let (mut near, mut away) = (Vec::new(), Vec::new());
+        tangential_angles(
+            &a.cell_axes,
+            &boundary,
+            l,
+            BORDER_RADII * p.radius,
+            AWAY_RADII * p.radius,
+            &mut near,
+            &mut away,
+        );
+        assert_eq!((near.len(), away.len()), (12, 0), "{:?}", a.cell_axes);
+        if expect_tangential {
+            // The nearest boundary site is a lattice site: its normal is off by up to ~0.13 rad.
+            assert!(near.iter().all(|&x| x < 0.2), "tangential cells: {near:?}");
+        } else {
+            assert!(near.iter().all(|&x| x > FRAC_PI_2 - 0.2), "radial cells: {near:?}");
+        }
+    }
 }
 
 /// The O(L²) sliding window equals the brute-force (2h+1)² window sum, periodic.
