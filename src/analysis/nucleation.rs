@@ -69,3 +69,152 @@ impl HoleProbability {
         self.bins.iter().map(|(&k, &(n, h))| (k as f64 * STRAIN_RATE_BIN, n, h, h as f64 / n as f64))
     }
 }
+
+/// An exponential P = A·exp(b ε̇) fitted to the bins, with standard errors.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExponentialFit {
+    pub ln_a: f64,
+    /// The coefficient of the exponential (the paper's Fig. 2 inset).
+    pub b: f64,
+    pub se_ln_a: f64,
+    pub se_b: f64,
+}
+
+/// Least squares on ln P over the bins with a hole site, weighted by N_hole (the inverse of the
+/// variance of ln P̂ ≈ 1/N_hole for small P), over (ε̇, N_ε̇, N_hole,ε̇) bins. The standard
+/// errors are those of the weighted fit with the variances known (1/N_hole); None with fewer
+/// than two bins with holes at two distinct ε̇.
+pub fn least_squares_fit(bins: &[(f64, u64, u64)]) -> Option<ExponentialFit> {
+    let pts: Vec<(f64, f64, f64)> = bins
+        .iter()
+        .filter(|b| b.1 > 0 && b.2 > 0)
+        .map(|&(x, n, h)| (x, (h as f64 / n as f64).ln(), h as f64))
+        .collect();
+    if pts.len() < 2 {
+        return None;
+    }
+    let sw: f64 = pts.iter().map(|p| p.2).sum();
+    let mx = pts.iter().map(|p| p.2 * p.0).sum::<f64>() / sw;
+    let my = pts.iter().map(|p| p.2 * p.1).sum::<f64>() / sw;
+    let sxx: f64 = pts.iter().map(|p| p.2 * (p.0 - mx) * (p.0 - mx)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let sxy: f64 = pts.iter().map(|p| p.2 * (p.0 - mx) * (p.1 - my)).sum();
+    let b = sxy / sxx;
+    Some(ExponentialFit { ln_a: my - b * mx, b, se_ln_a: (1.0 / sw + mx * mx / sxx).sqrt(), se_b: (1.0 / sxx).sqrt() })
+}
+
+/// Binomial maximum likelihood over every bin: N_hole,ε̇ of N_ε̇ sites opened, each with
+/// probability P(ε̇) = A·exp(b ε̇) (< 1), by Newton's method from the least-squares fit (or a
+/// flat P), with step halving; the standard errors from the inverse of the observed information.
+/// Bins without holes count (they pull P down), unlike in [`least_squares_fit`]. None without a
+/// hole site, without two distinct ε̇, or if it does not converge.
+pub fn binomial_fit(bins: &[(f64, u64, u64)]) -> Option<ExponentialFit> {
+    let total_h: u64 = bins.iter().map(|b| b.2).sum();
+    let total_n: u64 = bins.iter().map(|b| b.1).sum();
+    if total_h == 0 || bins.iter().filter(|b| b.1 > 0).count() < 2 {
+        return None;
+    }
+    // ε̇ centred on its site-weighted mean, for a well-conditioned Newton step.
+    let x0 = bins.iter().map(|b| b.0 * b.1 as f64).sum::<f64>() / total_n as f64;
+    let loglik = |a: f64, b: f64| -> Option<f64> {
+        let mut l = 0.0;
+        for &(x, n, h) in bins {
+            let eta = a + b * (x - x0);
+            let p = eta.exp();
+            if p >= 1.0 {
+                return None;
+            }
+            l += h as f64 * eta + (n - h) as f64 * (-p).ln_1p();
+        }
+        Some(l)
+    };
+    let (mut a, mut b) = match least_squares_fit(bins) {
+        Some(f) if loglik(f.ln_a + f.b * x0, f.b).is_some() => (f.ln_a + f.b * x0, f.b),
+        _ => ((total_h as f64 / total_n as f64).ln(), 0.0),
+    };
+    let mut l = loglik(a, b)?;
+    let info = |a: f64, b: f64| {
+        let (mut ga, mut gb, mut haa, mut hab, mut hbb) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(x, n, h) in bins {
+            let u = x - x0;
+            let p = (a + b * u).exp();
+            let g = (h as f64 - n as f64 * p) / (1.0 - p);
+            let w = (n - h) as f64 * p / ((1.0 - p) * (1.0 - p));
+            ga += g;
+            gb += g * u;
+            haa += w;
+            hab += w * u;
+            hbb += w * u * u;
+        }
+        (ga, gb, haa, hab, hbb)
+    };
+    for _ in 0..200 {
+        let (ga, gb, haa, hab, hbb) = info(a, b);
+        let det = haa * hbb - hab * hab;
+        if det <= 0.0 || !det.is_finite() {
+            return None;
+        }
+        let (da, db) = ((hbb * ga - hab * gb) / det, (haa * gb - hab * ga) / det);
+        let mut step = 1.0;
+        let mut moved = false;
+        while step > 1e-10 {
+            if let Some(l1) = loglik(a + step * da, b + step * db) {
+                if l1 >= l - 1e-12 * l.abs() {
+                    (a, b, l) = (a + step * da, b + step * db, l1);
+                    moved = true;
+                    break;
+                }
+            }
+            step *= 0.5;
+        }
+        let small = (step * da).abs() < 1e-12 * (1.0 + a.abs()) && (step * db).abs() < 1e-10 * (1.0 + b.abs());
+        if !moved || small {
+            let (_, _, haa, hab, hbb) = info(a, b);
+            let det = haa * hbb - hab * hab;
+            if det <= 0.0 {
+                return None;
+            }
+            // Var of (α, b) with α = ln A + b x0: ln A = α − b x0.
+            let (vaa, vab, vbb) = (hbb / det, -hab / det, haa / det);
+            let var_ln_a = vaa - 2.0 * x0 * vab + x0 * x0 * vbb;
+            return Some(ExponentialFit { ln_a: a - b * x0, b, se_ln_a: var_ln_a.max(0.0).sqrt(), se_b: vbb.sqrt() });
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Bins drawn exactly from P = 0.001·exp(2000 ε̇) with many sites: both fits recover it.
+    #[test]
+    fn both_fits_recover_an_exponential() {
+        let bins: Vec<(f64, u64, u64)> = (0..10)
+            .map(|k| {
+                let x = k as f64 * STRAIN_RATE_BIN;
+                let n = 10_000_000u64;
+                let p = 0.001 * (2000.0 * x).exp();
+                (x, n, (p * n as f64).round() as u64)
+            })
+            .collect();
+        for f in [least_squares_fit(&bins).unwrap(), binomial_fit(&bins).unwrap()] {
+            assert!((f.b - 2000.0).abs() < 5.0 && (f.ln_a - 0.001f64.ln()).abs() < 0.01, "{f:?}");
+            assert!(f.se_b > 0.0 && f.se_b < 50.0 && f.se_ln_a > 0.0, "{f:?}");
+        }
+    }
+
+    /// Few hole sites: the binomial fit counts the bins without holes, least squares cannot.
+    #[test]
+    fn the_binomial_fit_counts_bins_without_holes() {
+        let bins = [(0.0, 1000, 1), (0.001, 1000, 0), (0.002, 1000, 10), (0.003, 1000, 0)];
+        let ls = least_squares_fit(&bins).unwrap();
+        let ml = binomial_fit(&bins).unwrap();
+        assert!(ls.b > ml.b, "empty bins pull the binomial coefficient down: {ls:?} {ml:?}");
+        assert!(ml.se_b.is_finite() && ml.se_b > 0.0);
+        assert_eq!(least_squares_fit(&bins[..2]), None);
+        assert_eq!(binomial_fit(&[(0.0, 10, 0), (0.1, 10, 0)]), None);
+    }
+}

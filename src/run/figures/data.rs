@@ -322,34 +322,20 @@ pub fn fmt(x: f64) -> String {
     }
 }
 
-/// A weighted least-squares line through (x, ln y) with weights w: (ln A, b) of y = A e^{b x}.
-pub fn exponential_fit(points: &[(f64, f64, f64)]) -> Option<(f64, f64)> {
-    let pts: Vec<&(f64, f64, f64)> = points.iter().filter(|p| p.1 > 0.0 && p.2 > 0.0).collect();
-    if pts.len() < 2 {
-        return None;
-    }
-    let sw: f64 = pts.iter().map(|p| p.2).sum();
-    let mx = pts.iter().map(|p| p.2 * p.0).sum::<f64>() / sw;
-    let my = pts.iter().map(|p| p.2 * p.1.ln()).sum::<f64>() / sw;
-    let sxx: f64 = pts.iter().map(|p| p.2 * (p.0 - mx) * (p.0 - mx)).sum();
-    if sxx <= 0.0 {
-        return None;
-    }
-    let sxy: f64 = pts.iter().map(|p| p.2 * (p.0 - mx) * (p.1.ln() - my)).sum();
-    let b = sxy / sxx;
-    Some((my - b * mx, b))
-}
-
 /// Fig. 2: P(hole | ε̇) per (χ, ζ), pooled over runs, with exponential fits; inset: the fitted
 /// coefficient against χ^0.1/ζ.
 fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
-    use crate::analysis::nucleation::STRAIN_RATE_BIN;
+    use crate::analysis::nucleation::{binomial_fit, least_squares_fit, STRAIN_RATE_BIN};
     let mut text =
         String::from("chi,zeta,strain_rate_low,strain_rate_high,sites,sites_opening_into_a_new_hole,probability\n");
-    let mut fits = String::from("chi,zeta,chi_0.1_over_zeta,bins_with_holes,amplitude,coefficient\n");
+    let mut fits = String::from(
+        "chi,zeta,chi_0.1_over_zeta,bins_with_holes,hole_sites,\
+         binomial_amplitude,binomial_coefficient,binomial_coefficient_se,\
+         least_squares_amplitude,least_squares_coefficient,least_squares_coefficient_se\n",
+    );
     let mut panel = Panel::new("Fig. 2: P(hole | ε̇)", "strain rate ε̇", "P(hole | ε̇)");
     panel.log_y = true;
-    let mut inset = Panel::new("", "χ^0.1 / ζ", "coefficient");
+    let mut inset = Panel::new("", "χ^0.1 / ζ", "coefficient (binomial ML)");
     let mut inset_series = Series::new("", 0);
     for (ci, chi) in CHI_FIG2.into_iter().enumerate() {
         for (zi, zeta) in ZETAS.into_iter().enumerate() {
@@ -366,11 +352,13 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
                 }
             }
             let mut pts = Vec::new();
+            let mut counts = Vec::new();
             for (&k, &(n, h)) in &bins {
                 let lo = k as f64 * STRAIN_RATE_BIN;
                 let p = h as f64 / n as f64;
                 let _ = writeln!(text, "{chi},{zeta},{lo:.6},{:.6},{n},{h},{p:.6e}", lo + STRAIN_RATE_BIN);
                 pts.push((lo, p, h as f64));
+                counts.push((lo, n, h));
             }
             // χ = 0.01 empty, 0.005 faint, 0.001 filled, as in the paper; a colour per ζ.
             let marker = [Marker::Empty, Marker::Faint, Marker::Filled][ci];
@@ -382,35 +370,36 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
             panel.series.push(s);
             let x = chi.powf(0.1) / zeta;
             let holes = pts.iter().filter(|p| p.2 > 0.0).count();
-            match exponential_fit(&pts) {
-                Some((ln_a, b)) => {
-                    let _ = writeln!(fits, "{chi},{zeta},{x:.6},{holes},{:.6e},{b:.6e}", ln_a.exp());
-                    let xs: Vec<f64> = pts.iter().filter(|p| p.1 > 0.0).map(|p| p.0).collect();
-                    let (x0, x1) =
-                        (xs.iter().copied().fold(f64::MAX, f64::min), xs.iter().copied().fold(f64::MIN, f64::max));
-                    let mut line = Series::new("", zi);
-                    line.marker = Marker::None;
-                    line.line = true;
-                    for t in 0..=20 {
-                        let e = x0 + (x1 - x0) * t as f64 / 20.0;
-                        line.push(e, (ln_a + b * e).exp(), 0.0);
-                    }
-                    panel.series.push(line);
-                    inset_series.push(x, b, 0.0);
-                    made.measured.push(format!(
-                        "χ = {chi}, ζ = {zeta} ({} runs): P = {} · exp({} ε̇) over {holes} bins with holes",
-                        sel.len(),
-                        fmt(ln_a.exp()),
-                        fmt(b)
-                    ));
+            let hole_sites: u64 = counts.iter().map(|c| c.2).sum();
+            let ml = binomial_fit(&counts);
+            let ls = least_squares_fit(&counts);
+            let cols = |f: Option<crate::analysis::nucleation::ExponentialFit>| {
+                f.map(|f| format!("{:.6e},{:.6e},{:.6e}", f.ln_a.exp(), f.b, f.se_b)).unwrap_or_else(|| ",,".into())
+            };
+            let _ = writeln!(fits, "{chi},{zeta},{x:.6},{holes},{hole_sites},{},{}", cols(ml), cols(ls));
+            let shown = |f: Option<crate::analysis::nucleation::ExponentialFit>| {
+                f.map(|f| format!("P = {} · exp(({} ± {}) ε̇)", fmt(f.ln_a.exp()), fmt(f.b), fmt(f.se_b)))
+                    .unwrap_or_else(|| "too few bins with holes".into())
+            };
+            made.measured.push(format!(
+                "χ = {chi}, ζ = {zeta} ({} runs, {hole_sites} hole sites in {holes} bins): binomial ML {}; least squares on ln P {}",
+                sel.len(),
+                shown(ml),
+                shown(ls)
+            ));
+            if let Some(f) = ml {
+                let xs: Vec<f64> = pts.iter().filter(|p| p.1 > 0.0).map(|p| p.0).collect();
+                let (x0, x1) =
+                    (xs.iter().copied().fold(f64::MAX, f64::min), xs.iter().copied().fold(f64::MIN, f64::max));
+                let mut line = Series::new("", zi);
+                line.marker = Marker::None;
+                line.line = true;
+                for t in 0..=20 {
+                    let e = x0 + (x1 - x0) * t as f64 / 20.0;
+                    line.push(e, (f.ln_a + f.b * e).exp(), 0.0);
                 }
-                None => {
-                    let _ = writeln!(fits, "{chi},{zeta},{x:.6},{holes},,");
-                    made.measured.push(format!(
-                        "χ = {chi}, ζ = {zeta} ({} runs): {holes} bins with holes, too few for a fit",
-                        sel.len()
-                    ));
-                }
+                panel.series.push(line);
+                inset_series.push(x, f.b, f.se_b);
             }
         }
     }
@@ -704,14 +693,5 @@ mod tests {
         let s = survival(vec![(3.0, true), (1.0, true), (2.0, false)]);
         assert_eq!(s.len(), 2);
         assert!((s[0].3 - 2.0 / 3.0).abs() < 1e-12 && s[1].3 == 0.0, "{s:?}");
-    }
-
-    #[test]
-    fn exponential_fit_recovers_its_exponential() {
-        let pts: Vec<(f64, f64, f64)> =
-            (0..8).map(|i| (i as f64 * 0.1, 0.02 * (30.0 * i as f64 * 0.1).exp(), 5.0)).collect();
-        let (ln_a, b) = exponential_fit(&pts).unwrap();
-        assert!((ln_a.exp() - 0.02).abs() < 1e-9 && (b - 30.0).abs() < 1e-9);
-        assert!(exponential_fit(&pts[..1]).is_none());
     }
 }

@@ -29,7 +29,7 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
         Figure::Fig2 => (
             "Fig. 2: P(hole | ε̇) with exponential fits; inset: the coefficients against χ^0.1/ζ",
             "“P(hole|ε̇), for different activities and substrate frictions, is well fitted by an exponential … the coefficient of the exponential decreases with activity and increases with substrate friction … plotted against χ^0.1/ζ, collapsing the points onto the same curve.” Empty symbols χ = 0.01, faint χ = 0.005, full χ = 0.001.",
-            "χ ∈ {0.01, 0.005, 0.001} × ζ ∈ {0.3, 0.4, 0.5} (Fig. 2 names no ζ values: Fig. 3c's), bins of Δε̇ = 0.000125 pooled over the runs; once a hole has grown above half a cell (πR²/2), no frame is counted until it (its family) has closed. Fit P = A·exp(b ε̇) by least squares on ln P weighted by the sites that opened; the coefficient is b.".into(),
+            "χ ∈ {0.01, 0.005, 0.001} × ζ ∈ {0.3, 0.4, 0.5} (Fig. 2 names no ζ values: Fig. 3c's), bins of Δε̇ = 0.000125 pooled over the runs; once a hole has grown above half a cell (πR²/2), no frame is counted until it (its family) has closed. Two fits of P = A·exp(b ε̇), each with its standard error: binomial maximum likelihood over every bin (N_hole,ε̇ of N_ε̇ sites opened with probability P; bins without holes count; errors from the observed information), drawn as the lines and plotted in the inset as b ± se; and least squares on ln P over the bins with holes, weighted by N_hole (≈ 1/var ln P̂), in the table beside it.".into(),
         ),
         Figure::Fig3ab => (
             "Fig. 3a–b: largest hole area and number of holes against ζ",
