@@ -30,6 +30,8 @@ pub struct RunData {
     /// The run's holes, counted as the regime criterion counts them (families).
     pub holes: Vec<CountedHole>,
     pub precursors: Vec<Precursor>,
+    /// The precursors' chance baseline: random sites of the same frames.
+    pub chance: Vec<Precursor>,
     /// Strain-rate bin → (sites, sites opening into a new hole), Fig. 2.
     pub probability: BTreeMap<i64, (u64, u64)>,
     /// C_v(r), C_Q(r) of the last frame: the paper's Fig. S1 takes them after the whole run.
@@ -87,6 +89,7 @@ fn measure_run(dir: &Path) -> Result<RunData, String> {
         box_area: (p.box_size * p.box_size) as f64,
         holes: Vec::new(),
         precursors: Vec::new(),
+        chance: Vec::new(),
         probability: BTreeMap::new(),
         correlations: (Vec::new(), Vec::new()),
     };
@@ -101,6 +104,7 @@ fn measure_run(dir: &Path) -> Result<RunData, String> {
     data.active_time = last - first;
     data.holes = counted_holes(&ra.tracker.holes, last, HoleCounting::Families);
     data.precursors = ra.precursors.rows.clone();
+    data.chance = ra.precursors.chance.clone();
     data.probability = ra.hole_probability.bins.clone();
     if let Some(f) = ra.frames.last() {
         data.correlations = (f.velocity_correlation.clone(), f.nematic_correlation.clone());
@@ -225,7 +229,7 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
     };
     let mut text = String::from("chi,frames_before,holes");
     for (name, _, _) in &columns {
-        let _ = write!(text, ",{name}_samples,{name}_mean,{name}_sem");
+        let _ = write!(text, ",{name}_samples,{name}_mean,{name}_sem,{name}_chance_mean,{name}_chance_sem");
     }
     text.push('\n');
     let mut panels: Vec<Panel> =
@@ -240,6 +244,10 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
         for (c, (_, _, column)) in columns.iter().enumerate() {
             let mut series = Series::new(format!("χ = {chi} ({holes} holes)"), k);
             series.line = true;
+            // Chance: the same measure about random sites of the same frames.
+            let mut chance = Series::new(format!("χ = {chi}, chance"), k);
+            chance.line = true;
+            chance.marker = Marker::Faint;
             for before in 0..=DEPTH {
                 let v: Vec<f64> = sel
                     .iter()
@@ -248,10 +256,20 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
                     .filter_map(column)
                     .collect();
                 let (m, e) = mean_sem(&v);
+                let w: Vec<f64> = sel
+                    .iter()
+                    .flat_map(|r| r.chance.iter())
+                    .filter(|p| p.frames_before == before)
+                    .filter_map(column)
+                    .collect();
+                let (mc, ec) = mean_sem(&w);
                 if c == 0 {
                     line.push(format!("{chi},{before},{holes}"));
                 }
-                let _ = write!(line[before], ",{},{},{}", v.len(), num(m), num(e));
+                let _ = write!(line[before], ",{},{},{},{},{}", v.len(), num(m), num(e), num(mc), num(ec));
+                if mc.is_finite() {
+                    chance.push(0.0 - before as f64, mc, ec);
+                }
                 // The paper draws a χ without holes at zero.
                 if holes == 0 {
                     series.push(0.0 - before as f64, 0.0, 0.0);
@@ -263,6 +281,9 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
                 series.marker = Marker::Empty;
             }
             panels[c].series.push(series);
+            if !chance.points.is_empty() {
+                panels[c].series.push(chance);
+            }
         }
         for l in line {
             text += &l;
@@ -285,7 +306,21 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
                     .collect();
                 let (m0, e0) = mean_sem(&v);
                 let (m1, _) = mean_sem(&far);
-                format!("{desc}: {} ± {} at nucleation, {} {DEPTH} frames before", fmt(m0), fmt(e0), fmt(m1))
+                let base: Vec<f64> = sel
+                    .iter()
+                    .flat_map(|r| r.chance.iter())
+                    .filter(|p| p.frames_before <= DEPTH)
+                    .filter_map(column)
+                    .collect();
+                let (mb, eb) = mean_sem(&base);
+                format!(
+                    "{desc}: {} ± {} at nucleation, {} {DEPTH} frames before; chance (random sites of the same frames) {} ± {}",
+                    fmt(m0),
+                    fmt(e0),
+                    fmt(m1),
+                    fmt(mb),
+                    fmt(eb)
+                )
             })
             .collect();
         made.measured.push(if holes == 0 {

@@ -19,12 +19,12 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
         Figure::Fig1c => (
             "Fig. 1c: distance from the hole to the nearest spiral core before nucleation",
             "“just before the hole forms, both the peak strain in the monolayer and the nearest spiral core localise near the nucleation point (within approximately one cell diameter).” Points at zero distance are simulations without holes (χ = 0.1, 0.05); at χ = 0.01 few holes form.",
-            format!("χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta} (the paper states no ζ: the default). Mean ± standard error over every hole of every run at that χ; x is minus the number of frames before the hole's first frame."),
+            format!("χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta} (the paper states no ζ: the default). Mean ± standard error over every hole of every run at that χ; x is minus the number of frames before the hole's first frame. The faint line beside each curve is chance: the same measure about 16 random sites (seeded ChaCha8) of each of the same frames."),
         ),
         Figure::Fig1d => (
             "Fig. 1d: the largest strain rate near the nucleation site before nucleation",
             "“Normalised maximum strain rate in an area of radius R/2 around the location of hole nucleation … The normalization is per time-frame”; the peak strain localises at the nucleation point just before the hole forms.",
-            format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}; max ε̇ within R/2 of the hole's nucleation centroid over the frame's max ε̇."),
+            format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}; max ε̇ within R/2 of the hole's nucleation centroid over the frame's max ε̇. The faint line beside each curve is chance: the same measure about 16 random sites (seeded ChaCha8) of each of the same frames."),
         ),
         Figure::Fig2 => (
             "Fig. 2: P(hole | ε̇) with exponential fits; inset: the coefficients against χ^0.1/ζ",
@@ -54,7 +54,7 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
         Figure::FigS2 => (
             "Fig. S2: distances to the two nearest +½ defects before nucleation",
             "“While the hole does not always nucleate precisely between the defects, it remains consistently closer to two defects, with both defects typically located within approximately two cell diameters.” Points at zero distance are simulations without holes (χ = 0.1, 0.05).",
-            format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}; distances over R."),
+            format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}; distances over R. The faint line beside each curve is chance: the same measure about 16 random sites (seeded ChaCha8) of each of the same frames."),
         ),
         Figure::FigS3 => (
             "Fig. S3: largest hole area and number of holes against γ",
