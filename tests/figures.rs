@@ -38,13 +38,13 @@ fn the_paper_plan_has_the_papers_counts_and_shares_runs() {
     assert!(plan
         .runs_of(Figure::FigS3)
         .all(|(j, _)| j.params.active_steps == 100_000 && j.params.relax_steps == 10_000));
-    // Every run once: the χ = 0.001, ζ = 0.3, seed 1 run serves 1c, 1d, 2, 3ab, 3c, 3d, S2, S3.
+    // Every run once: the χ = 0.001, ζ = 0.3, seed 1 run serves 1c, 1d, 2, 3ab, 3c, 3d, S2, S3, mechanism.
     let mut names: Vec<&str> = plan.jobs.iter().map(|j| j.name.as_str()).collect();
     names.sort();
     names.dedup();
     assert_eq!(names.len(), plan.jobs.len());
     let k = plan.jobs.iter().position(|j| j.name == "chi0.001_zeta0.3_gamma0.06_L140_seed1").unwrap();
-    assert_eq!(plan.points[k].1.len(), 8, "{:?}", plan.points[k].1);
+    assert_eq!(plan.points[k].1.len(), 9, "{:?}", plan.points[k].1);
     // 9 points × 100 (Figs. 2, 3c) + 6 × 10 (the rest of 3d) + 3 γ × 10 (S3) + 4 × 3 (S1).
     assert_eq!(plan.jobs.len(), 900 + 60 + 30 + 12);
     // The dry limit of Fig. S1.

@@ -122,10 +122,13 @@ pub enum Figure {
     FigS1,
     FigS2,
     FigS3,
+    /// The mechanism's claims no figure of the paper measures (issue 23): antiparallel +½
+    /// pairs, no holes at −½ defects, cells tangential to a hole's edge.
+    Mechanism,
 }
 
 impl Figure {
-    pub const ALL: [Figure; 9] = [
+    pub const ALL: [Figure; 10] = [
         Figure::Fig1c,
         Figure::Fig1d,
         Figure::Fig2,
@@ -135,6 +138,7 @@ impl Figure {
         Figure::FigS1,
         Figure::FigS2,
         Figure::FigS3,
+        Figure::Mechanism,
     ];
 
     /// Its name on the command line and the stem of its files (`fig1c.png`, `fig1c.csv`).
@@ -149,6 +153,7 @@ impl Figure {
             Figure::FigS1 => "S1",
             Figure::FigS2 => "S2",
             Figure::FigS3 => "S3",
+            Figure::Mechanism => "mechanism",
         }
     }
 
@@ -166,11 +171,11 @@ impl Figure {
                 q => Figure::ALL.into_iter().find(|f| f.id().to_ascii_lowercase() == q),
             };
             out.insert(f.ok_or_else(|| {
-                format!("--only {part}: not a figure; the figures are 1c, 1d, 2, 3a, 3b (drawn together as 3ab), 3c, 3d, S1, S2, S3")
+                format!("--only {part}: not a figure; the figures are 1c, 1d, 2, 3a, 3b (drawn together as 3ab), 3c, 3d, S1, S2, S3, mechanism")
             })?);
         }
         if out.is_empty() {
-            return Err("--only: name at least one figure (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3)".into());
+            return Err("--only: name at least one figure (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3, mechanism)".into());
         }
         Ok(out.into_iter().collect())
     }
@@ -252,7 +257,7 @@ impl Plan {
             match f {
                 // The paper does not state ζ for Figs. 1c–d and S2: the base's (UNSTATED_ZETA
                 // unless `--set zeta=…`).
-                Figure::Fig1c | Figure::Fig1d | Figure::FigS2 => {
+                Figure::Fig1c | Figure::Fig1d | Figure::FigS2 | Figure::Mechanism => {
                     for chi in CHI_REGIMES {
                         want(f, Friction::Chi(chi), zeta0, gamma0, None, spec.few);
                     }

@@ -32,6 +32,10 @@ pub struct RunData {
     pub precursors: Vec<Precursor>,
     /// The precursors' chance baseline: random sites of the same frames.
     pub chance: Vec<Precursor>,
+    /// Tangential alignment ([`crate::analysis::alignment`]): every angle (radians) between a
+    /// cell's axis and the nearest hole boundary's tangent, over the frames with a hole open, for
+    /// the cells bordering a hole and the cells away from holes.
+    pub alignment: (Vec<f64>, Vec<f64>),
     /// Strain-rate bin → (sites, sites opening into a new hole), Fig. 2.
     pub probability: BTreeMap<i64, (u64, u64)>,
     /// C_v(r), C_Q(r) of the last frame: the paper's Fig. S1 takes them after the whole run.
@@ -90,6 +94,7 @@ fn measure_run(dir: &Path) -> Result<RunData, String> {
         holes: Vec::new(),
         precursors: Vec::new(),
         chance: Vec::new(),
+        alignment: (Vec::new(), Vec::new()),
         probability: BTreeMap::new(),
         correlations: (Vec::new(), Vec::new()),
     };
@@ -105,6 +110,10 @@ fn measure_run(dir: &Path) -> Result<RunData, String> {
     data.holes = counted_holes(&ra.tracker.holes, last, HoleCounting::Families);
     data.precursors = ra.precursors.rows.clone();
     data.chance = ra.precursors.chance.clone();
+    for (_, near, away) in &ra.alignment {
+        data.alignment.0.extend_from_slice(near);
+        data.alignment.1.extend_from_slice(away);
+    }
     data.probability = ra.hole_probability.bins.clone();
     if let Some(f) = ra.frames.last() {
         data.correlations = (f.velocity_correlation.clone(), f.nematic_correlation.clone());
@@ -193,7 +202,9 @@ pub fn figure(plan: &Plan, figure: Figure, runs: &[RunData], out: &Path) -> Resu
     let base = out.join(figure.stem());
     let mut made = Made { figure, files: Vec::new(), runs: seeds_note(plan, figure), measured: Vec::new() };
     match figure {
-        Figure::Fig1c | Figure::Fig1d | Figure::FigS2 => precursor_figure(plan, figure, runs, &base, &mut made)?,
+        Figure::Fig1c | Figure::Fig1d | Figure::FigS2 | Figure::Mechanism => {
+            precursor_figure(plan, figure, runs, &base, &mut made)?
+        }
         Figure::Fig2 => fig2(plan, runs, &base, &mut made)?,
         Figure::Fig3ab => holes_figure(plan, figure, runs, &base, &mut made)?,
         Figure::Fig3c => fig3c(plan, runs, &base, &mut made)?,
@@ -222,6 +233,12 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
         Figure::Fig1d => vec![("max_strain_rate_within_r_half_over_max", "max ε̇ within R/2 / max ε̇", |p| {
             Some(p.strain_rate).filter(|v| v.is_finite())
         })],
+        Figure::Mechanism => vec![
+            ("plus_half_pair_angle_degrees", "angle between the two nearest +½ orientations (°)", |p| {
+                p.plus_half_angle.map(f64::to_degrees)
+            }),
+            ("nearest_minus_half_distance_over_r", "distance to the nearest −½ defect / R", |p| p.minus_half),
+        ],
         _ => vec![
             ("nearest_plus_half_distance_over_r", "distance to the nearest +½ defect / R", |p| p.plus_half[0]),
             ("second_plus_half_distance_over_r", "distance to the second nearest +½ defect / R", |p| p.plus_half[1]),
@@ -332,6 +349,7 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
     let titles: &[&str] = match figure {
         Figure::Fig1c => &["Fig. 1c: nearest spiral core before a hole"],
         Figure::Fig1d => &["Fig. 1d: strain rate at the nucleation site"],
+        Figure::Mechanism => &["Antiparallel +½ pairs (180°: antiparallel)", "−½ defects near a nucleation"],
         _ => &["Fig. S2a: nearest +½ defect", "Fig. S2b: second nearest +½ defect"],
     };
     for (p, t) in panels.iter_mut().zip(titles) {
@@ -340,9 +358,62 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
         p.y_from_zero = true;
         p.x_range = Some((-(DEPTH as f64) - 0.5, 0.5));
     }
+    if figure == Figure::Mechanism {
+        panels.push(alignment_panel(plan, runs, base, made)?);
+    }
     csv(base, "", &text, made)?;
     made.files.extend(draw::panels(base, &panels, None)?);
     Ok(())
+}
+
+/// The mechanism's tangential alignment: per χ, the mean angle between a cell's elongation axis
+/// and the nearest hole boundary's tangent, for the cells bordering a hole and for the cells away
+/// from holes (45°: random axes), with its table.
+fn alignment_panel(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<Panel, String> {
+    use crate::analysis::alignment::{AWAY_RADII, BORDER_RADII};
+    let mut text = String::from("chi,where,cell_frames,mean_angle_degrees,sem_degrees\n");
+    let mut panel = Panel::new(
+        &format!("Cells at a hole's edge (0°: tangential, 45°: random; ζ = {})", plan.base.zeta),
+        "log10 χ",
+        "angle between the cell axis and the hole's tangent (°)",
+    );
+    panel.y_from_zero = true;
+    panel.hline = Some(45.0);
+    let mut near_s = Series::new(format!("cells within {BORDER_RADII} R of a hole"), 0);
+    let mut away_s = Series::new(format!("cells farther than {AWAY_RADII} R"), 1);
+    away_s.marker = Marker::Faint;
+    for chi in CHI_REGIMES {
+        let sel = select(plan, runs, Figure::Mechanism, |p| is_chi(p, chi));
+        if sel.is_empty() {
+            continue;
+        }
+        let deg = |v: &[f64]| v.iter().map(|a| a.to_degrees()).collect::<Vec<f64>>();
+        let near: Vec<f64> = sel.iter().flat_map(|r| deg(&r.alignment.0)).collect();
+        let away: Vec<f64> = sel.iter().flat_map(|r| deg(&r.alignment.1)).collect();
+        let (mn, en) = mean_sem(&near);
+        let (ma, ea) = mean_sem(&away);
+        let _ = writeln!(text, "{chi},bordering_a_hole,{},{},{}", near.len(), num(mn), num(en));
+        let _ = writeln!(text, "{chi},away_from_holes,{},{},{}", away.len(), num(ma), num(ea));
+        if mn.is_finite() {
+            near_s.push(chi.log10(), mn, en);
+        }
+        if ma.is_finite() {
+            away_s.push(chi.log10(), ma, ea);
+        }
+        made.measured.push(format!(
+            "χ = {chi}: cells bordering a hole {}° ± {}° ({} cell-frames), away from holes {}° ± {}° ({}); 45° is random (the standard errors treat cell-frames as independent: they are not)",
+            fmt(mn),
+            fmt(en),
+            near.len(),
+            fmt(ma),
+            fmt(ea),
+            away.len()
+        ));
+    }
+    panel.series.push(near_s);
+    panel.series.push(away_s);
+    csv(base, "_alignment", &text, made)?;
+    Ok(panel)
 }
 
 pub fn fmt(x: f64) -> String {

@@ -56,6 +56,11 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
             "“While the hole does not always nucleate precisely between the defects, it remains consistently closer to two defects, with both defects typically located within approximately two cell diameters.” Points at zero distance are simulations without holes (χ = 0.1, 0.05).",
             format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}; distances over R. The faint line beside each curve is chance: the same measure about 16 random sites (seeded ChaCha8) of each of the same frames."),
         ),
+        Figure::Mechanism => (
+            "The mechanism: antiparallel +½ pairs, −½ defects, cells tangential to a hole",
+            "“two +1/2 topological defects in the nematic field moving in the vicinity of each other in an antiparallel relative orientation”; “aligning cells tangentially along the tissue–hole interface”; “we do not see hole formation at −1/2 defects in the simulations.” (The paper shows no figure of these.)",
+            format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}. Panel 1: the angle between the orientations (head to tail) of the two +½ defects nearest the nucleation centroid (180° antiparallel, 90° on average for independent orientations); its chance line is the same for the two +½ nearest each of 16 random sites of the same frames. Panel 2: the distance to the nearest −½ defect, over R, with chance (compare Fig. S2's nearest +½). Panel 3: for every cell whose centroid lies within 1.5 R of an open hole's boundary, the angle between its elongation axis (shape tensor) and the tangent of the nearest boundary site, against cells farther than 3 R from every hole, in every frame with a hole open."),
+        ),
         Figure::FigS3 => (
             "Fig. S3: largest hole area and number of holes against γ",
             "“as γ increases, both the average number and the average maximum area of holes decrease.” χ = 0.001, ζ = 0.3.",
