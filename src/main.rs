@@ -56,11 +56,15 @@ struct FiguresArgs {
     /// Output directory: the runs in DIR/runs/, the figures, plan.csv and figures.md in DIR.
     #[arg(long)]
     out: PathBuf,
-    /// smoke (minutes: tiny boxes, proves the pipeline), standard (full size, a few seeds, one
-    /// machine overnight) or paper (the paper's counts: a cluster).
+    /// smoke (minutes: tiny boxes, proves the pipeline), standard (full size, a few seeds, half
+    /// the paper's length: one machine overnight), evidence (the paper's protocol: 10,000
+    /// relaxation and 100,000 active steps, a frame every 1,000 steps; 4 seeds per point for
+    /// Figs. 2 and 3c, 3 elsewhere, the χ = 0.01 points at ζ = 0.4 and 0.5 included; 75 runs,
+    /// some 20 core-hours; issue 23) or paper (the paper's counts: a cluster).
     #[arg(long, default_value = "smoke")]
     scale: monolayer::run::figures::Scale,
-    /// Only these figures and their runs: --only 1c,3d,S1 (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3).
+    /// Only these figures and their runs: --only 1c,3d,S1 (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3,
+    /// mechanism).
     #[arg(long, value_name = "LIST")]
     only: Option<String>,
     /// A parameter for every run, over the scale's: --set q_magnitude=0.4.
@@ -69,8 +73,8 @@ struct FiguresArgs {
     /// Simulations at a time, one per core (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
-    /// Run the whole `paper` scale on this machine (days of core time: it is refused without
-    /// this; a --shard, as a Slurm array task runs, is not).
+    /// Run the whole `paper` or `evidence` scale on this machine (days or a day of core time: it
+    /// is refused without this; a --shard, as a Slurm array task runs, is not).
     #[arg(long)]
     yes: bool,
     /// all (runs, then figures), runs (only the runs: a Slurm array task), or figures (only the

@@ -52,6 +52,48 @@ fn the_paper_plan_has_the_papers_counts_and_shares_runs() {
     assert_eq!((dry.params.xi_cell, dry.params.xi_substrate), (0.0, 1.0));
 }
 
+/// The evidence scale (issue 23): the paper's protocol with 4 seeds per point for Figs. 2 and
+/// 3c, 3 elsewhere, χ = 0.01 at ζ = 0.4 and 0.5, S1 with the same 100 cells on 120²; named by
+/// `--help`.
+#[test]
+fn the_evidence_plan_is_the_papers_protocol_with_enough_seeds() {
+    use monolayer::run::figures::{Friction, Point, S1_INITIAL_GAP};
+    let plan = Plan::new(Scale::Evidence, &Figure::ALL, &[]).unwrap();
+    assert_eq!(plan.frame_interval, 1000);
+    assert!(plan.jobs.iter().all(|j| j.params.relax_steps == 10_000 && j.params.active_steps == 100_000));
+    let at =
+        |chi: f64, zeta: f64| move |p: &Point| matches!(p.friction, Friction::Chi(c) if c == chi) && p.zeta == zeta;
+    let count = |f: Figure, pick: &dyn Fn(&Point) -> bool| plan.runs_of(f).filter(|(_, p)| pick(p)).count();
+    for zeta in [0.3, 0.4, 0.5] {
+        for chi in [0.01, 0.005, 0.001] {
+            assert_eq!(count(Figure::Fig2, &at(chi, zeta)), 4, "Fig. 2 at χ = {chi}, ζ = {zeta}");
+        }
+        for chi in [0.005, 0.001] {
+            assert_eq!(count(Figure::Fig3c, &at(chi, zeta)), 4);
+        }
+        assert_eq!(count(Figure::Fig3ab, &at(0.01, zeta)), 3, "χ = 0.01 at ζ = {zeta}");
+        assert_eq!(count(Figure::Fig3d, &at(0.05, zeta)), 3);
+    }
+    for chi in [0.1, 0.05, 0.01, 0.005, 0.001] {
+        assert_eq!(count(Figure::Fig1c, &at(chi, 0.3)), 3);
+        assert_eq!(count(Figure::Mechanism, &at(chi, 0.3)), 3);
+    }
+    assert_eq!(plan.runs_of(Figure::FigS3).count(), 12);
+    // S1: the paper's 120² box holds the same 100 cells, their disks placed with a 1-site gap.
+    assert_eq!(plan.runs_of(Figure::FigS1).count(), 12);
+    assert!(plan
+        .runs_of(Figure::FigS1)
+        .all(|(j, _)| { (j.params.box_size, j.params.n_cells, j.params.initial_gap) == (120, 100, S1_INITIAL_GAP) }));
+    // 36 (Figs. 2, 3c) + 9 (χ = 0.1 of 3a–b) + 9 (χ = 0.05 of 3d) + 9 (S3's other γ) + 12 (S1).
+    assert_eq!(plan.jobs.len(), 75);
+    let o = monolayer(&["figures", "--help"]);
+    let help = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        help.contains("evidence") && help.contains("100,000 active steps") && help.contains("every 1,000"),
+        "{help}"
+    );
+}
+
 #[test]
 fn figures_and_scales_are_checked_before_anything_runs() {
     assert_eq!(Figure::parse_list("3a,3b, s1").unwrap(), vec![Figure::Fig3ab, Figure::FigS1]);
@@ -62,7 +104,7 @@ fn figures_and_scales_are_checked_before_anything_runs() {
     let out = out.to_str().unwrap();
     let o = monolayer(&["figures", "--out", out, "--scale", "huge"]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("smoke, standard, paper"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("smoke, standard, evidence, paper"), "{}", stderr(&o));
     let o = monolayer(&["figures", "--out", out, "--set", "zeta=40"]);
     assert!(!o.status.success() && stderr(&o).contains("`zeta`"), "{}", stderr(&o));
     let o = monolayer(&["figures", "--out", out, "--stage", "draw"]);

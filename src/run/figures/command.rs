@@ -97,10 +97,11 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
         );
     }
     // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
-    if o.scale == Scale::Paper && !o.yes && o.shard.is_none() && !todo.is_empty() {
+    if matches!(o.scale, Scale::Paper | Scale::Evidence) && !o.yes && o.shard.is_none() && !todo.is_empty() {
         return Err(format!(
-            "--scale paper runs {} simulations here, about {} on {} core(s): refused without --yes; \
+            "--scale {} runs {} simulations here, about {} on {} core(s): refused without --yes; \
              on a cluster, --slurm submits them as a job array (--slurm --dry-run prints the scripts)",
+            o.scale.name(),
             todo.len(),
             hours(core_seconds / workers as f64),
             workers

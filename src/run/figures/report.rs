@@ -13,7 +13,7 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
         .scale
         .spec()
         .correlation_box
-        .map(|(l, n)| format!("L = {l}, N = {n} (the paper's 120² box at its density; N is not stated)"))
+        .map(|(l, n)| format!("L = {l}, N = {n} (the paper's 120² box with the same 100 cells, a denser tissue: the text shrinks the box \"to make sure that no holes are formed\"; initial gap {} sites so the disks fit)", super::S1_INITIAL_GAP))
         .unwrap_or_else(|| format!("the scale's box, L = {}, N = {}", plan.base.box_size, plan.base.n_cells));
     match figure {
         Figure::Fig1c => (
