@@ -157,6 +157,13 @@ fn the_smoke_scale_draws_every_figure_and_resumes_without_running_again() {
     let csvs = csv_files(&out);
     assert!(csvs["fig3d.csv"].lines().count() == 16, "{}", csvs["fig3d.csv"]);
     assert!(csvs["figS1.csv"].contains("dry,"), "the dry limit is in Fig. S1");
+    // Issue 23's definitions reach the figures: chance lines, both fits, the mechanism.
+    for f in ["fig1c.csv", "fig1d.csv", "figS2.csv", "figmechanism.csv"] {
+        assert!(csvs[f].lines().next().unwrap().contains("_chance_mean"), "{f} lacks its chance line");
+    }
+    assert!(csvs["fig2_fits.csv"].starts_with("chi,zeta,chi_0.1_over_zeta,bins_with_holes,hole_sites,binomial_amplitude,binomial_coefficient,binomial_coefficient_se,least_squares_"));
+    assert!(csvs["figmechanism_alignment.csv"].contains("bordering_a_hole"), "{}", csvs["figmechanism_alignment.csv"]);
+    assert!(md.contains("chance") && md.contains("binomial"), "{md}");
     // Again: every run is done, nothing runs, the same tables.
     let o = monolayer(&["figures", "--out", out.to_str().unwrap(), "--scale", "smoke", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));

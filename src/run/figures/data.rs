@@ -379,6 +379,7 @@ fn alignment_panel(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) 
     );
     panel.y_from_zero = true;
     panel.hline = Some(45.0);
+    panel.hline_label = "random axes (45°)".into();
     let mut near_s = Series::new(format!("cells within {BORDER_RADII} R of a hole"), 0);
     let mut away_s = Series::new(format!("cells farther than {AWAY_RADII} R"), 1);
     away_s.marker = Marker::Faint;

@@ -52,6 +52,8 @@ pub struct Panel {
     pub y_from_zero: bool,
     /// A dotted horizontal line (1/e on the correlations).
     pub hline: Option<f64>,
+    /// The line's legend.
+    pub hline_label: String,
     /// A fixed x range (the precursors' 10 frames), else the data's.
     pub x_range: Option<(f64, f64)>,
     pub series: Vec<Series>,
@@ -66,6 +68,7 @@ impl Panel {
             log_y: false,
             y_from_zero: false,
             hline: None,
+            hline_label: "1/e".into(),
             x_range: None,
             series: Vec::new(),
         }
@@ -161,7 +164,7 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, smal
                 chart
                     .draw_series(LineSeries::new(vec![(x0, h), (x1, h)], BLACK.mix(0.4)))
                     .map_err(plot_err)?
-                    .label("1/e")
+                    .label(p.hline_label.as_str())
                     .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.4)));
             }
             let mut labelled = false;
