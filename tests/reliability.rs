@@ -492,3 +492,92 @@ fn a_full_disk_during_analyze_leaves_no_partial_tables() {
     assert!(left.is_empty(), "a partial set: {left:?}");
     ok(&analyzed(&run, &out));
 }
+
+// ---- Issue 24 ----
+
+/// A tmpfs of a given size mounted on a fresh directory, unmounted when dropped; None (with a
+/// message) where this process may not mount one, and a failure under `CI=true`, where `.ci/run`
+/// runs the tests as root.
+struct TmpFs {
+    dir: tempfile::TempDir,
+}
+
+impl TmpFs {
+    fn mount(size: &str) -> Option<TmpFs> {
+        let dir = tempfile::tempdir().unwrap();
+        let o = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs", arg(dir.path())])
+            .output();
+        match o {
+            Ok(o) if o.status.success() => Some(TmpFs { dir }),
+            other => {
+                let why = match other {
+                    Ok(o) => stderr(&o),
+                    Err(e) => e.to_string(),
+                };
+                assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true: cannot mount a tmpfs: {why}");
+                eprintln!("skipped: cannot mount a tmpfs here (needs root): {why}");
+                None
+            }
+        }
+    }
+
+    fn path(&self) -> &Path {
+        self.dir.path()
+    }
+
+    fn resize(&self, size: &str) {
+        let o = Command::new("mount").args(["-o", &format!("remount,size={size}"), arg(self.path())]).output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+}
+
+impl Drop for TmpFs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(self.path()).output();
+    }
+}
+
+/// Issue 24, item 1: the full-disk reproduction on a real tmpfs, at several disk sizes (the disk
+/// fills at the checkpoint, at a frame or at the record): every run stops, resumes once there is
+/// space, and ends with the same bits as a run that never stopped.
+#[test]
+fn a_full_disk_at_any_write_resumes_to_the_same_bits() {
+    let args = |out: &Path| -> Vec<String> {
+        let sm = "--threads 1 --quiet --set box_size=48 --set n_cells=10 --relax-steps 200 --steps 1500";
+        let more = "--frame-interval 50 --seed 2 --zeta 0.4 --out";
+        let mut v: Vec<String> = format!("run {sm} {more}").split(' ').map(String::from).collect();
+        v.push(arg(out).to_string());
+        v
+    };
+    let run = |out: &Path| {
+        let a = args(out);
+        monolayer(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let reference = tempfile::tempdir().unwrap();
+    let whole = reference.path().join("r");
+    ok(&run(&whole));
+    let files = |dir: &Path| {
+        let mut v: Vec<_> = fs::read_dir(dir.join("frames")).unwrap().map(|e| e.unwrap().path()).collect();
+        v.sort();
+        v.push(checkpoint_path(dir));
+        v
+    };
+    for size in ["600k", "350k", "1100k"] {
+        let Some(disk) = TmpFs::mount(size) else { return };
+        let stopped = disk.path().join("r");
+        let o = run(&stopped);
+        assert_eq!(o.status.code(), Some(2), "size {size}: {}", stderr(&o));
+        assert!(stderr(&o).contains("No space left on device"), "size {size}: {}", stderr(&o));
+        disk.resize("256m");
+        let o = monolayer(&["run", "--quiet", "--resume", arg(&stopped)]);
+        assert!(o.status.success(), "size {size}: the resume failed: {}", stderr(&o));
+        let (a, b) = (files(&whole), files(&stopped));
+        assert_eq!(a.len(), b.len(), "size {size}");
+        for (x, y) in a.iter().zip(&b) {
+            assert!(fs::read(x).unwrap() == fs::read(y).unwrap(), "size {size}: {} differs", y.display());
+        }
+        let record = RunRecord::load(&stopped).unwrap();
+        assert_eq!((record.status, record.last_frame_step), (RunStatus::Finished, Some(1700)), "size {size}");
+    }
+}

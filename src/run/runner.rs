@@ -224,13 +224,18 @@ impl RunDir {
             if frame {
                 m.evaluate_now().map_err(|e| Stop::Simulation(e.to_string()))?;
                 write_frame(m, &frame_path(dir, s)).map_err(Stop::Io)?;
-                record.last_frame_step = Some(s);
                 if let Some(Err(e)) = live.as_deref_mut().map(|live| live.frame(m)) {
                     watch(m, &Event::AnalysisFailed(e));
                 }
             }
             if frame || s == p.relax_steps {
                 write_checkpoint(m, &checkpoint).map_err(Stop::Io)?;
+                // The record's last frame advances only once the checkpoint of its step is
+                // safely written: a failed checkpoint write (a full disk) leaves the record at the
+                // previous checkpoint, which `--resume` continues from.
+                if frame {
+                    record.last_frame_step = Some(s);
+                }
                 record.save(dir).map_err(Stop::Io)?;
                 if frame {
                     watch(m, &Event::Frame);
