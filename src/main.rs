@@ -87,8 +87,9 @@ struct FiguresArgs {
     /// the runs and the figures job after it (afterok).
     #[arg(long)]
     slurm: bool,
-    /// With --slurm: print the scripts; write and submit nothing.
-    #[arg(long, requires = "slurm")]
+    /// Print the plan and its estimate (with --slurm, the scripts too); run, write and submit
+    /// nothing.
+    #[arg(long)]
     dry_run: bool,
     /// With --slurm: array tasks running at once (the %N of --array).
     #[arg(long, default_value_t = 16, requires = "slurm")]
@@ -497,7 +498,10 @@ fn figures(a: FiguresArgs) -> Result<(), String> {
         scale: a.scale,
         only: a.only,
         sets: a.set,
-        jobs: a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)),
+        jobs: match a.jobs {
+            Some(n) => check_threads("--jobs", n)?,
+            None => cores(),
+        },
         yes: a.yes,
         stage: a.stage,
         shard: a.shard,

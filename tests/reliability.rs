@@ -581,3 +581,71 @@ fn a_full_disk_at_any_write_resumes_to_the_same_bits() {
         assert_eq!((record.status, record.last_frame_step), (RunStatus::Finished, Some(1700)), "size {size}");
     }
 }
+
+/// Issue 24, item 2: the estimate steps a stable stand-in where the plan's first job blows up
+/// (S3's γ = 0.04 does within 22 steps), and `--dry-run` needs no `--slurm`.
+#[test]
+fn the_estimate_survives_a_plan_whose_first_job_blows_up() {
+    use monolayer::run::figures::{Figure, Plan, Scale, Speed};
+    let plan = Plan::new(Scale::Smoke, &[Figure::FigS3], &[]).unwrap();
+    let first = &plan.jobs[0];
+    assert_eq!(first.params.gamma, 0.04, "S3's first job is the unstable γ = 0.04");
+    let speed = Speed::measure(&[first], 100, 30).unwrap();
+    assert_eq!(speed.sizes.len(), 1);
+    assert!(speed.sizes[0].1 .0 > 0.0 && speed.sizes[0].1 .1 > 0.0, "{:?}", speed.sizes);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("figs");
+    let o = monolayer(&["figures", "--only", "S3", "--dry-run", "--quiet", "--out", arg(&out)]);
+    ok(&o);
+    assert!(stderr(&o).contains("estimate:") && stderr(&o).contains("dry run"), "{}", stderr(&o));
+    assert!(!out.join("runs").exists(), "a dry run runs nothing");
+    let o = monolayer(&["figures", "--only", "S3", "--slurm", "--dry-run", "--out", arg(&out)]);
+    ok(&o);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("runs.sbatch"));
+    let o = monolayer(&["figures", "--set", "gamma=0.04", "--only", "1c", "--dry-run", "--out", arg(&out)]);
+    ok(&o);
+}
+
+/// Issue 24, item 3: a run.json with a parameter removed is refused, naming the key.
+#[test]
+fn a_record_missing_a_parameter_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &["--zeta", "0.4"]));
+    edit_record(&run, |v| {
+        v["params"].as_object_mut().unwrap().remove("zeta");
+        v["status"] = "running".into();
+    });
+    let e = RunRecord::load(&run).unwrap_err();
+    assert!(e.contains("`params.zeta` is missing"), "{e}");
+    refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["run.json", "`params.zeta` is missing"]);
+}
+
+/// Issue 24, item 4: grids that set one parameter twice (directly, or through `chi`) or list
+/// values equal as numbers are refused.
+#[test]
+fn grids_that_set_a_parameter_twice_are_refused() {
+    for (text, expect) in [
+        ("[grid]\nchi = [0.1]\nxi_substrate = [0.1, 0.5]\n", "both `chi` and `xi_substrate`"),
+        ("[base]\nchi = 0.1\n[grid]\nxi_substrate = [0.5]\n", "both `chi` and `xi_substrate`"),
+        ("[grid]\nzeta = [1, 1.0]\n", "grid `zeta` lists 1 twice (1 and 1.0 are one value"),
+        ("[grid]\nactive_steps = [100, 1e2]\n", "grid `active_steps` lists 100 twice"),
+    ] {
+        let spec: SweepSpec = toml::from_str(text).unwrap();
+        let e = spec.jobs().unwrap_err();
+        assert!(e.contains(expect), "{text}: {e}");
+    }
+    let o = monolayer(&["sweep", "--out", "/nonexistent/never", "--grid", "chi=0.1", "--grid", "xi_substrate=0.5"]);
+    refused(&o, &["both `chi` and `xi_substrate`"]);
+    let o = monolayer(&["sweep", "--out", "/nonexistent/never", "--grid", "zeta=1,1.0"]);
+    refused(&o, &["grid `zeta` lists 1 twice"]);
+    let o = monolayer(&["sweep", "--out", "/nonexistent/never", "--grid", "zeta=1", "--grid", "zeta=2"]);
+    refused(&o, &["`zeta` is already a grid axis"]);
+}
+
+/// Issue 24, item 6: `figures --jobs` has the bound of `--threads` and `sweep --jobs`.
+#[test]
+fn figures_jobs_are_bounded() {
+    let o = monolayer(&["figures", "--jobs", "1000", "--dry-run", "--out", "/nonexistent/never"]);
+    refused(&o, &["--jobs 1000: must be in [1, "]);
+}

@@ -232,9 +232,9 @@ impl RunRecord {
         if !dir.is_dir() {
             return Err(format!("{}: no such directory", dir.display()));
         }
-        let file = File::open(&path).map_err(|e| err(&path, format!("{e} (is this a run directory?)")))?;
+        let text = fs::read_to_string(&path).map_err(|e| err(&path, format!("{e} (is this a run directory?)")))?;
         let value: serde_json::Value =
-            serde_json::from_reader(BufReader::new(file)).map_err(|e| err(&path, format!("not valid JSON: {e}")))?;
+            serde_json::from_str(&text).map_err(|e| err(&path, format!("not valid JSON: {e}")))?;
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
             return Err(err(&path, format!("not a record of this program (no \"format\": \"{FORMAT}\")")));
         }
@@ -242,7 +242,26 @@ impl RunRecord {
         if v != Some(FORMAT_VERSION as u64) {
             return Err(err(&path, format!("format_version {v:?}, this program reads {FORMAT_VERSION}")));
         }
-        let record: RunRecord = serde_json::from_value(value).map_err(|e| err(&path, e))?;
+        // A run continues with the parameters it was started with, never with a default: a record
+        // without one (hand-edited, or of an older version that lacked it) is refused by name.
+        let given = value
+            .get("params")
+            .and_then(|p| p.as_object())
+            .ok_or_else(|| err(&path, "no `params` table: not a complete run record"))?;
+        let defaults = serde_json::to_value(Params::default()).expect("the defaults serialise");
+        let defaults = defaults.as_object().expect("params are a table");
+        if let Some((k, d)) = defaults.iter().find(|(k, _)| !given.contains_key(k.as_str())) {
+            return Err(err(
+                &path,
+                format!(
+                    "parameter `params.{k}` is missing: a run resumes only with the values it started with, never \
+                     a default; add `\"{k}\": VALUE` with the run's value (this version's default is {d})"
+                ),
+            ));
+        }
+        let mut de = serde_json::Deserializer::from_str(&text);
+        let record: RunRecord = serde_path_to_error::deserialize(&mut de)
+            .map_err(|e| err(&path, format!("`{}`: {}", e.path(), e.inner())))?;
         record.params.validate().map_err(|e| err(&path, e))?;
         if record.frame_interval == 0 {
             return Err(err(&path, "`frame_interval` = 0: must be ≥ 1"));

@@ -89,6 +89,11 @@ impl SweepSpec {
     /// are strings).
     pub fn add_grid(&mut self, arg: &str) -> Result<(), String> {
         let (k, values) = parse_list("--grid", arg)?;
+        if self.grid.contains_key(&k) {
+            return Err(format!(
+                "--grid {arg}: `{k}` is already a grid axis (give its values in one --grid {k}=V1,V2,…)"
+            ));
+        }
         self.grid.insert(k, toml::Value::Array(values));
         Ok(())
     }
@@ -153,11 +158,32 @@ impl SweepSpec {
                 toml::Value::Array(_) => return Err(format!("sweep: grid `{k}` is an empty list")),
                 other => vec![other.clone()],
             };
-            let texts: Vec<String> = values.iter().map(value_text).collect();
-            if let Some(t) = texts.iter().enumerate().find_map(|(i, t)| texts[..i].contains(t).then_some(t)) {
-                return Err(format!("sweep: grid `{k}` lists {t} twice"));
+            // Equal as numbers is equal (`zeta = [1, 1.0]`): two runs of one point.
+            let same = |a: &toml::Value, b: &toml::Value| match (number(k, a), number(k, b)) {
+                (Ok(x), Ok(y)) => x == y,
+                _ => value_text(a) == value_text(b),
+            };
+            if let Some((i, j)) =
+                (0..values.len()).find_map(|j| (0..j).find(|&i| same(&values[i], &values[j])).map(|i| (i, j)))
+            {
+                let (a, b) = (value_text(&values[i]), value_text(&values[j]));
+                return Err(format!(
+                    "sweep: grid `{k}` lists {a} twice ({a} and {b} are one value: two identical runs)"
+                ));
             }
             axes.push((k.clone(), values));
+        }
+        // `chi` sets ξ_s = χ·ξ_cell: beside `xi_substrate` one of the two would be overridden
+        // silently, and the run named and tabled by the other.
+        let sets = |key: &str| {
+            self.base.contains_key(key)
+                || self.grid.contains_key(key)
+                || self.points.iter().any(|p| p.contains_key(key))
+        };
+        if sets("chi") && sets("xi_substrate") {
+            return Err("sweep: sets both `chi` and `xi_substrate` (χ sets ξ_s = χ·ξ_cell, so one would override \
+                        the other): give one of them"
+                .into());
         }
         let mut points = self.starting_points()?;
         for (k, values) in &axes {

@@ -96,6 +96,10 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
             workers
         );
     }
+    if o.dry_run {
+        eprintln!("dry run: nothing run or written");
+        return Ok(());
+    }
     // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
     if o.scale == Scale::Paper && !o.yes && o.shard.is_none() && !todo.is_empty() {
         return Err(format!(
