@@ -132,4 +132,61 @@ proptest! {
             prop_assert!(Monolayer::from_state(small(), 1, s).is_ok());
         }
     }
+
+    /// Any shape in any array's `.npy` header (issue 24: an 80 GB one aborted the process) is
+    /// refused before it is allocated, or read and checked as any frame is.
+    #[test]
+    fn any_npz_header_shape_is_refused_or_read(
+        array in prop::sample::select(vec!["phi", "patches", "velocity", "phi_offsets", "q_hat", "step"]),
+        shape in prop::collection::vec(prop_oneof![0u64..50, any::<u64>(), Just(1u64 << 33)], 0..4),
+        data in 0usize..200,
+    ) {
+        let (_, frame, checkpoint) = files();
+        let dir = tempfile::tempdir().unwrap();
+        let descr = if ["patches", "phi_offsets", "step"].contains(&array) { "<i8" } else { "<f8" };
+        let bytes = npy(descr, &shape, &vec![0; data]);
+        for (original, read) in [(frame, 0), (checkpoint, 1)] {
+            let path = dir.path().join("x.npz");
+            fs::copy(original, &path).unwrap();
+            let entry = if read == 1 && array == "phi" { "phi_padded" } else { array };
+            replace_npz_entry(&path, entry, &bytes);
+            // Never a panic, never an abort: an error or a checked read.
+            let _ = if read == 0 { read_frame(&path, small().box_size).map(|_| ()) } else { read_checkpoint(&path, small().box_size).map(|_| ()) };
+        }
+    }
+}
+
+/// An `.npy` whose header declares `shape` of `descr`, followed by `data` bytes only.
+fn npy(descr: &str, shape: &[u64], data: &[u8]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| format!("{d},")).collect();
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}), }}", dims.join(" "));
+    while (10 + dict.len() + 1) % 64 != 0 {
+        dict.push(' ');
+    }
+    dict.push('\n');
+    let mut v = b"\x93NUMPY\x01\x00".to_vec();
+    v.extend((dict.len() as u16).to_le_bytes());
+    v.extend(dict.as_bytes());
+    v.extend(data);
+    v
+}
+
+/// Rewrites the `.npz` at `path` with the entry `name.npy` replaced by `bytes`.
+fn replace_npz_entry(path: &Path, name: &str, bytes: &[u8]) {
+    use std::io::{Read, Write};
+    let mut zip = zip::ZipArchive::new(fs::File::open(path).unwrap()).unwrap();
+    let mut entries = Vec::new();
+    for i in 0..zip.len() {
+        let mut e = zip.by_index(i).unwrap();
+        let mut data = Vec::new();
+        e.read_to_end(&mut data).unwrap();
+        entries.push((e.name().to_string(), data));
+    }
+    let mut w = zip::ZipWriter::new(fs::File::create(path).unwrap());
+    let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+    for (n, data) in entries {
+        w.start_file(n.as_str(), options).unwrap();
+        w.write_all(if n == format!("{name}.npy") { bytes } else { &data }).unwrap();
+    }
+    w.finish().unwrap();
 }

@@ -649,3 +649,70 @@ fn figures_jobs_are_bounded() {
     let o = monolayer(&["figures", "--jobs", "1000", "--dry-run", "--out", "/nonexistent/never"]);
     refused(&o, &["--jobs 1000: must be in [1, "]);
 }
+
+/// An `.npy` whose header declares `shape` of f64 (or `descr`), followed by `data` bytes only.
+fn npy(descr: &str, shape: &[u64], data: &[u8]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| format!("{d},")).collect();
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}), }}", dims.join(" "));
+    while (10 + dict.len() + 1) % 64 != 0 {
+        dict.push(' ');
+    }
+    dict.push('\n');
+    let mut v = b"\x93NUMPY\x01\x00".to_vec();
+    v.extend((dict.len() as u16).to_le_bytes());
+    v.extend(dict.as_bytes());
+    v.extend(data);
+    v
+}
+
+/// Rewrites the `.npz` at `path` with the entry `name.npy` replaced by `bytes`.
+fn replace_npz_entry(path: &Path, name: &str, bytes: &[u8]) {
+    use std::io::{Read, Write};
+    let mut zip = zip::ZipArchive::new(fs::File::open(path).unwrap()).unwrap();
+    let mut entries = Vec::new();
+    for i in 0..zip.len() {
+        let mut e = zip.by_index(i).unwrap();
+        let mut data = Vec::new();
+        e.read_to_end(&mut data).unwrap();
+        entries.push((e.name().to_string(), data));
+    }
+    let mut w = zip::ZipWriter::new(fs::File::create(path).unwrap());
+    let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+    for (n, data) in entries {
+        w.start_file(n.as_str(), options).unwrap();
+        w.write_all(if n == format!("{name}.npy") { bytes } else { &data }).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// Issue 24, item 5: an `.npz` header declaring a huge shape is refused before anything is
+/// allocated, in `analyze` (a frame) and in `--resume` (the checkpoint); no abort.
+#[test]
+fn huge_npz_headers_are_refused_before_allocating() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let frame = frame_path(&run, 150);
+    replace_npz_entry(&frame, "phi", &npy("<f8", &[10_000_000_000], &[0; 64]));
+    let o = analyzed(&run, &dir.path().join("a"));
+    refused(&o, &["frame_0000150.npz", "array `phi`", "damaged"]);
+    edit_record(&run, |v| v["status"] = "running".into());
+    replace_npz_entry(&checkpoint_path(&run), "warm_start", &npy("<f8", &[100_000, 100_000, 2], &[0; 64]));
+    let o = monolayer(&["run", "--quiet", "--resume", arg(&run)]);
+    refused(&o, &["checkpoint.npz", "array `warm_start`", "damaged"]);
+    // A shape whose product overflows u64.
+    replace_npz_entry(&checkpoint_path(&run), "warm_start", &npy("<f8", &[u64::MAX, 4], &[0; 64]));
+    refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["array `warm_start`"]);
+}
+
+/// Issue 24, item 12: a FIFO named as a frame is refused, not read (which would hang).
+#[test]
+fn a_fifo_among_the_frames_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let fifo = frame_path(&run, 1000);
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    refused(&analyzed(&run, &dir.path().join("a")), &["frame_0001000.npz", "not a regular file"]);
+}

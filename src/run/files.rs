@@ -380,8 +380,73 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     })
 }
 
+/// The shape and item size an `.npy` header declares: `(shape, bytes per item)`.
+fn npy_header(bytes: &[u8]) -> Option<(Vec<u64>, u64)> {
+    let rest = bytes.strip_prefix(b"\x93NUMPY")?;
+    let (len, start) = match rest.first()? {
+        1 => (u16::from_le_bytes([*rest.get(2)?, *rest.get(3)?]) as usize, 4),
+        _ => (u32::from_le_bytes(rest.get(2..6)?.try_into().ok()?) as usize, 6),
+    };
+    let text = std::str::from_utf8(rest.get(start..start + len)?).ok()?;
+    let after = |key: &str| text.find(key).map(|i| &text[i + key.len()..]);
+    let shape = after("'shape':")?;
+    let shape = &shape[shape.find('(')? + 1..shape.find(')')?];
+    let shape =
+        shape.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse().ok()).collect::<Option<_>>()?;
+    let descr = after("'descr':")?;
+    let descr = descr.trim_start().trim_start_matches(['\'', '"']);
+    let digits: String = descr.chars().skip_while(|c| !c.is_ascii_digit()).take_while(char::is_ascii_digit).collect();
+    Some((shape, digits.parse().ok().filter(|&b| b > 0)?))
+}
+
+/// Checks every array's header in the `.npz` at `path` before anything is allocated from it: a
+/// damaged or hostile header may declare any shape (ndarray-npy would allocate it whole, and the
+/// process abort). No array of a run on an L×L lattice holds more than `max_values`, and no
+/// array holds more bytes than its zip entry, whose size deflate bounds by its compressed size.
+fn check_npz_headers(path: &Path, max_values: u64) -> IoResult<()> {
+    let file = File::open(path).map_err(|e| err(path, e))?;
+    let mut zip =
+        zip::ZipArchive::new(BufReader::new(file)).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
+    for i in 0..zip.len() {
+        let mut entry = zip.by_index(i).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
+        let name = entry.name().trim_end_matches(".npy").to_string();
+        // Deflate expands at most 1032-fold.
+        let (size, packed) = (entry.size(), entry.compressed_size());
+        if size > packed.saturating_mul(1100).saturating_add(4096) {
+            return Err(err(path, format!("array `{name}`: {size} bytes from {packed} compressed: a damaged file")));
+        }
+        let mut head = Vec::new();
+        (&mut entry).take(1 << 16).read_to_end(&mut head).map_err(|e| err(path, format!("array `{name}`: {e}")))?;
+        let (shape, item) =
+            npy_header(&head).ok_or_else(|| err(path, format!("array `{name}`: not a readable .npy header")))?;
+        let values = shape.iter().try_fold(1u64, |a, &d| a.checked_mul(d));
+        let bytes = values.and_then(|v| v.checked_mul(item));
+        match (values, bytes) {
+            (Some(v), Some(b)) if v <= max_values && b <= size => {}
+            _ => {
+                return Err(err(
+                    path,
+                    format!(
+                        "array `{name}`: its header declares shape {shape:?}, more than the file holds or a run on \
+                         this lattice has ({max_values} values at most): a damaged file"
+                    ),
+                ))
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The most values one array of a frame or checkpoint of an L×L run holds: the lattice fields
+/// (2 L²), or every cell's φ together (each cell's patch is at most L² and the cells cover the
+/// box a few times at most: 64 L², against ≈ 5 L² at the paper's density).
+fn max_array_values(l: usize) -> u64 {
+    64 * (l as u64).pow(2) + 4096
+}
+
 /// Reads a checkpoint written by [`write_checkpoint`].
 pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
+    check_npz_headers(path, max_array_values(l))?;
     let file = File::open(path).map_err(|e| err(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let e = |name: &str| {
@@ -478,6 +543,10 @@ impl RunFrames {
                 continue;
             }
             if let Some(step) = name.strip_prefix("frame_").and_then(|s| s.strip_suffix(".npz")) {
+                // A FIFO or a device would block the reader, or never end.
+                if !fs::metadata(entry.path()).is_ok_and(|m| m.is_file()) {
+                    return Err(format!("{}: not a regular file: not a frame", entry.path().display()));
+                }
                 let step: u64 = step
                     .parse()
                     .map_err(|_| format!("{}: not a frame name (frame_<step>.npz)", entry.path().display()))?;
@@ -508,6 +577,7 @@ impl RunFrames {
 
 /// Reads one frame of a run on an L×L lattice, checking every array's shape.
 pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
+    check_npz_headers(path, max_array_values(l))?;
     let file = File::open(path).map_err(|e| err(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
     let e = |name: &'static str| move |x: ndarray_npy::ReadNpzError| err(path, format!("array `{name}`: {x}"));
