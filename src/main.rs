@@ -295,6 +295,13 @@ struct BenchArgs {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // The commands that run simulations stop gracefully on SIGTERM and SIGINT.
+    if matches!(cli.command, Command::Run(_) | Command::Sweep(_) | Command::Figures(_)) {
+        if let Err(e) = monolayer::run::runner::stop_gracefully_on_signals() {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    }
     let result = match cli.command {
         Command::Run(a) => a
             .threads
@@ -313,7 +320,11 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(2)
+            // 128 + the signal, as a shell reports a process the signal ended.
+            match monolayer::run::runner::stop_signal() {
+                Some((_, sig)) => ExitCode::from(128 + sig as u8),
+                None => ExitCode::from(2),
+            }
         }
     }
 }

@@ -716,3 +716,47 @@ fn a_fifo_among_the_frames_is_refused() {
     assert!(made.success());
     refused(&analyzed(&run, &dir.path().join("a")), &["frame_0001000.npz", "not a regular file"]);
 }
+
+/// Issue 24, item 14: SIGTERM and SIGINT, sent for real to a running `monolayer run`, stop it
+/// after the step under way with `stopped: signal …` and the shell's status (143, 130); the
+/// resume ends with the same bits as a run never stopped.
+#[test]
+fn a_signal_stops_a_run_gracefully_and_it_resumes_to_the_same_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = |out: &Path| -> Vec<String> {
+        let mut v: Vec<String> = SMALL_RUN.iter().map(|s| s.to_string()).collect();
+        v.extend(["--steps", "3000", "--frame-interval", "50", "--out", arg(out)].map(String::from));
+        v
+    };
+    let whole = dir.path().join("whole");
+    ok(&monolayer(&args(&whole).iter().map(String::as_str).collect::<Vec<_>>()));
+    for (signal, status) in [("TERM", 143), ("INT", 130)] {
+        let run = dir.path().join(signal);
+        let child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+            .args(args(&run))
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Once it is in its active phase (a frame written), the signal.
+        let deadline = Instant::now() + Duration::from_secs(600);
+        while !frame_path(&run, 200).exists() {
+            assert!(Instant::now() < deadline, "the run never wrote its second frame");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let sent = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
+        assert!(sent.success());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(status), "SIG{signal}: {}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("stopped by SIG{signal}")), "{}", stderr(&o));
+        let record = RunRecord::load(&run).unwrap();
+        assert_eq!(record.status, RunStatus::Stopped(format!("signal SIG{signal}")), "SIG{signal}");
+        assert!(record.last_frame_step.unwrap() < 3100, "SIG{signal}: it stopped early");
+        ok(&monolayer(&["run", "--quiet", "--resume", arg(&run)]));
+        for step in [200, 1600, 3100] {
+            let (a, b) = (frame_path(&whole, step), frame_path(&run, step));
+            assert!(fs::read(a).unwrap() == fs::read(b).unwrap(), "SIG{signal}: frame {step} differs");
+        }
+        assert!(fs::read(checkpoint_path(&whole)).unwrap() == fs::read(checkpoint_path(&run)).unwrap());
+    }
+}

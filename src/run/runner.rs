@@ -4,6 +4,7 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
@@ -31,6 +32,36 @@ enum Stop {
     Simulation(String),
     /// Writing its files failed: the machine's problem, and the run can go on from its checkpoint.
     Io(String),
+    /// SIGTERM or SIGINT (Slurm, Ctrl-C): the step under way was finished; the run goes on from its
+    /// checkpoint.
+    Signal(&'static str),
+}
+
+static SIGTERM_SEEN: AtomicBool = AtomicBool::new(false);
+static SIGINT_SEEN: AtomicBool = AtomicBool::new(false);
+
+/// Turns SIGTERM and SIGINT into a graceful stop for this process: a run finishes the step under
+/// way, records `stopped: signal …` and returns (then [`stop_signal`] says which); a second
+/// signal of the same kind ends the process at once, as the first would have.
+pub fn stop_gracefully_on_signals() -> Result<(), String> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    for (sig, seen) in [(SIGTERM, &SIGTERM_SEEN), (SIGINT, &SIGINT_SEEN)] {
+        // The default action first, armed by the flag the second handler sets.
+        signal_hook::flag::register_conditional_default(sig, seen).map_err(|e| format!("signal handler: {e}"))?;
+        signal_hook::flag::register(sig, seen).map_err(|e| format!("signal handler: {e}"))?;
+    }
+    Ok(())
+}
+
+/// The signal that asked this process to stop, if one did: (name, number).
+pub fn stop_signal() -> Option<(&'static str, i32)> {
+    if SIGTERM_SEEN.load(Ordering::SeqCst) {
+        Some(("SIGTERM", 15))
+    } else if SIGINT_SEEN.load(Ordering::SeqCst) {
+        Some(("SIGINT", 2))
+    } else {
+        None
+    }
 }
 
 /// Bytes a run of `params` needs at most, roughly (within about 1.5× of the peak measured): the
@@ -186,11 +217,18 @@ impl RunDir {
             Ok(()) => RunStatus::Finished,
             Err(Stop::Simulation(e)) => RunStatus::Failed(e.clone()),
             Err(Stop::Io(e)) => RunStatus::Stopped(e.clone()),
+            Err(Stop::Signal(name)) => RunStatus::Stopped(format!("signal {name}")),
         };
         let saved = self.record.save(&self.dir);
         match outcome {
             Ok(()) => saved,
             Err(Stop::Simulation(e)) => Err(e),
+            Err(Stop::Signal(name)) => Err(format!(
+                "stopped by {name} at step {}: `run --resume {}` (or the same sweep again) continues it from its \
+                 last checkpoint",
+                self.monolayer.step_count(),
+                self.dir.display()
+            )),
             Err(Stop::Io(e)) => Err(format!(
                 "{e}\n  the run itself is sound: once this is fixed, `run --resume {}` (or the same sweep again) \
                  continues it from its last checkpoint",
@@ -209,6 +247,9 @@ impl RunDir {
         let checkpoint = checkpoint_path(&self.dir);
         let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
         while m.step_count() < total {
+            if let Some((name, _)) = stop_signal() {
+                return Err(Stop::Signal(name));
+            }
             if let Err(e) = m.step() {
                 let last_good = dir.join(LAST_GOOD_STATE);
                 write_checkpoint(m, &last_good).map_err(Stop::Io)?;

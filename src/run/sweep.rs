@@ -506,7 +506,8 @@ pub fn run_sweep(
         for _ in 0..workers.max(1).min(total.max(1)) {
             scope.spawn(|| {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a one-thread pool");
-                loop {
+                // After SIGTERM or SIGINT no run starts; those under way stop after their step.
+                while crate::run::runner::stop_signal().is_none() {
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(job) = mine.get(i) else { break };
                     let dir = runs_dir.join(&job.name);

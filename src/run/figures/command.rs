@@ -113,6 +113,9 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
     if !todo.is_empty() {
         execute(&plan, &mine, o, steps)?;
     }
+    if let Some((name, _)) = crate::run::runner::stop_signal() {
+        return Err(format!("stopped by {name}: the same command again continues the runs from their checkpoints"));
+    }
     if o.stage == Stage::All {
         draw(&plan, &o.out, o.jobs)?;
     }
