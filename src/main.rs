@@ -446,7 +446,10 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
         }
         return Ok(());
     }
-    let shard = a.shard.or(slurm_shard()?);
+    let shard = match a.shard {
+        Some(s) => Some(s),
+        None => slurm_shard()?,
+    };
     let workers = match a.jobs {
         Some(n) => check_threads("--jobs", n)?,
         None => cores(),
@@ -525,15 +528,35 @@ fn figures(a: FiguresArgs) -> Result<(), String> {
 }
 
 /// The shard of a Slurm job array, when run as one.
+/// The task's index counts from the array's first (`SLURM_ARRAY_TASK_MIN`), so that
+/// `--array=1-N` runs every shard as `--array=0-N-1` does.
 fn slurm_shard() -> Result<Option<Shard>, String> {
-    match (std::env::var("SLURM_ARRAY_TASK_ID"), std::env::var("SLURM_ARRAY_TASK_COUNT")) {
-        (Ok(id), Ok(count)) => format!("{id}/{count}").parse().map(Some),
-        _ => Ok(None),
+    let var = |name: &str| std::env::var(name).ok();
+    let (Some(id), Some(count)) = (var("SLURM_ARRAY_TASK_ID"), var("SLURM_ARRAY_TASK_COUNT")) else {
+        return Ok(None);
+    };
+    let number = |name: &str, v: &str| {
+        v.trim().parse::<usize>().map_err(|_| format!("{name} = {v:?}: not a task number (from Slurm's environment)"))
+    };
+    let (id, count) = (number("SLURM_ARRAY_TASK_ID", &id)?, number("SLURM_ARRAY_TASK_COUNT", &count)?);
+    let min = var("SLURM_ARRAY_TASK_MIN").map(|m| number("SLURM_ARRAY_TASK_MIN", &m)).transpose()?.unwrap_or(0);
+    let max = var("SLURM_ARRAY_TASK_MAX").map(|m| number("SLURM_ARRAY_TASK_MAX", &m)).transpose()?;
+    let contiguous = max.is_none_or(|max| max.checked_sub(min).map(|d| d + 1) == Some(count));
+    match id.checked_sub(min) {
+        Some(index) if index < count && count > 0 && contiguous => Ok(Some(Shard { index, count })),
+        _ => Err(format!(
+            "this Slurm array task (SLURM_ARRAY_TASK_ID = {id}, MIN = {min}, MAX = {}, COUNT = {count}) is not one of \
+             a contiguous array such as --array=0-{}: give each task its share with --shard K/N",
+            max.map(|m| m.to_string()).unwrap_or_else(|| "unset".into()),
+            count.saturating_sub(1)
+        )),
     }
 }
 
 fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
     let params = a.params.params()?;
+    params.validate().map_err(|e| e.to_string())?;
+    monolayer::run::runner::check_memory(&params)?;
     let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
     m.advance(a.total_steps).map_err(|e| e.to_string())?;
     println!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint());

@@ -760,3 +760,190 @@ fn a_signal_stops_a_run_gracefully_and_it_resumes_to_the_same_bits() {
         assert!(fs::read(checkpoint_path(&whole)).unwrap() == fs::read(checkpoint_path(&run)).unwrap());
     }
 }
+
+/// Issue 24, item 7: `MONOLAYER_MEMORY_LIMIT_MB` that cannot be read is named, 2⁴⁴ MB no longer
+/// wraps to 0, RLIMIT_AS is consulted (a run refused, not aborted), and `fingerprint` checks.
+#[test]
+fn the_memory_check_reads_its_variable_and_the_process_limits() {
+    use monolayer::run::runner::{cgroup_room, parse_memory_limit_mb};
+    let fingerprint = |env: Option<&str>, limit_kb: Option<u64>, size: &str| {
+        let ulimit = limit_kb.map(|k| format!("ulimit -v {k}; ")).unwrap_or_default();
+        let mut c = Command::new("sh");
+        c.arg("-c").arg(format!("{ulimit}exec \"$0\" \"$@\"")).arg(env!("CARGO_BIN_EXE_monolayer"));
+        c.args(["fingerprint", "--total-steps", "1", "--set", size, "--set", "n_cells=6"]);
+        if let Some(v) = env {
+            c.env("MONOLAYER_MEMORY_LIMIT_MB", v);
+        }
+        c.output().unwrap()
+    };
+    for bad in ["abc", "100MB", "-5", "1.5", "0", ""] {
+        let o = fingerprint(Some(bad), None, "box_size=48");
+        refused(&o, &["MONOLAYER_MEMORY_LIMIT_MB", "whole number of megabytes"]);
+    }
+    ok(&fingerprint(Some("17592186044416"), None, "box_size=48"));
+    refused(&fingerprint(Some("1"), None, "box_size=48"), &["more than MONOLAYER_MEMORY_LIMIT_MB (1 MB)"]);
+    // ulimit -v: refused with the limit named, where it used to abort on allocation.
+    let o = fingerprint(None, Some(1_000_000), "box_size=2000");
+    refused(&o, &["RLIMIT_AS"]);
+    assert_eq!(parse_memory_limit_mb("17592186044416"), Ok(u64::MAX));
+    assert_eq!(cgroup_room("max\n", Some("5")), None);
+    assert_eq!(cgroup_room("1073741824\n", Some("73741824\n")), Some(1_000_000_000));
+    assert_eq!(cgroup_room("9223372036854771712", None), None, "cgroup v1's 'no limit'");
+}
+
+/// Issue 24, item 8: structure and type errors of TOML and JSON name the key and the line.
+#[test]
+fn file_errors_name_the_key_and_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = |text: &str| {
+        let path = dir.path().join("s.toml");
+        fs::write(&path, text).unwrap();
+        SweepSpec::from_file(&path).unwrap_err()
+    };
+    for (text, expect) in [
+        ("seeds = \"1\"\n", "s.toml, line 1: key `seeds`: invalid type"),
+        ("seeds = [1]\nframe_interval = -5\n", "s.toml, line 2: key `frame_interval`: invalid value: integer `-5`"),
+        ("[grid]\nzeta = [0.3]\nzeta = [0.4]\n", "s.toml, line 3: duplicate key `zeta`"),
+        ("[grid]\nzeta = [0.3\n", "s.toml, line 2: "),
+    ] {
+        let e = sweep(text);
+        assert!(e.contains(expect), "{text:?}: {e}");
+    }
+    let config = dir.path().join("c.toml");
+    fs::write(&config, "zeta = 0.3\nbox_size = 99999999999999999999\n").unwrap();
+    let e = monolayer::run::config::load_params(Some(&config), &[]).unwrap_err();
+    assert!(e.contains("c.toml, line 2: key `box_size`: ") && e.contains("too large"), "{e}");
+    let e = monolayer::run::config::load_params(None, &["active_steps=1e19".into()]).unwrap_err();
+    assert!(e.contains("`active_steps`") && e.contains("too large"), "{e}");
+    let run = dir.path().join("r");
+    RunRecord::new(Params { box_size: 48, n_cells: 6, ..Params::default() }, 1, 50).save(&run).unwrap_or_else(|_| {
+        fs::create_dir_all(&run).unwrap();
+        RunRecord::new(Params { box_size: 48, n_cells: 6, ..Params::default() }, 1, 50).save(&run).unwrap()
+    });
+    edit_record(&run, |v| v["seed"] = (-1).into());
+    let e = RunRecord::load(&run).unwrap_err();
+    assert!(e.contains("`seed`") && e.contains("line "), "{e}");
+}
+
+/// Issue 24, item 9: an `--out` an `#SBATCH` line cannot hold is refused, naming what is wrong.
+#[test]
+fn slurm_scripts_refuse_paths_sbatch_cannot_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["a b", "100%", "line\nbreak", "q\"uote"] {
+        let out = dir.path().join(name);
+        let o = monolayer(&["figures", "--only", "S3", "--slurm", "--dry-run", "--out", arg(&out)]);
+        refused(&o, &["--out", "an #SBATCH line cannot hold"]);
+    }
+}
+
+/// Issue 24, item 10: `.lock` is never followed through a symbolic link.
+#[test]
+fn the_lock_is_not_followed_through_a_symlink() {
+    let dir = tempfile::tempdir().unwrap();
+    let victim = dir.path().join("precious.txt");
+    fs::write(&victim, "keep me").unwrap();
+    let run = dir.path().join("r");
+    fs::create_dir_all(&run).unwrap();
+    std::os::unix::fs::symlink(&victim, run.join(RunLock::FILE)).unwrap();
+    let e = RunLock::acquire(&run).unwrap_err();
+    assert!(e.contains("symbolic link"), "{e}");
+    assert_eq!(fs::read_to_string(&victim).unwrap(), "keep me");
+}
+
+/// Issue 24, item 11: a 1-based Slurm array runs every shard; an array that is not contiguous
+/// is refused with what to do, naming the variables Slurm set.
+#[test]
+fn one_based_slurm_arrays_run_every_shard() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let sweep = |id: &str, extra: &[(&str, &str)]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_monolayer"));
+        c.args(["sweep", "--quiet", "--out", arg(&out), "--grid", "zeta=0.2,0.4", "--frame-interval", "50"]);
+        c.args(["--set", "box_size=48", "--set", "n_cells=6", "--set", "relax_steps=50", "--set", "active_steps=50"]);
+        c.env("SLURM_ARRAY_TASK_ID", id).env("SLURM_ARRAY_TASK_COUNT", "2");
+        for (k, v) in extra {
+            c.env(k, v);
+        }
+        c.output().unwrap()
+    };
+    ok(&sweep("2", &[("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_MAX", "2")]));
+    assert!(out.join("runs/zeta0.4_seed1/run.json").exists());
+    assert!(!out.join("runs/zeta0.2_seed1").exists(), "task 2 of 1-2 is the second shard");
+    ok(&sweep("1", &[("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_MAX", "2")]));
+    assert!(out.join("runs/zeta0.2_seed1/run.json").exists());
+    let o = sweep("2", &[]);
+    refused(&o, &["SLURM_ARRAY_TASK_ID = 2", "--shard K/N"]);
+    let o = sweep("4", &[("SLURM_ARRAY_TASK_MIN", "0"), ("SLURM_ARRAY_TASK_MAX", "4")]);
+    refused(&o, &["not one of a contiguous array"]);
+}
+
+/// Issue 24, item 12: absurd but finite inputs are refused.
+#[test]
+fn absurd_finite_inputs_are_refused() {
+    use monolayer::model::snapshot::{decode, encode};
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    // A frame with φ = 1e300 (analysed into NaN before).
+    edit_npz(&frame_path(&run, 150), "phi", |a| match a {
+        Npy::F(a) => a[[0]] = 1e300,
+        Npy::I(_) => unreachable!(),
+    });
+    refused(&analyzed(&run, &dir.path().join("a")), &["frame_0000150.npz", "`phi`"]);
+    // φ = 3 is finite and small, and still no φ a run leaves.
+    edit_npz(&frame_path(&run, 150), "phi", |a| match a {
+        Npy::F(a) => a[[0]] = 3.0,
+        Npy::I(_) => unreachable!(),
+    });
+    refused(&analyzed(&run, &dir.path().join("a")), &["frame_0000150.npz", "φ = 3"]);
+    // A checkpoint whose substrate map is ≤ 0.
+    edit_record(&run, |v| v["status"] = "running".into());
+    edit_npz(&checkpoint_path(&run), "substrate", |a| match a {
+        Npy::F(a) => a[[3, 4]] = -1.0,
+        Npy::I(_) => unreachable!(),
+    });
+    refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["`substrate`", "> 0"]);
+    // The relaxed-state decoder: NaN, a 0-wide patch, a step past any run.
+    let p = Params { box_size: 48, n_cells: 6, ..Params::default() };
+    let state = Monolayer::new(p.clone(), 1).unwrap().state();
+    assert!(decode(&encode(&state, 7), 7, 48).is_ok());
+    let mut nan = state.clone();
+    nan.cells[0].1[5] = f64::NAN;
+    let mut narrow = state.clone();
+    narrow.cells[0].0.w = 0;
+    let mut late = state.clone();
+    late.step = u64::MAX;
+    let mut soft = state.clone();
+    soft.substrate[0] = 0.0;
+    for (what, s) in [("NaN", nan), ("0-wide", narrow), ("u64::MAX", late), ("substrate 0", soft)] {
+        assert!(decode(&encode(&s, 7), 7, 48).is_err(), "{what} accepted");
+    }
+    // A 200,000-value grid is refused before its runs are validated one by one.
+    let values: Vec<String> = (0..200_000).map(|i| format!("{}", 0.1 + i as f64 * 1e-6)).collect();
+    let spec: SweepSpec = toml::from_str(&format!("[grid]\nzeta = [{}]\n", values.join(","))).unwrap();
+    assert!(spec.jobs().unwrap_err().contains("more than a sweep's 100000 runs"));
+}
+
+/// Issue 24, item 13: temporaries of writers killed with -9 (`.staging.PID.N` in the analysis
+/// directory, `.NAME.PID.N.tmp` in a figures directory) are cleaned on the next start; a living
+/// writer's are left.
+#[test]
+fn stale_temporaries_of_dead_writers_are_cleaned() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let analysis = dir.path().join("a");
+    let dead = analysis.join(".staging.999999999.0");
+    let alive = analysis.join(format!(".staging.{}.0", std::process::id()));
+    fs::create_dir_all(&dead).unwrap();
+    fs::create_dir_all(&alive).unwrap();
+    fs::write(dead.join("frames.csv"), "x").unwrap();
+    ok(&analyzed(&run, &analysis));
+    assert!(!dead.exists() && alive.exists());
+    let figs = dir.path().join("f");
+    fs::create_dir_all(&figs).unwrap();
+    let stale = figs.join(".figures.md.999999999.3.tmp");
+    fs::write(&stale, "x").unwrap();
+    let _ = monolayer(&["figures", "--only", "S3", "--stage", "figures", "--out", arg(&figs)]);
+    assert!(!stale.exists());
+}

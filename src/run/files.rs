@@ -74,6 +74,34 @@ pub fn remove_stale_temporaries(dir: &Path) {
     }
 }
 
+/// Removes what writers that are no longer alive left in `dir`: temporary files
+/// (`.NAME.PID.N.tmp`, of [`write_atomic`]) and staging directories (`.staging.PID.N`, of
+/// `analyze`), each named by its writer's process id. A living writer's are left alone, so this
+/// needs no lock (`analyze` and `figures` take none).
+pub fn remove_dead_temporaries(dir: &Path) {
+    let Ok(entries) = fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let pid = if let Some(rest) = name.strip_prefix(".staging.") {
+            rest.split('.').next()
+        } else if name.starts_with('.') && name.ends_with(".tmp") {
+            name.trim_end_matches(".tmp").rsplit('.').nth(1)
+        } else {
+            None
+        };
+        let Some(pid) = pid.and_then(|p| p.parse::<u32>().ok()) else { continue };
+        if pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists() {
+            continue;
+        }
+        let path = entry.path();
+        let _ = if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            fs::remove_dir_all(&path)
+        } else {
+            fs::remove_file(&path)
+        };
+    }
+}
+
 /// The one writer of a run directory: an OS lock on `DIR/.lock`, held while this value lives and
 /// released by the OS when the process ends however it ends (a stale file locks nothing). The
 /// holder's process id is written into the file, for the error the next writer gets.
@@ -88,13 +116,17 @@ impl RunLock {
     /// Takes the lock of `dir` (which must exist), or says which process holds it.
     pub fn acquire(dir: &Path) -> IoResult<Self> {
         let path = dir.join(Self::FILE);
-        let mut file = fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(&path)
-            .map_err(|e| err(&path, e))?;
+        let mut options = fs::OpenOptions::new();
+        options.read(true).write(true).create(true).truncate(false);
+        // Never through a symbolic link: the pid would be written into whatever it points at.
+        #[cfg(unix)]
+        std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NOFOLLOW);
+        let mut file = options.open(&path).map_err(|e| match fs::symlink_metadata(&path) {
+            Ok(m) if m.file_type().is_symlink() => {
+                err(&path, "a symbolic link, not this program's lock file: remove it, then try again")
+            }
+            _ => err(&path, e),
+        })?;
         match file.try_lock() {
             Ok(()) => {}
             Err(fs::TryLockError::WouldBlock) => {
@@ -279,10 +311,11 @@ fn npz_err(path: &Path) -> impl Fn(ndarray_npy::WriteNpzError) -> String + '_ {
     move |e| err(path, e)
 }
 
-/// Refuses NaN and infinities: no file this program writes holds one, so a file that does is
-/// damaged, and the tables measured from it would fill with them.
+/// Refuses NaN, infinities and absurd magnitudes (beyond 10¹⁰⁰, whose squares overflow): no file
+/// this program writes holds one, so a file that does is damaged, and the tables measured from it
+/// would fill with NaN.
 fn finite<'a>(path: &Path, name: &str, values: impl Iterator<Item = &'a f64>) -> IoResult<()> {
-    match values.enumerate().find(|(_, v)| !v.is_finite()) {
+    match values.enumerate().find(|(_, v)| !(v.is_finite() && v.abs() <= 1e100)) {
         Some((k, v)) => Err(err(path, format!("array `{name}` holds {v} at index {k}: a damaged file"))),
         None => Ok(()),
     }
@@ -473,6 +506,9 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     finite(path, "phi_padded", phi.iter())?;
     finite(path, "warm_start", warm.iter())?;
     finite(path, "substrate", substrate.iter())?;
+    if let Some((k, v)) = substrate.iter().enumerate().find(|(_, &v)| v <= 0.0) {
+        return Err(err(path, format!("array `substrate` holds {v} at index {k}: a friction map is > 0")));
+    }
     let mut cells = Vec::with_capacity(n);
     for i in 0..n {
         let (a, b) = (offsets[i], offsets[i + 1]);
@@ -653,6 +689,14 @@ pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
 /// Checks a frame read from a run against the run's record: a frame with cells missing would be
 /// measured as holes where the cells are.
 pub fn check_frame(frame: &Frame, params: &Params) -> IoResult<()> {
+    // A step leaves every φ in [phi_min, phi_max] or fails the run: a frame beyond is damaged.
+    let (lo, hi) = (params.phi_min, params.phi_max);
+    if let Some(v) = frame.cells.iter().flat_map(|(_, phi)| phi.iter()).find(|&&v| !(lo..=hi).contains(&v)) {
+        return Err(err(
+            &frame.path,
+            format!("holds φ = {v}, outside [{lo}, {hi}] where every run stays: a damaged file"),
+        ));
+    }
     if frame.cells.len() != params.n_cells {
         return Err(err(
             &frame.path,

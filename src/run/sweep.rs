@@ -53,6 +53,9 @@ pub struct SweepSpec {
     pub frame_interval: u64,
 }
 
+/// The most runs one sweep takes (the paper's whole plan is 1,002).
+pub const MAX_RUNS: usize = 100_000;
+
 fn default_seeds() -> Vec<u64> {
     vec![1]
 }
@@ -82,7 +85,7 @@ fn value_text(v: &toml::Value) -> String {
 impl SweepSpec {
     pub fn from_file(path: &Path) -> Result<Self, String> {
         let text = fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        toml::from_str(&text).map_err(|e: toml::de::Error| format!("{}: {}", path.display(), e.message()))
+        crate::run::config::from_toml(&text, &path.display().to_string())
     }
 
     /// `KEY=V1,V2,…` from the command line into the grid (values in TOML syntax; bare words
@@ -148,7 +151,11 @@ impl SweepSpec {
             return Err("sweep: `frame_interval` must be ≥ 1".into());
         }
         // Two jobs of one name would share a directory, and the tables would count them twice.
-        if let Some(seed) = self.seeds.iter().enumerate().find_map(|(i, s)| self.seeds[..i].contains(s).then_some(s)) {
+        if self.seeds.len() > MAX_RUNS {
+            return Err(format!("sweep: {} seeds, more than a sweep's {MAX_RUNS} runs", self.seeds.len()));
+        }
+        let mut seen = std::collections::HashSet::new();
+        if let Some(seed) = self.seeds.iter().find(|s| !seen.insert(**s)) {
             return Err(format!("sweep: `seeds` lists {seed} twice"));
         }
         let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
@@ -158,18 +165,25 @@ impl SweepSpec {
                 toml::Value::Array(_) => return Err(format!("sweep: grid `{k}` is an empty list")),
                 other => vec![other.clone()],
             };
-            // Equal as numbers is equal (`zeta = [1, 1.0]`): two runs of one point.
-            let same = |a: &toml::Value, b: &toml::Value| match (number(k, a), number(k, b)) {
-                (Ok(x), Ok(y)) => x == y,
-                _ => value_text(a) == value_text(b),
-            };
-            if let Some((i, j)) =
-                (0..values.len()).find_map(|j| (0..j).find(|&i| same(&values[i], &values[j])).map(|i| (i, j)))
-            {
-                let (a, b) = (value_text(&values[i]), value_text(&values[j]));
+            if values.len() > MAX_RUNS {
                 return Err(format!(
-                    "sweep: grid `{k}` lists {a} twice ({a} and {b} are one value: two identical runs)"
+                    "sweep: grid `{k}` lists {} values, more than a sweep's {MAX_RUNS} runs",
+                    values.len()
                 ));
+            }
+            // Equal as numbers is equal (`zeta = [1, 1.0]`): two runs of one point.
+            let mut seen = std::collections::HashMap::new();
+            for v in &values {
+                let id = match number(k, v) {
+                    Ok(x) => format!("{}", x + 0.0),
+                    Err(_) => value_text(v),
+                };
+                if let Some(first) = seen.insert(id, v) {
+                    let (a, b) = (value_text(first), value_text(v));
+                    return Err(format!(
+                        "sweep: grid `{k}` lists {a} twice ({a} and {b} are one value: two identical runs)"
+                    ));
+                }
             }
             axes.push((k.clone(), values));
         }
@@ -185,6 +199,15 @@ impl SweepSpec {
                         the other): give one of them"
                 .into());
         }
+        let runs = axes
+            .iter()
+            .try_fold(self.points.len().max(1).saturating_mul(self.seeds.len()), |n, (_, v)| n.checked_mul(v.len()))
+            .filter(|&n| n <= MAX_RUNS);
+        if runs.is_none() {
+            return Err(format!(
+                "sweep: more than {MAX_RUNS} runs (the paper's whole plan is 1,002): split it into several sweeps"
+            ));
+        }
         let mut points = self.starting_points()?;
         for (k, values) in &axes {
             points = points
@@ -199,6 +222,7 @@ impl SweepSpec {
                 .collect();
         }
         let mut jobs = Vec::new();
+        let mut names = std::collections::HashMap::new();
         for point in &points {
             let mut table = self.base.clone();
             let mut chi = table.remove("chi");
@@ -228,12 +252,14 @@ impl SweepSpec {
                 let mut name: String = label.iter().map(|(k, v)| format!("{k}{v}_")).collect();
                 name = name.replace(['/', ' ', '"'], "");
                 name.push_str(&format!("seed{seed}"));
-                if let Some(other) = jobs.iter().find(|j: &&Job| j.name == name) {
+                if let Some(&other) = names.get(&name) {
+                    let other: &Job = &jobs[other];
                     return Err(format!(
                         "sweep: runs {:?} and {:?} would share the directory {name}",
                         other.values, label
                     ));
                 }
+                names.insert(name.clone(), jobs.len());
                 jobs.push(Job { name, values: label.clone(), params: params.clone(), seed });
             }
         }
