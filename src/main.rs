@@ -486,6 +486,13 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
             _ => None,
         })
         .collect();
+    if let Some((name, _)) = monolayer::run::runner::stop_signal() {
+        return Err(format!(
+            "stopped by {name}: {} run(s) stopped part way; the same command again continues them from their \
+             checkpoints, and the runs not yet started",
+            stopped.len()
+        ));
+    }
     if !stopped.is_empty() {
         return Err(format!(
             "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \

@@ -137,7 +137,10 @@ fn address_space_limit() -> Option<u64> {
         .find_map(|l| l.strip_prefix("VmSize:"))
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
         .unwrap_or(0);
-    Some((r.rlim_cur as u64).saturating_sub(used_kb.saturating_mul(1024)))
+    // rlim_t is u64 on 64-bit Linux, narrower elsewhere.
+    #[allow(clippy::unnecessary_cast)]
+    let limit = r.rlim_cur as u64;
+    Some(limit.saturating_sub(used_kb.saturating_mul(1024)))
 }
 
 /// The memory a run may use, and what sets it: the least of `MONOLAYER_MEMORY_LIMIT_MB` (else
