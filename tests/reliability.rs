@@ -947,3 +947,53 @@ fn stale_temporaries_of_dead_writers_are_cleaned() {
     let _ = monolayer(&["figures", "--only", "S3", "--stage", "figures", "--out", arg(&figs)]);
     assert!(!stale.exists());
 }
+
+/// Issue 24, item 14, in a sweep: SIGTERM stops the run under way (`stopped: signal SIGTERM`),
+/// starts no other, exits 143; the same command again finishes both.
+#[test]
+fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let args = [
+        "sweep",
+        "--quiet",
+        "--jobs",
+        "1",
+        "--out",
+        arg(&out),
+        "--grid",
+        "zeta=0.2,0.4",
+        "--frame-interval",
+        "50",
+        "--set",
+        "box_size=48",
+        "--set",
+        "n_cells=6",
+        "--set",
+        "relax_steps=100",
+        "--set",
+        "active_steps=3000",
+    ];
+    let child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first = out.join("runs/zeta0.2_seed1");
+    let deadline = Instant::now() + Duration::from_secs(600);
+    while !frame_path(&first, 200).exists() {
+        assert!(Instant::now() < deadline, "the first run never wrote its second frame");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(143), "{}", stderr(&o));
+    assert!(stderr(&o).contains("stopped by SIGTERM"), "{}", stderr(&o));
+    assert_eq!(RunRecord::load(&first).unwrap().status, RunStatus::Stopped("signal SIGTERM".into()));
+    assert!(!out.join("runs/zeta0.4_seed1").exists(), "no run starts after the signal");
+    ok(&monolayer(&args));
+    for run in ["zeta0.2_seed1", "zeta0.4_seed1"] {
+        assert_eq!(RunRecord::load(&out.join("runs").join(run)).unwrap().status, RunStatus::Finished);
+    }
+}
