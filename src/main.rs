@@ -91,8 +91,9 @@ struct FiguresArgs {
     /// the runs and the figures job after it (afterok).
     #[arg(long)]
     slurm: bool,
-    /// With --slurm: print the scripts; write and submit nothing.
-    #[arg(long, requires = "slurm")]
+    /// Print the plan and its estimate (with --slurm, the scripts too); run, write and submit
+    /// nothing.
+    #[arg(long)]
     dry_run: bool,
     /// With --slurm: array tasks running at once (the %N of --array).
     #[arg(long, default_value_t = 16, requires = "slurm")]
@@ -298,6 +299,13 @@ struct BenchArgs {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // The commands that run simulations stop gracefully on SIGTERM and SIGINT.
+    if matches!(cli.command, Command::Run(_) | Command::Sweep(_) | Command::Figures(_)) {
+        if let Err(e) = monolayer::run::runner::stop_gracefully_on_signals() {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    }
     let result = match cli.command {
         Command::Run(a) => a
             .threads
@@ -316,7 +324,11 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(2)
+            // 128 + the signal, as a shell reports a process the signal ended.
+            match monolayer::run::runner::stop_signal() {
+                Some((_, sig)) => ExitCode::from(128 + sig as u8),
+                None => ExitCode::from(2),
+            }
         }
     }
 }
@@ -438,7 +450,10 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
         }
         return Ok(());
     }
-    let shard = a.shard.or(slurm_shard()?);
+    let shard = match a.shard {
+        Some(s) => Some(s),
+        None => slurm_shard()?,
+    };
     let workers = match a.jobs {
         Some(n) => check_threads("--jobs", n)?,
         None => cores(),
@@ -475,6 +490,13 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
             _ => None,
         })
         .collect();
+    if let Some((name, _)) = monolayer::run::runner::stop_signal() {
+        return Err(format!(
+            "stopped by {name}: {} run(s) stopped part way; the same command again continues them from their \
+             checkpoints, and the runs not yet started",
+            stopped.len()
+        ));
+    }
     if !stopped.is_empty() {
         return Err(format!(
             "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \
@@ -501,7 +523,10 @@ fn figures(a: FiguresArgs) -> Result<(), String> {
         scale: a.scale,
         only: a.only,
         sets: a.set,
-        jobs: a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)),
+        jobs: match a.jobs {
+            Some(n) => check_threads("--jobs", n)?,
+            None => cores(),
+        },
         yes: a.yes,
         stage: a.stage,
         shard: a.shard,
@@ -514,15 +539,35 @@ fn figures(a: FiguresArgs) -> Result<(), String> {
 }
 
 /// The shard of a Slurm job array, when run as one.
+/// The task's index counts from the array's first (`SLURM_ARRAY_TASK_MIN`), so that
+/// `--array=1-N` runs every shard as `--array=0-N-1` does.
 fn slurm_shard() -> Result<Option<Shard>, String> {
-    match (std::env::var("SLURM_ARRAY_TASK_ID"), std::env::var("SLURM_ARRAY_TASK_COUNT")) {
-        (Ok(id), Ok(count)) => format!("{id}/{count}").parse().map(Some),
-        _ => Ok(None),
+    let var = |name: &str| std::env::var(name).ok();
+    let (Some(id), Some(count)) = (var("SLURM_ARRAY_TASK_ID"), var("SLURM_ARRAY_TASK_COUNT")) else {
+        return Ok(None);
+    };
+    let number = |name: &str, v: &str| {
+        v.trim().parse::<usize>().map_err(|_| format!("{name} = {v:?}: not a task number (from Slurm's environment)"))
+    };
+    let (id, count) = (number("SLURM_ARRAY_TASK_ID", &id)?, number("SLURM_ARRAY_TASK_COUNT", &count)?);
+    let min = var("SLURM_ARRAY_TASK_MIN").map(|m| number("SLURM_ARRAY_TASK_MIN", &m)).transpose()?.unwrap_or(0);
+    let max = var("SLURM_ARRAY_TASK_MAX").map(|m| number("SLURM_ARRAY_TASK_MAX", &m)).transpose()?;
+    let contiguous = max.is_none_or(|max| max.checked_sub(min).map(|d| d + 1) == Some(count));
+    match id.checked_sub(min) {
+        Some(index) if index < count && count > 0 && contiguous => Ok(Some(Shard { index, count })),
+        _ => Err(format!(
+            "this Slurm array task (SLURM_ARRAY_TASK_ID = {id}, MIN = {min}, MAX = {}, COUNT = {count}) is not one of \
+             a contiguous array such as --array=0-{}: give each task its share with --shard K/N",
+            max.map(|m| m.to_string()).unwrap_or_else(|| "unset".into()),
+            count.saturating_sub(1)
+        )),
     }
 }
 
 fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
     let params = a.params.params()?;
+    params.validate().map_err(|e| e.to_string())?;
+    monolayer::run::runner::check_memory(&params)?;
     let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
     m.advance(a.total_steps).map_err(|e| e.to_string())?;
     println!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint());

@@ -132,4 +132,135 @@ proptest! {
             prop_assert!(Monolayer::from_state(small(), 1, s).is_ok());
         }
     }
+
+    /// Any shape in any array's `.npy` header (issue 24: an 80 GB one aborted the process) is
+    /// refused before it is allocated, or read and checked as any frame is.
+    #[test]
+    fn any_npz_header_shape_is_refused_or_read(
+        array in prop::sample::select(vec!["phi", "patches", "velocity", "phi_offsets", "q_hat", "step"]),
+        shape in prop::collection::vec(prop_oneof![0u64..50, any::<u64>(), Just(1u64 << 33)], 0..4),
+        data in 0usize..200,
+    ) {
+        let (_, frame, checkpoint) = files();
+        let dir = tempfile::tempdir().unwrap();
+        let descr = if ["patches", "phi_offsets", "step"].contains(&array) { "<i8" } else { "<f8" };
+        let bytes = npy(descr, &shape, &vec![0; data]);
+        for (original, read) in [(frame, 0), (checkpoint, 1)] {
+            let path = dir.path().join("x.npz");
+            fs::copy(original, &path).unwrap();
+            let entry = if read == 1 && array == "phi" { "phi_padded" } else { array };
+            replace_npz_entry(&path, entry, &bytes);
+            // Never a panic, never an abort: an error or a checked read.
+            let _ = if read == 0 { read_frame(&path, small().box_size).map(|_| ()) } else { read_checkpoint(&path, small().box_size).map(|_| ()) };
+        }
+    }
+
+    /// Sweep files of any structure (keys, tables and values shuffled from fragments, duplicates
+    /// and unclosed brackets among them) are read or refused with the file and a line; none
+    /// panics.
+    #[test]
+    fn sweep_files_of_any_structure_are_read_or_refused_with_a_line(
+        lines in prop::collection::vec(prop::sample::select(vec![
+            "seeds = [1, 2]", "seeds = \"1\"", "seeds = [-1]", "frame_interval = 50", "frame_interval = -5",
+            "frame_interval = 1e3", "[base]", "[grid]", "[[points]]", "zeta = [0.3, 0.5]", "zeta = 0.4",
+            "zeta = [0.3", "chi = [0.1]", "xi_substrate = [0.5]", "box_size = 99999999999999999999",
+            "active_steps = 1e19", "nonsense", "x = { a = 1 }", "", "# a comment",
+        ]), 0..8),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.toml");
+        fs::write(&path, lines.join("\n")).unwrap();
+        match monolayer::run::sweep::SweepSpec::from_file(&path) {
+            Ok(spec) => {
+                if let Err(e) = spec.jobs() {
+                    prop_assert!(e.starts_with("sweep") || e.contains("parameter"), "{}", e);
+                }
+            }
+            Err(e) => prop_assert!(e.contains("s.toml, line ") || e.contains("s.toml:"), "{}", e),
+        }
+    }
+
+    /// A run record with any set of parameters removed is refused, naming one that is missing;
+    /// with none removed it reads as written.
+    #[test]
+    fn run_records_missing_any_parameters_are_refused_by_name(
+        remove in prop::collection::vec(any::<prop::sample::Index>(), 0..4),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let record = RunRecord::new(small(), 1, 10);
+        record.save(dir.path()).unwrap();
+        let path = dir.path().join("run.json");
+        let mut v: serde_json::Value = serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
+        let keys: Vec<String> = v["params"].as_object().unwrap().keys().cloned().collect();
+        let removed: Vec<String> = remove.iter().map(|i| i.get(&keys).clone()).collect();
+        for k in &removed {
+            v["params"].as_object_mut().unwrap().remove(k);
+        }
+        fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
+        match RunRecord::load(dir.path()) {
+            Ok(r) => prop_assert!(removed.is_empty() && r.params == small()),
+            Err(e) => prop_assert!(removed.iter().any(|k| e.contains(&format!("`params.{k}` is missing"))), "{}", e),
+        }
+    }
+
+    /// The relaxed-state decoder, given a valid file with any bytes changed (and the checksum
+    /// made right again, as a hostile file would), refuses it or yields a state a run can hold:
+    /// finite, patches on the lattice, a step within a run's.
+    #[test]
+    fn relaxed_states_with_any_bytes_changed_are_refused_or_sane(
+        edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+    ) {
+        use monolayer::model::snapshot::{decode, encode};
+        let (_, _, checkpoint) = files();
+        let state = read_checkpoint(checkpoint, small().box_size).unwrap();
+        let mut bytes = encode(&state, 7);
+        let body = bytes.len() - 8;
+        for (at, value) in &edits {
+            bytes[at.index(body)] = *value;
+        }
+        // FNV-1a, as the format's checksum.
+        let sum = bytes[..body].iter().fold(0xcbf29ce484222325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100000001b3));
+        bytes[body..].copy_from_slice(&sum.to_le_bytes());
+        if let Ok(s) = decode(&bytes, 7, small().box_size) {
+            let l = small().box_size;
+            prop_assert!(s.step <= 2_000_000_000);
+            prop_assert!(s.cells.iter().all(|(p, phi)| p.w >= 1 && p.h >= 1 && p.w < l && p.h < l && phi.iter().all(|v| v.is_finite())));
+            prop_assert!(s.substrate.iter().all(|&v| v.is_finite() && v > 0.0));
+        }
+    }
+}
+
+/// An `.npy` whose header declares `shape` of `descr`, followed by `data` bytes only.
+fn npy(descr: &str, shape: &[u64], data: &[u8]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| format!("{d},")).collect();
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}), }}", dims.join(" "));
+    while (10 + dict.len() + 1) % 64 != 0 {
+        dict.push(' ');
+    }
+    dict.push('\n');
+    let mut v = b"\x93NUMPY\x01\x00".to_vec();
+    v.extend((dict.len() as u16).to_le_bytes());
+    v.extend(dict.as_bytes());
+    v.extend(data);
+    v
+}
+
+/// Rewrites the `.npz` at `path` with the entry `name.npy` replaced by `bytes`.
+fn replace_npz_entry(path: &Path, name: &str, bytes: &[u8]) {
+    use std::io::{Read, Write};
+    let mut zip = zip::ZipArchive::new(fs::File::open(path).unwrap()).unwrap();
+    let mut entries = Vec::new();
+    for i in 0..zip.len() {
+        let mut e = zip.by_index(i).unwrap();
+        let mut data = Vec::new();
+        e.read_to_end(&mut data).unwrap();
+        entries.push((e.name().to_string(), data));
+    }
+    let mut w = zip::ZipWriter::new(fs::File::create(path).unwrap());
+    let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+    for (n, data) in entries {
+        w.start_file(n.as_str(), options).unwrap();
+        w.write_all(if n == format!("{name}.npy") { bytes } else { &data }).unwrap();
+    }
+    w.finish().unwrap();
 }

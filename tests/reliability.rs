@@ -492,3 +492,508 @@ fn a_full_disk_during_analyze_leaves_no_partial_tables() {
     assert!(left.is_empty(), "a partial set: {left:?}");
     ok(&analyzed(&run, &out));
 }
+
+// ---- Issue 24 ----
+
+/// A tmpfs of a given size mounted on a fresh directory, unmounted when dropped; None (with a
+/// message) where this process may not mount one, and a failure under `CI=true`, where `.ci/run`
+/// runs the tests as root.
+struct TmpFs {
+    dir: tempfile::TempDir,
+}
+
+impl TmpFs {
+    fn mount(size: &str) -> Option<TmpFs> {
+        let dir = tempfile::tempdir().unwrap();
+        let o = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs", arg(dir.path())])
+            .output();
+        match o {
+            Ok(o) if o.status.success() => Some(TmpFs { dir }),
+            other => {
+                let why = match other {
+                    Ok(o) => stderr(&o),
+                    Err(e) => e.to_string(),
+                };
+                assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true: cannot mount a tmpfs: {why}");
+                eprintln!("skipped: cannot mount a tmpfs here (needs root): {why}");
+                None
+            }
+        }
+    }
+
+    fn path(&self) -> &Path {
+        self.dir.path()
+    }
+
+    fn resize(&self, size: &str) {
+        let o = Command::new("mount").args(["-o", &format!("remount,size={size}"), arg(self.path())]).output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+}
+
+impl Drop for TmpFs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(self.path()).output();
+    }
+}
+
+/// Issue 24, item 1: the full-disk reproduction on a real tmpfs, at several disk sizes (the disk
+/// fills at the checkpoint, at a frame or at the record): every run stops, resumes once there is
+/// space, and ends with the same bits as a run that never stopped.
+#[test]
+fn a_full_disk_at_any_write_resumes_to_the_same_bits() {
+    let args = |out: &Path| -> Vec<String> {
+        let sm = "--threads 1 --quiet --set box_size=48 --set n_cells=10 --relax-steps 200 --steps 1500";
+        let more = "--frame-interval 50 --seed 2 --zeta 0.4 --out";
+        let mut v: Vec<String> = format!("run {sm} {more}").split(' ').map(String::from).collect();
+        v.push(arg(out).to_string());
+        v
+    };
+    let run = |out: &Path| {
+        let a = args(out);
+        monolayer(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let reference = tempfile::tempdir().unwrap();
+    let whole = reference.path().join("r");
+    ok(&run(&whole));
+    let files = |dir: &Path| {
+        let mut v: Vec<_> = fs::read_dir(dir.join("frames")).unwrap().map(|e| e.unwrap().path()).collect();
+        v.sort();
+        v.push(checkpoint_path(dir));
+        v
+    };
+    for size in ["600k", "350k", "1100k"] {
+        let Some(disk) = TmpFs::mount(size) else { return };
+        let stopped = disk.path().join("r");
+        let o = run(&stopped);
+        assert_eq!(o.status.code(), Some(2), "size {size}: {}", stderr(&o));
+        assert!(stderr(&o).contains("No space left on device"), "size {size}: {}", stderr(&o));
+        disk.resize("256m");
+        let o = monolayer(&["run", "--quiet", "--resume", arg(&stopped)]);
+        assert!(o.status.success(), "size {size}: the resume failed: {}", stderr(&o));
+        let (a, b) = (files(&whole), files(&stopped));
+        assert_eq!(a.len(), b.len(), "size {size}");
+        for (x, y) in a.iter().zip(&b) {
+            assert!(fs::read(x).unwrap() == fs::read(y).unwrap(), "size {size}: {} differs", y.display());
+        }
+        let record = RunRecord::load(&stopped).unwrap();
+        assert_eq!((record.status, record.last_frame_step), (RunStatus::Finished, Some(1700)), "size {size}");
+    }
+}
+
+/// Issue 24, item 2: the estimate steps a stable stand-in where the plan's first job blows up
+/// (S3's γ = 0.04 does within 22 steps), and `--dry-run` needs no `--slurm`.
+#[test]
+fn the_estimate_survives_a_plan_whose_first_job_blows_up() {
+    use monolayer::run::figures::{Figure, Plan, Scale, Speed};
+    let plan = Plan::new(Scale::Smoke, &[Figure::FigS3], &[]).unwrap();
+    let first = &plan.jobs[0];
+    assert_eq!(first.params.gamma, 0.04, "S3's first job is the unstable γ = 0.04");
+    let speed = Speed::measure(&[first], 100, 30).unwrap();
+    assert_eq!(speed.sizes.len(), 1);
+    assert!(speed.sizes[0].1 .0 > 0.0 && speed.sizes[0].1 .1 > 0.0, "{:?}", speed.sizes);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("figs");
+    let o = monolayer(&["figures", "--only", "S3", "--dry-run", "--quiet", "--out", arg(&out)]);
+    ok(&o);
+    assert!(stderr(&o).contains("estimate:") && stderr(&o).contains("dry run"), "{}", stderr(&o));
+    assert!(!out.join("runs").exists(), "a dry run runs nothing");
+    let o = monolayer(&["figures", "--only", "S3", "--slurm", "--dry-run", "--out", arg(&out)]);
+    ok(&o);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("runs.sbatch"));
+    let o = monolayer(&["figures", "--set", "gamma=0.04", "--only", "1c", "--dry-run", "--out", arg(&out)]);
+    ok(&o);
+}
+
+/// Issue 24, item 3: a run.json with a parameter removed is refused, naming the key.
+#[test]
+fn a_record_missing_a_parameter_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &["--zeta", "0.4"]));
+    edit_record(&run, |v| {
+        v["params"].as_object_mut().unwrap().remove("zeta");
+        v["status"] = "running".into();
+    });
+    let e = RunRecord::load(&run).unwrap_err();
+    assert!(e.contains("`params.zeta` is missing"), "{e}");
+    refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["run.json", "`params.zeta` is missing"]);
+}
+
+/// Issue 24, item 4: grids that set one parameter twice (directly, or through `chi`) or list
+/// values equal as numbers are refused.
+#[test]
+fn grids_that_set_a_parameter_twice_are_refused() {
+    for (text, expect) in [
+        ("[grid]\nchi = [0.1]\nxi_substrate = [0.1, 0.5]\n", "both `chi` and `xi_substrate`"),
+        ("[base]\nchi = 0.1\n[grid]\nxi_substrate = [0.5]\n", "both `chi` and `xi_substrate`"),
+        ("[grid]\nzeta = [1, 1.0]\n", "grid `zeta` lists 1 twice (1 and 1.0 are one value"),
+        ("[grid]\nactive_steps = [100, 1e2]\n", "grid `active_steps` lists 100 twice"),
+    ] {
+        let spec: SweepSpec = toml::from_str(text).unwrap();
+        let e = spec.jobs().unwrap_err();
+        assert!(e.contains(expect), "{text}: {e}");
+    }
+    let o = monolayer(&["sweep", "--out", "/nonexistent/never", "--grid", "chi=0.1", "--grid", "xi_substrate=0.5"]);
+    refused(&o, &["both `chi` and `xi_substrate`"]);
+    let o = monolayer(&["sweep", "--out", "/nonexistent/never", "--grid", "zeta=1,1.0"]);
+    refused(&o, &["grid `zeta` lists 1 twice"]);
+    let o = monolayer(&["sweep", "--out", "/nonexistent/never", "--grid", "zeta=1", "--grid", "zeta=2"]);
+    refused(&o, &["`zeta` is already a grid axis"]);
+}
+
+/// Issue 24, item 6: `figures --jobs` has the bound of `--threads` and `sweep --jobs`.
+#[test]
+fn figures_jobs_are_bounded() {
+    let o = monolayer(&["figures", "--jobs", "1000", "--dry-run", "--out", "/nonexistent/never"]);
+    refused(&o, &["--jobs 1000: must be in [1, "]);
+}
+
+/// An `.npy` whose header declares `shape` of f64 (or `descr`), followed by `data` bytes only.
+fn npy(descr: &str, shape: &[u64], data: &[u8]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| format!("{d},")).collect();
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}), }}", dims.join(" "));
+    while (10 + dict.len() + 1) % 64 != 0 {
+        dict.push(' ');
+    }
+    dict.push('\n');
+    let mut v = b"\x93NUMPY\x01\x00".to_vec();
+    v.extend((dict.len() as u16).to_le_bytes());
+    v.extend(dict.as_bytes());
+    v.extend(data);
+    v
+}
+
+/// Rewrites the `.npz` at `path` with the entry `name.npy` replaced by `bytes`.
+fn replace_npz_entry(path: &Path, name: &str, bytes: &[u8]) {
+    use std::io::{Read, Write};
+    let mut zip = zip::ZipArchive::new(fs::File::open(path).unwrap()).unwrap();
+    let mut entries = Vec::new();
+    for i in 0..zip.len() {
+        let mut e = zip.by_index(i).unwrap();
+        let mut data = Vec::new();
+        e.read_to_end(&mut data).unwrap();
+        entries.push((e.name().to_string(), data));
+    }
+    let mut w = zip::ZipWriter::new(fs::File::create(path).unwrap());
+    let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+    for (n, data) in entries {
+        w.start_file(n.as_str(), options).unwrap();
+        w.write_all(if n == format!("{name}.npy") { bytes } else { &data }).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// Issue 24, item 5: an `.npz` header declaring a huge shape is refused before anything is
+/// allocated, in `analyze` (a frame) and in `--resume` (the checkpoint); no abort.
+#[test]
+fn huge_npz_headers_are_refused_before_allocating() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let frame = frame_path(&run, 150);
+    replace_npz_entry(&frame, "phi", &npy("<f8", &[10_000_000_000], &[0; 64]));
+    let o = analyzed(&run, &dir.path().join("a"));
+    refused(&o, &["frame_0000150.npz", "array `phi`", "damaged"]);
+    edit_record(&run, |v| v["status"] = "running".into());
+    replace_npz_entry(&checkpoint_path(&run), "warm_start", &npy("<f8", &[100_000, 100_000, 2], &[0; 64]));
+    let o = monolayer(&["run", "--quiet", "--resume", arg(&run)]);
+    refused(&o, &["checkpoint.npz", "array `warm_start`", "damaged"]);
+    // A shape whose product overflows u64.
+    replace_npz_entry(&checkpoint_path(&run), "warm_start", &npy("<f8", &[u64::MAX, 4], &[0; 64]));
+    refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["array `warm_start`"]);
+}
+
+/// Issue 24, item 12: a FIFO named as a frame is refused, not read (which would hang).
+#[test]
+fn a_fifo_among_the_frames_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let fifo = frame_path(&run, 1000);
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    refused(&analyzed(&run, &dir.path().join("a")), &["frame_0001000.npz", "not a regular file"]);
+}
+
+/// Issue 24, item 14: SIGTERM and SIGINT, sent for real to a running `monolayer run`, stop it
+/// after the step under way with `stopped: signal …` and the shell's status (143, 130); the
+/// resume ends with the same bits as a run never stopped.
+#[test]
+fn a_signal_stops_a_run_gracefully_and_it_resumes_to_the_same_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = |out: &Path| -> Vec<String> {
+        let mut v: Vec<String> = SMALL_RUN.iter().map(|s| s.to_string()).collect();
+        v.extend(["--steps", "3000", "--frame-interval", "50", "--out", arg(out)].map(String::from));
+        v
+    };
+    let whole = dir.path().join("whole");
+    ok(&monolayer(&args(&whole).iter().map(String::as_str).collect::<Vec<_>>()));
+    for (signal, status) in [("TERM", 143), ("INT", 130)] {
+        let run = dir.path().join(signal);
+        let child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+            .args(args(&run))
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Once it is in its active phase (a frame written), the signal.
+        let deadline = Instant::now() + Duration::from_secs(600);
+        while !frame_path(&run, 200).exists() {
+            assert!(Instant::now() < deadline, "the run never wrote its second frame");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let sent = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
+        assert!(sent.success());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(status), "SIG{signal}: {}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("stopped by SIG{signal}")), "{}", stderr(&o));
+        let record = RunRecord::load(&run).unwrap();
+        assert_eq!(record.status, RunStatus::Stopped(format!("signal SIG{signal}")), "SIG{signal}");
+        assert!(record.last_frame_step.unwrap() < 3100, "SIG{signal}: it stopped early");
+        ok(&monolayer(&["run", "--quiet", "--resume", arg(&run)]));
+        for step in [200, 1600, 3100] {
+            let (a, b) = (frame_path(&whole, step), frame_path(&run, step));
+            assert!(fs::read(a).unwrap() == fs::read(b).unwrap(), "SIG{signal}: frame {step} differs");
+        }
+        assert!(fs::read(checkpoint_path(&whole)).unwrap() == fs::read(checkpoint_path(&run)).unwrap());
+    }
+}
+
+/// Issue 24, item 7: `MONOLAYER_MEMORY_LIMIT_MB` that cannot be read is named, 2⁴⁴ MB no longer
+/// wraps to 0, RLIMIT_AS is consulted (a run refused, not aborted), and `fingerprint` checks.
+#[test]
+fn the_memory_check_reads_its_variable_and_the_process_limits() {
+    use monolayer::run::runner::{cgroup_room, parse_memory_limit_mb};
+    let fingerprint = |env: Option<&str>, limit_kb: Option<u64>, size: &str| {
+        let ulimit = limit_kb.map(|k| format!("ulimit -v {k}; ")).unwrap_or_default();
+        let mut c = Command::new("sh");
+        c.arg("-c").arg(format!("{ulimit}exec \"$0\" \"$@\"")).arg(env!("CARGO_BIN_EXE_monolayer"));
+        c.args(["fingerprint", "--total-steps", "1", "--set", size, "--set", "n_cells=6"]);
+        if let Some(v) = env {
+            c.env("MONOLAYER_MEMORY_LIMIT_MB", v);
+        }
+        c.output().unwrap()
+    };
+    for bad in ["abc", "100MB", "-5", "1.5", "0", ""] {
+        let o = fingerprint(Some(bad), None, "box_size=48");
+        refused(&o, &["MONOLAYER_MEMORY_LIMIT_MB", "whole number of megabytes"]);
+    }
+    ok(&fingerprint(Some("17592186044416"), None, "box_size=48"));
+    refused(&fingerprint(Some("1"), None, "box_size=48"), &["more than MONOLAYER_MEMORY_LIMIT_MB (1 MB)"]);
+    // ulimit -v: refused with the limit named, where it used to abort on allocation.
+    let o = fingerprint(None, Some(1_000_000), "box_size=2000");
+    refused(&o, &["RLIMIT_AS"]);
+    assert_eq!(parse_memory_limit_mb("17592186044416"), Ok(u64::MAX));
+    assert_eq!(cgroup_room("max\n", Some("5")), None);
+    assert_eq!(cgroup_room("1073741824\n", Some("73741824\n")), Some(1_000_000_000));
+    assert_eq!(cgroup_room("9223372036854771712", None), None, "cgroup v1's 'no limit'");
+}
+
+/// Issue 24, item 8: structure and type errors of TOML and JSON name the key and the line.
+#[test]
+fn file_errors_name_the_key_and_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = |text: &str| {
+        let path = dir.path().join("s.toml");
+        fs::write(&path, text).unwrap();
+        SweepSpec::from_file(&path).unwrap_err()
+    };
+    for (text, expect) in [
+        ("seeds = \"1\"\n", "s.toml, line 1: key `seeds`: invalid type"),
+        ("seeds = [1]\nframe_interval = -5\n", "s.toml, line 2: key `frame_interval`: invalid value: integer `-5`"),
+        ("[grid]\nzeta = [0.3]\nzeta = [0.4]\n", "s.toml, line 3: duplicate key `zeta`"),
+        ("[grid]\nzeta = [0.3\n", "s.toml, line 2: "),
+    ] {
+        let e = sweep(text);
+        assert!(e.contains(expect), "{text:?}: {e}");
+    }
+    let config = dir.path().join("c.toml");
+    fs::write(&config, "zeta = 0.3\nbox_size = 99999999999999999999\n").unwrap();
+    let e = monolayer::run::config::load_params(Some(&config), &[]).unwrap_err();
+    assert!(e.contains("c.toml, line 2: key `box_size`: ") && e.contains("too large"), "{e}");
+    let e = monolayer::run::config::load_params(None, &["active_steps=1e19".into()]).unwrap_err();
+    assert!(e.contains("`active_steps`") && e.contains("too large"), "{e}");
+    let run = dir.path().join("r");
+    RunRecord::new(Params { box_size: 48, n_cells: 6, ..Params::default() }, 1, 50).save(&run).unwrap_or_else(|_| {
+        fs::create_dir_all(&run).unwrap();
+        RunRecord::new(Params { box_size: 48, n_cells: 6, ..Params::default() }, 1, 50).save(&run).unwrap()
+    });
+    edit_record(&run, |v| v["seed"] = (-1).into());
+    let e = RunRecord::load(&run).unwrap_err();
+    assert!(e.contains("`seed`") && e.contains("line "), "{e}");
+}
+
+/// Issue 24, item 9: an `--out` an `#SBATCH` line cannot hold is refused, naming what is wrong.
+#[test]
+fn slurm_scripts_refuse_paths_sbatch_cannot_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["a b", "100%", "line\nbreak", "q\"uote"] {
+        let out = dir.path().join(name);
+        let o = monolayer(&["figures", "--only", "S3", "--slurm", "--dry-run", "--out", arg(&out)]);
+        refused(&o, &["--out", "an #SBATCH line cannot hold"]);
+    }
+}
+
+/// Issue 24, item 10: `.lock` is never followed through a symbolic link.
+#[test]
+fn the_lock_is_not_followed_through_a_symlink() {
+    let dir = tempfile::tempdir().unwrap();
+    let victim = dir.path().join("precious.txt");
+    fs::write(&victim, "keep me").unwrap();
+    let run = dir.path().join("r");
+    fs::create_dir_all(&run).unwrap();
+    std::os::unix::fs::symlink(&victim, run.join(RunLock::FILE)).unwrap();
+    let e = RunLock::acquire(&run).unwrap_err();
+    assert!(e.contains("symbolic link"), "{e}");
+    assert_eq!(fs::read_to_string(&victim).unwrap(), "keep me");
+}
+
+/// Issue 24, item 11: a 1-based Slurm array runs every shard; an array that is not contiguous
+/// is refused with what to do, naming the variables Slurm set.
+#[test]
+fn one_based_slurm_arrays_run_every_shard() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let sweep = |id: &str, extra: &[(&str, &str)]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_monolayer"));
+        c.args(["sweep", "--quiet", "--out", arg(&out), "--grid", "zeta=0.2,0.4", "--frame-interval", "50"]);
+        c.args(["--set", "box_size=48", "--set", "n_cells=6", "--set", "relax_steps=50", "--set", "active_steps=50"]);
+        c.env("SLURM_ARRAY_TASK_ID", id).env("SLURM_ARRAY_TASK_COUNT", "2");
+        for (k, v) in extra {
+            c.env(k, v);
+        }
+        c.output().unwrap()
+    };
+    ok(&sweep("2", &[("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_MAX", "2")]));
+    assert!(out.join("runs/zeta0.4_seed1/run.json").exists());
+    assert!(!out.join("runs/zeta0.2_seed1").exists(), "task 2 of 1-2 is the second shard");
+    ok(&sweep("1", &[("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_MAX", "2")]));
+    assert!(out.join("runs/zeta0.2_seed1/run.json").exists());
+    let o = sweep("2", &[]);
+    refused(&o, &["SLURM_ARRAY_TASK_ID = 2", "--shard K/N"]);
+    let o = sweep("4", &[("SLURM_ARRAY_TASK_MIN", "0"), ("SLURM_ARRAY_TASK_MAX", "4")]);
+    refused(&o, &["not one of a contiguous array"]);
+}
+
+/// Issue 24, item 12: absurd but finite inputs are refused.
+#[test]
+fn absurd_finite_inputs_are_refused() {
+    use monolayer::model::snapshot::{decode, encode};
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    // A frame with φ = 1e300 (analysed into NaN before).
+    edit_npz(&frame_path(&run, 150), "phi", |a| match a {
+        Npy::F(a) => a[[0]] = 1e300,
+        Npy::I(_) => unreachable!(),
+    });
+    refused(&analyzed(&run, &dir.path().join("a")), &["frame_0000150.npz", "`phi`"]);
+    // φ = 3 is finite and small, and still no φ a run leaves.
+    edit_npz(&frame_path(&run, 150), "phi", |a| match a {
+        Npy::F(a) => a[[0]] = 3.0,
+        Npy::I(_) => unreachable!(),
+    });
+    refused(&analyzed(&run, &dir.path().join("a")), &["frame_0000150.npz", "φ = 3"]);
+    // A checkpoint whose substrate map is ≤ 0.
+    edit_record(&run, |v| v["status"] = "running".into());
+    edit_npz(&checkpoint_path(&run), "substrate", |a| match a {
+        Npy::F(a) => a[[3, 4]] = -1.0,
+        Npy::I(_) => unreachable!(),
+    });
+    refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["`substrate`", "> 0"]);
+    // The relaxed-state decoder: NaN, a 0-wide patch, a step past any run.
+    let p = Params { box_size: 48, n_cells: 6, ..Params::default() };
+    let state = Monolayer::new(p.clone(), 1).unwrap().state();
+    assert!(decode(&encode(&state, 7), 7, 48).is_ok());
+    let mut nan = state.clone();
+    nan.cells[0].1[5] = f64::NAN;
+    let mut narrow = state.clone();
+    narrow.cells[0].0.w = 0;
+    let mut late = state.clone();
+    late.step = u64::MAX;
+    let mut soft = state.clone();
+    soft.substrate[0] = 0.0;
+    for (what, s) in [("NaN", nan), ("0-wide", narrow), ("u64::MAX", late), ("substrate 0", soft)] {
+        assert!(decode(&encode(&s, 7), 7, 48).is_err(), "{what} accepted");
+    }
+    // A 200,000-value grid is refused before its runs are validated one by one.
+    let values: Vec<String> = (0..200_000).map(|i| format!("{}", 0.1 + i as f64 * 1e-6)).collect();
+    let spec: SweepSpec = toml::from_str(&format!("[grid]\nzeta = [{}]\n", values.join(","))).unwrap();
+    assert!(spec.jobs().unwrap_err().contains("more than a sweep's 100000 runs"));
+}
+
+/// Issue 24, item 13: temporaries of writers killed with -9 (`.staging.PID.N` in the analysis
+/// directory, `.NAME.PID.N.tmp` in a figures directory) are cleaned on the next start; a living
+/// writer's are left.
+#[test]
+fn stale_temporaries_of_dead_writers_are_cleaned() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let analysis = dir.path().join("a");
+    let dead = analysis.join(".staging.999999999.0");
+    let alive = analysis.join(format!(".staging.{}.0", std::process::id()));
+    fs::create_dir_all(&dead).unwrap();
+    fs::create_dir_all(&alive).unwrap();
+    fs::write(dead.join("frames.csv"), "x").unwrap();
+    ok(&analyzed(&run, &analysis));
+    assert!(!dead.exists() && alive.exists());
+    let figs = dir.path().join("f");
+    fs::create_dir_all(&figs).unwrap();
+    let stale = figs.join(".figures.md.999999999.3.tmp");
+    fs::write(&stale, "x").unwrap();
+    let _ = monolayer(&["figures", "--only", "S3", "--stage", "figures", "--out", arg(&figs)]);
+    assert!(!stale.exists());
+}
+
+/// Issue 24, item 14, in a sweep: SIGTERM stops the run under way (`stopped: signal SIGTERM`),
+/// starts no other, exits 143; the same command again finishes both.
+#[test]
+fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let args = [
+        "sweep",
+        "--quiet",
+        "--jobs",
+        "1",
+        "--out",
+        arg(&out),
+        "--grid",
+        "zeta=0.2,0.4",
+        "--frame-interval",
+        "50",
+        "--set",
+        "box_size=48",
+        "--set",
+        "n_cells=6",
+        "--set",
+        "relax_steps=100",
+        "--set",
+        "active_steps=3000",
+    ];
+    let child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first = out.join("runs/zeta0.2_seed1");
+    let deadline = Instant::now() + Duration::from_secs(600);
+    while !frame_path(&first, 200).exists() {
+        assert!(Instant::now() < deadline, "the first run never wrote its second frame");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(143), "{}", stderr(&o));
+    assert!(stderr(&o).contains("stopped by SIGTERM"), "{}", stderr(&o));
+    assert_eq!(RunRecord::load(&first).unwrap().status, RunStatus::Stopped("signal SIGTERM".into()));
+    assert!(!out.join("runs/zeta0.4_seed1").exists(), "no run starts after the signal");
+    ok(&monolayer(&args));
+    for run in ["zeta0.2_seed1", "zeta0.4_seed1"] {
+        assert_eq!(RunRecord::load(&out.join("runs").join(run)).unwrap().status, RunStatus::Finished);
+    }
+}

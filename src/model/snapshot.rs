@@ -121,6 +121,10 @@ pub fn decode(bytes: &[u8], key: u64, l: usize) -> Result<State, SimError> {
         )));
     }
     let step = r.u64()?;
+    // Both phases at their longest: a larger step count is no state of a run (and would wrap).
+    if step > 2 * crate::model::params::MAX_STEPS {
+        return Err(bad(format!("step {step}: more than a run's 2·10⁹ steps")));
+    }
     let (file_l, n) = (r.u32()? as usize, r.u32()? as usize);
     if file_l != l {
         return Err(bad(format!("lattice {file_l}×{file_l}, the parameters say {l}×{l}")));
@@ -128,7 +132,7 @@ pub fn decode(bytes: &[u8], key: u64, l: usize) -> Result<State, SimError> {
     let mut cells = Vec::with_capacity(n.min(body.len() / 16));
     for i in 0..n {
         let [x0, y0, w, h] = [r.u32()?, r.u32()?, r.u32()?, r.u32()?].map(|v| v as usize);
-        if [x0, y0, w, h].iter().any(|&v| v >= l) {
+        if [x0, y0, w, h].iter().any(|&v| v >= l) || w == 0 || h == 0 {
             return Err(bad(format!("cell {i}: patch ({x0}, {y0}, {w}, {h}) does not fit the {l}×{l} lattice")));
         }
         let patch = Patch { x0, y0, w, h };
@@ -144,6 +148,16 @@ pub fn decode(bytes: &[u8], key: u64, l: usize) -> Result<State, SimError> {
     let substrate = if flags & HAS_SUBSTRATE != 0 { r.f64s(l * l)? } else { vec![1.0; l * l] };
     if r.at != body.len() {
         return Err(bad(format!("{} bytes left over after the state", body.len() - r.at)));
+    }
+    let nan = |what: &str| bad(format!("{what} holds NaN or an infinity: a damaged file"));
+    if cells.iter().any(|(_, phi)| phi.iter().any(|v| !v.is_finite())) {
+        return Err(nan("φ"));
+    }
+    if warm_start.iter().any(|c: &C64| !c.re.is_finite() || !c.im.is_finite()) {
+        return Err(nan("the warm start"));
+    }
+    if substrate.iter().any(|&v| !(v.is_finite() && v > 0.0)) {
+        return Err(bad("the substrate map holds a value that is not a finite friction > 0".into()));
     }
     Ok(State { step, cells, warm_start, substrate })
 }

@@ -64,6 +64,9 @@ fn coerce(key: &str, v: &toml::Value, default: &toml::Value) -> Result<toml::Val
         (V::Integer(_), V::Float(x)) if x.is_finite() && *x >= 0.0 && x.fract() == 0.0 && *x < 9.2e18 => {
             Ok(V::Integer(*x as i64))
         }
+        (V::Integer(_), V::Float(x)) if x.is_finite() && *x >= 9.2e18 => {
+            bad(format!("a whole number too large for any count here (at most {})", i64::MAX))
+        }
         (V::Integer(_), _) => bad("must be a whole number ≥ 0".into()),
         (V::String(_), V::String(_)) => Ok(v.clone()),
         (V::String(_), _) => {
@@ -101,6 +104,28 @@ pub fn params_from_table(table: &toml::Table, origin: &str) -> Result<Params, St
     checked.try_into().map_err(|e: toml::de::Error| format!("{origin}: {}", e.message()))
 }
 
+/// A TOML document read into `T`; an error names `origin`, the line and the key (its path).
+pub fn from_toml<T: serde::de::DeserializeOwned>(text: &str, origin: &str) -> Result<T, String> {
+    let error = |e: &toml::de::Error, key: Option<String>| {
+        let line =
+            e.span().map(|s| text.as_bytes()[..s.start.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1);
+        let at = line.map(|l| format!(", line {l}")).unwrap_or_default();
+        let key = key.filter(|k| k != ".").map(|k| format!(" key `{k}`:")).unwrap_or_default();
+        let mut message = e.message().trim().replace(
+            " as i128, expected any valid TOML value",
+            ": too large (a whole number here is at most 9223372036854775807)",
+        );
+        // A duplicate key: its name is what the span covers.
+        if let Some(name) = e.span().and_then(|s| text.get(s)).filter(|n| message.contains("duplicate") && n.len() < 80)
+        {
+            message = format!("{message} `{}`", name.trim());
+        }
+        format!("{origin}{at}:{key} {message}")
+    };
+    let de = toml::Deserializer::parse(text).map_err(|e| error(&e, None))?;
+    serde_path_to_error::deserialize(de).map_err(|e| error(e.inner(), Some(e.path().to_string())))
+}
+
 /// A finite real number for a key that is not a parameter itself (a sweep's `chi`).
 pub fn number(key: &str, v: &toml::Value) -> Result<f64, String> {
     match coerce(key, v, &toml::Value::Float(0.0))? {
@@ -114,8 +139,7 @@ pub fn load_params(config: Option<&Path>, overrides: &[String]) -> Result<Params
     let (mut table, origin) = match config {
         Some(path) => {
             let text = fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-            let table =
-                text.parse::<toml::Table>().map_err(|e| format!("{}: {}", path.display(), e.message().trim()))?;
+            let table: toml::Table = from_toml(&text, &path.display().to_string())?;
             (table, path.display().to_string())
         }
         None => (toml::Table::new(), "--set".to_string()),

@@ -74,6 +74,34 @@ pub fn remove_stale_temporaries(dir: &Path) {
     }
 }
 
+/// Removes what writers that are no longer alive left in `dir`: temporary files
+/// (`.NAME.PID.N.tmp`, of [`write_atomic`]) and staging directories (`.staging.PID.N`, of
+/// `analyze`), each named by its writer's process id. A living writer's are left alone, so this
+/// needs no lock (`analyze` and `figures` take none).
+pub fn remove_dead_temporaries(dir: &Path) {
+    let Ok(entries) = fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let pid = if let Some(rest) = name.strip_prefix(".staging.") {
+            rest.split('.').next()
+        } else if name.starts_with('.') && name.ends_with(".tmp") {
+            name.trim_end_matches(".tmp").rsplit('.').nth(1)
+        } else {
+            None
+        };
+        let Some(pid) = pid.and_then(|p| p.parse::<u32>().ok()) else { continue };
+        if pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists() {
+            continue;
+        }
+        let path = entry.path();
+        let _ = if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            fs::remove_dir_all(&path)
+        } else {
+            fs::remove_file(&path)
+        };
+    }
+}
+
 /// The one writer of a run directory: an OS lock on `DIR/.lock`, held while this value lives and
 /// released by the OS when the process ends however it ends (a stale file locks nothing). The
 /// holder's process id is written into the file, for the error the next writer gets.
@@ -88,13 +116,17 @@ impl RunLock {
     /// Takes the lock of `dir` (which must exist), or says which process holds it.
     pub fn acquire(dir: &Path) -> IoResult<Self> {
         let path = dir.join(Self::FILE);
-        let mut file = fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(&path)
-            .map_err(|e| err(&path, e))?;
+        let mut options = fs::OpenOptions::new();
+        options.read(true).write(true).create(true).truncate(false);
+        // Never through a symbolic link: the pid would be written into whatever it points at.
+        #[cfg(unix)]
+        std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NOFOLLOW);
+        let mut file = options.open(&path).map_err(|e| match fs::symlink_metadata(&path) {
+            Ok(m) if m.file_type().is_symlink() => {
+                err(&path, "a symbolic link, not this program's lock file: remove it, then try again")
+            }
+            _ => err(&path, e),
+        })?;
         match file.try_lock() {
             Ok(()) => {}
             Err(fs::TryLockError::WouldBlock) => {
@@ -232,9 +264,9 @@ impl RunRecord {
         if !dir.is_dir() {
             return Err(format!("{}: no such directory", dir.display()));
         }
-        let file = File::open(&path).map_err(|e| err(&path, format!("{e} (is this a run directory?)")))?;
+        let text = fs::read_to_string(&path).map_err(|e| err(&path, format!("{e} (is this a run directory?)")))?;
         let value: serde_json::Value =
-            serde_json::from_reader(BufReader::new(file)).map_err(|e| err(&path, format!("not valid JSON: {e}")))?;
+            serde_json::from_str(&text).map_err(|e| err(&path, format!("not valid JSON: {e}")))?;
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
             return Err(err(&path, format!("not a record of this program (no \"format\": \"{FORMAT}\")")));
         }
@@ -242,7 +274,26 @@ impl RunRecord {
         if v != Some(FORMAT_VERSION as u64) {
             return Err(err(&path, format!("format_version {v:?}, this program reads {FORMAT_VERSION}")));
         }
-        let record: RunRecord = serde_json::from_value(value).map_err(|e| err(&path, e))?;
+        // A run continues with the parameters it was started with, never with a default: a record
+        // without one (hand-edited, or of an older version that lacked it) is refused by name.
+        let given = value
+            .get("params")
+            .and_then(|p| p.as_object())
+            .ok_or_else(|| err(&path, "no `params` table: not a complete run record"))?;
+        let defaults = serde_json::to_value(Params::default()).expect("the defaults serialise");
+        let defaults = defaults.as_object().expect("params are a table");
+        if let Some((k, d)) = defaults.iter().find(|(k, _)| !given.contains_key(k.as_str())) {
+            return Err(err(
+                &path,
+                format!(
+                    "parameter `params.{k}` is missing: a run resumes only with the values it started with, never \
+                     a default; add `\"{k}\": VALUE` with the run's value (this version's default is {d})"
+                ),
+            ));
+        }
+        let mut de = serde_json::Deserializer::from_str(&text);
+        let record: RunRecord = serde_path_to_error::deserialize(&mut de)
+            .map_err(|e| err(&path, format!("`{}`: {}", e.path(), e.inner())))?;
         record.params.validate().map_err(|e| err(&path, e))?;
         if record.frame_interval == 0 {
             return Err(err(&path, "`frame_interval` = 0: must be ≥ 1"));
@@ -260,10 +311,11 @@ fn npz_err(path: &Path) -> impl Fn(ndarray_npy::WriteNpzError) -> String + '_ {
     move |e| err(path, e)
 }
 
-/// Refuses NaN and infinities: no file this program writes holds one, so a file that does is
-/// damaged, and the tables measured from it would fill with them.
+/// Refuses NaN, infinities and absurd magnitudes (beyond 10¹⁰⁰, whose squares overflow): no file
+/// this program writes holds one, so a file that does is damaged, and the tables measured from it
+/// would fill with NaN.
 fn finite<'a>(path: &Path, name: &str, values: impl Iterator<Item = &'a f64>) -> IoResult<()> {
-    match values.enumerate().find(|(_, v)| !v.is_finite()) {
+    match values.enumerate().find(|(_, v)| !(v.is_finite() && v.abs() <= 1e100)) {
         Some((k, v)) => Err(err(path, format!("array `{name}` holds {v} at index {k}: a damaged file"))),
         None => Ok(()),
     }
@@ -361,8 +413,73 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     })
 }
 
+/// The shape and item size an `.npy` header declares: `(shape, bytes per item)`.
+fn npy_header(bytes: &[u8]) -> Option<(Vec<u64>, u64)> {
+    let rest = bytes.strip_prefix(b"\x93NUMPY")?;
+    let (len, start) = match rest.first()? {
+        1 => (u16::from_le_bytes([*rest.get(2)?, *rest.get(3)?]) as usize, 4),
+        _ => (u32::from_le_bytes(rest.get(2..6)?.try_into().ok()?) as usize, 6),
+    };
+    let text = std::str::from_utf8(rest.get(start..start + len)?).ok()?;
+    let after = |key: &str| text.find(key).map(|i| &text[i + key.len()..]);
+    let shape = after("'shape':")?;
+    let shape = &shape[shape.find('(')? + 1..shape.find(')')?];
+    let shape =
+        shape.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse().ok()).collect::<Option<_>>()?;
+    let descr = after("'descr':")?;
+    let descr = descr.trim_start().trim_start_matches(['\'', '"']);
+    let digits: String = descr.chars().skip_while(|c| !c.is_ascii_digit()).take_while(char::is_ascii_digit).collect();
+    Some((shape, digits.parse().ok().filter(|&b| b > 0)?))
+}
+
+/// Checks every array's header in the `.npz` at `path` before anything is allocated from it: a
+/// damaged or hostile header may declare any shape (ndarray-npy would allocate it whole, and the
+/// process abort). No array of a run on an L×L lattice holds more than `max_values`, and no
+/// array holds more bytes than its zip entry, whose size deflate bounds by its compressed size.
+fn check_npz_headers(path: &Path, max_values: u64) -> IoResult<()> {
+    let file = File::open(path).map_err(|e| err(path, e))?;
+    let mut zip =
+        zip::ZipArchive::new(BufReader::new(file)).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
+    for i in 0..zip.len() {
+        let mut entry = zip.by_index(i).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
+        let name = entry.name().trim_end_matches(".npy").to_string();
+        // Deflate expands at most 1032-fold.
+        let (size, packed) = (entry.size(), entry.compressed_size());
+        if size > packed.saturating_mul(1100).saturating_add(4096) {
+            return Err(err(path, format!("array `{name}`: {size} bytes from {packed} compressed: a damaged file")));
+        }
+        let mut head = Vec::new();
+        (&mut entry).take(1 << 16).read_to_end(&mut head).map_err(|e| err(path, format!("array `{name}`: {e}")))?;
+        let (shape, item) =
+            npy_header(&head).ok_or_else(|| err(path, format!("array `{name}`: not a readable .npy header")))?;
+        let values = shape.iter().try_fold(1u64, |a, &d| a.checked_mul(d));
+        let bytes = values.and_then(|v| v.checked_mul(item));
+        match (values, bytes) {
+            (Some(v), Some(b)) if v <= max_values && b <= size => {}
+            _ => {
+                return Err(err(
+                    path,
+                    format!(
+                        "array `{name}`: its header declares shape {shape:?}, more than the file holds or a run on \
+                         this lattice has ({max_values} values at most): a damaged file"
+                    ),
+                ))
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The most values one array of a frame or checkpoint of an L×L run holds: the lattice fields
+/// (2 L²), or every cell's φ together (each cell's patch is at most L² and the cells cover the
+/// box a few times at most: 64 L², against ≈ 5 L² at the paper's density).
+fn max_array_values(l: usize) -> u64 {
+    64 * (l as u64).pow(2) + 4096
+}
+
 /// Reads a checkpoint written by [`write_checkpoint`].
 pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
+    check_npz_headers(path, max_array_values(l))?;
     let file = File::open(path).map_err(|e| err(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let e = |name: &str| {
@@ -389,6 +506,9 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     finite(path, "phi_padded", phi.iter())?;
     finite(path, "warm_start", warm.iter())?;
     finite(path, "substrate", substrate.iter())?;
+    if let Some((k, v)) = substrate.iter().enumerate().find(|(_, &v)| v <= 0.0) {
+        return Err(err(path, format!("array `substrate` holds {v} at index {k}: a friction map is > 0")));
+    }
     let mut cells = Vec::with_capacity(n);
     for i in 0..n {
         let (a, b) = (offsets[i], offsets[i + 1]);
@@ -459,6 +579,10 @@ impl RunFrames {
                 continue;
             }
             if let Some(step) = name.strip_prefix("frame_").and_then(|s| s.strip_suffix(".npz")) {
+                // A FIFO or a device would block the reader, or never end.
+                if !fs::metadata(entry.path()).is_ok_and(|m| m.is_file()) {
+                    return Err(format!("{}: not a regular file: not a frame", entry.path().display()));
+                }
                 let step: u64 = step
                     .parse()
                     .map_err(|_| format!("{}: not a frame name (frame_<step>.npz)", entry.path().display()))?;
@@ -489,6 +613,7 @@ impl RunFrames {
 
 /// Reads one frame of a run on an L×L lattice, checking every array's shape.
 pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
+    check_npz_headers(path, max_array_values(l))?;
     let file = File::open(path).map_err(|e| err(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
     let e = |name: &'static str| move |x: ndarray_npy::ReadNpzError| err(path, format!("array `{name}`: {x}"));
@@ -564,6 +689,14 @@ pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
 /// Checks a frame read from a run against the run's record: a frame with cells missing would be
 /// measured as holes where the cells are.
 pub fn check_frame(frame: &Frame, params: &Params) -> IoResult<()> {
+    // A step leaves every φ in [phi_min, phi_max] or fails the run: a frame beyond is damaged.
+    let (lo, hi) = (params.phi_min, params.phi_max);
+    if let Some(v) = frame.cells.iter().flat_map(|(_, phi)| phi.iter()).find(|&&v| !(lo..=hi).contains(&v)) {
+        return Err(err(
+            &frame.path,
+            format!("holds φ = {v}, outside [{lo}, {hi}] where every run stays: a damaged file"),
+        ));
+    }
     if frame.cells.len() != params.n_cells {
         return Err(err(
             &frame.path,

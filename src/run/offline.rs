@@ -273,6 +273,7 @@ impl RunAnalysis {
     ) -> Result<Vec<PathBuf>, String> {
         static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
         let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        super::files::remove_dead_temporaries(out);
         let stage = out.join(format!(".staging.{}.{call}", std::process::id()));
         let staged = fs::create_dir_all(&stage)
             .map_err(|e| format!("{}: {e}", stage.display()))

@@ -4,6 +4,7 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
@@ -31,6 +32,36 @@ enum Stop {
     Simulation(String),
     /// Writing its files failed: the machine's problem, and the run can go on from its checkpoint.
     Io(String),
+    /// SIGTERM or SIGINT (Slurm, Ctrl-C): the step under way was finished; the run goes on from its
+    /// checkpoint.
+    Signal(&'static str),
+}
+
+static SIGTERM_SEEN: AtomicBool = AtomicBool::new(false);
+static SIGINT_SEEN: AtomicBool = AtomicBool::new(false);
+
+/// Turns SIGTERM and SIGINT into a graceful stop for this process: a run finishes the step under
+/// way, records `stopped: signal …` and returns (then [`stop_signal`] says which); a second
+/// signal of the same kind ends the process at once, as the first would have.
+pub fn stop_gracefully_on_signals() -> Result<(), String> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    for (sig, seen) in [(SIGTERM, &SIGTERM_SEEN), (SIGINT, &SIGINT_SEEN)] {
+        // The default action first, armed by the flag the second handler sets.
+        signal_hook::flag::register_conditional_default(sig, seen).map_err(|e| format!("signal handler: {e}"))?;
+        signal_hook::flag::register(sig, seen).map_err(|e| format!("signal handler: {e}"))?;
+    }
+    Ok(())
+}
+
+/// The signal that asked this process to stop, if one did: (name, number).
+pub fn stop_signal() -> Option<(&'static str, i32)> {
+    if SIGTERM_SEEN.load(Ordering::SeqCst) {
+        Some(("SIGTERM", 15))
+    } else if SIGINT_SEEN.load(Ordering::SeqCst) {
+        Some(("SIGINT", 2))
+    } else {
+        None
+    }
 }
 
 /// Bytes a run of `params` needs at most, roughly (within about 1.5× of the peak measured): the
@@ -46,28 +77,110 @@ pub fn memory_estimate(params: &Params) -> u64 {
     sites * BYTES_PER_SITE + params.n_cells as u64 * side * side * FIELDS_PER_CELL_SITE * 8 + (16 << 20)
 }
 
-/// The memory a run may use: `MONOLAYER_MEMORY_LIMIT_MB` if set, else what the system says is
-/// available (Linux's MemAvailable); None where neither is known.
-fn memory_limit() -> Option<(u64, &'static str)> {
-    if let Some(mb) = std::env::var("MONOLAYER_MEMORY_LIMIT_MB").ok().and_then(|v| v.trim().parse::<u64>().ok()) {
-        return Some((mb << 20, "MONOLAYER_MEMORY_LIMIT_MB"));
+/// `MONOLAYER_MEMORY_LIMIT_MB` read: a whole number of megabytes ≥ 1, or an error naming it.
+pub fn parse_memory_limit_mb(text: &str) -> Result<u64, String> {
+    match text.trim().parse::<u64>() {
+        Ok(mb) if mb >= 1 => Ok(mb.saturating_mul(1 << 20)),
+        _ => Err(format!("MONOLAYER_MEMORY_LIMIT_MB = {text:?}: must be a whole number of megabytes ≥ 1, e.g. 4096")),
     }
-    let info = fs::read_to_string("/proc/meminfo").ok()?;
-    let kb: u64 = info
+}
+
+/// What a cgroup leaves: its `memory.max` (v2: a number or `max`; v1's `memory.limit_in_bytes`
+/// says "none" with a number near 2⁶³) less its `memory.current` (v1: `memory.usage_in_bytes`).
+pub fn cgroup_room(max: &str, current: Option<&str>) -> Option<u64> {
+    let max: u64 = max.trim().parse().ok().filter(|&m| m < 1 << 60)?;
+    let current: u64 = current.and_then(|c| c.trim().parse().ok()).unwrap_or(0);
+    Some(max.saturating_sub(current))
+}
+
+/// The smallest room the cgroups of this process leave (a Slurm `--mem`, a container): v2's
+/// `memory.max` and v1's `memory.limit_in_bytes` of its cgroup and every one above it.
+fn cgroup_limit() -> Option<u64> {
+    let own = fs::read_to_string("/proc/self/cgroup").ok()?;
+    let mut least: Option<u64> = None;
+    for line in own.lines() {
+        let mut parts = line.splitn(3, ':');
+        let (_, controllers, path) = (parts.next()?, parts.next()?, parts.next()?);
+        let (base, max, current) = match controllers {
+            "" => ("/sys/fs/cgroup".to_string(), "memory.max", "memory.current"),
+            c if c.split(',').any(|c| c == "memory") => {
+                ("/sys/fs/cgroup/memory".to_string(), "memory.limit_in_bytes", "memory.usage_in_bytes")
+            }
+            _ => continue,
+        };
+        let mut dir = PathBuf::from(format!("{base}{}", path.trim_end_matches('/')));
+        loop {
+            if let Ok(m) = fs::read_to_string(dir.join(max)) {
+                let c = fs::read_to_string(dir.join(current)).ok();
+                if let Some(room) = cgroup_room(&m, c.as_deref()) {
+                    least = Some(least.map_or(room, |l| l.min(room)));
+                }
+            }
+            if dir.as_os_str().len() <= base.len() || !dir.pop() {
+                break;
+            }
+        }
+    }
+    least
+}
+
+/// What RLIMIT_AS (`ulimit -v`) leaves this process: the limit less its address space now.
+fn address_space_limit() -> Option<u64> {
+    let mut r = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+    // SAFETY: getrlimit writes the struct it is given and nothing else.
+    if unsafe { libc::getrlimit(libc::RLIMIT_AS, &mut r) } != 0 || r.rlim_cur == libc::RLIM_INFINITY {
+        return None;
+    }
+    let status = fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let used_kb: u64 = status
         .lines()
-        .find_map(|l| l.strip_prefix("MemAvailable:"))?
-        .trim()
-        .trim_end_matches("kB")
-        .trim()
-        .parse()
-        .ok()?;
-    Some((kb << 10, "the memory available"))
+        .find_map(|l| l.strip_prefix("VmSize:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .unwrap_or(0);
+    // rlim_t is u64 on 64-bit Linux, narrower elsewhere.
+    #[allow(clippy::unnecessary_cast)]
+    let limit = r.rlim_cur as u64;
+    Some(limit.saturating_sub(used_kb.saturating_mul(1024)))
+}
+
+/// The memory a run may use, and what sets it: the least of `MONOLAYER_MEMORY_LIMIT_MB` (else
+/// Linux's MemAvailable), the room of the process's cgroups and of its RLIMIT_AS; None where
+/// none is known. An unreadable `MONOLAYER_MEMORY_LIMIT_MB` is an error.
+fn memory_limit() -> Result<Option<(u64, &'static str)>, String> {
+    let mut limits: Vec<(u64, &'static str)> = Vec::new();
+    match std::env::var("MONOLAYER_MEMORY_LIMIT_MB") {
+        Ok(v) => limits.push((parse_memory_limit_mb(&v)?, "MONOLAYER_MEMORY_LIMIT_MB")),
+        Err(std::env::VarError::NotUnicode(v)) => {
+            return Err(format!("MONOLAYER_MEMORY_LIMIT_MB = {v:?}: must be a whole number of megabytes ≥ 1"))
+        }
+        Err(std::env::VarError::NotPresent) => {
+            let available = fs::read_to_string("/proc/meminfo").ok().and_then(|info| {
+                info.lines()
+                    .find_map(|l| l.strip_prefix("MemAvailable:"))?
+                    .trim()
+                    .trim_end_matches("kB")
+                    .trim()
+                    .parse::<u64>()
+                    .ok()
+            });
+            if let Some(kb) = available {
+                limits.push((kb.saturating_mul(1024), "the memory available"));
+            }
+        }
+    }
+    if let Some(room) = cgroup_limit() {
+        limits.push((room, "what this process's cgroup leaves (memory.max)"));
+    }
+    if let Some(room) = address_space_limit() {
+        limits.push((room, "what RLIMIT_AS (ulimit -v) leaves"));
+    }
+    Ok(limits.into_iter().min_by_key(|l| l.0))
 }
 
 /// Refuses a run that would not fit in memory, before it starts, with what it would need.
 pub fn check_memory(params: &Params) -> Result<(), String> {
     let need = memory_estimate(params);
-    match memory_limit() {
+    match memory_limit()? {
         Some((limit, what)) if need > limit => Err(format!(
             "box_size = {}, n_cells = {} need about {} MB, more than {what} ({} MB): lower box_size or n_cells",
             params.box_size,
@@ -186,11 +299,18 @@ impl RunDir {
             Ok(()) => RunStatus::Finished,
             Err(Stop::Simulation(e)) => RunStatus::Failed(e.clone()),
             Err(Stop::Io(e)) => RunStatus::Stopped(e.clone()),
+            Err(Stop::Signal(name)) => RunStatus::Stopped(format!("signal {name}")),
         };
         let saved = self.record.save(&self.dir);
         match outcome {
             Ok(()) => saved,
             Err(Stop::Simulation(e)) => Err(e),
+            Err(Stop::Signal(name)) => Err(format!(
+                "stopped by {name} at step {}: `run --resume {}` (or the same sweep again) continues it from its \
+                 last checkpoint",
+                self.monolayer.step_count(),
+                self.dir.display()
+            )),
             Err(Stop::Io(e)) => Err(format!(
                 "{e}\n  the run itself is sound: once this is fixed, `run --resume {}` (or the same sweep again) \
                  continues it from its last checkpoint",
@@ -209,6 +329,9 @@ impl RunDir {
         let checkpoint = checkpoint_path(&self.dir);
         let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
         while m.step_count() < total {
+            if let Some((name, _)) = stop_signal() {
+                return Err(Stop::Signal(name));
+            }
             if let Err(e) = m.step() {
                 let last_good = dir.join(LAST_GOOD_STATE);
                 write_checkpoint(m, &last_good).map_err(Stop::Io)?;
@@ -224,13 +347,18 @@ impl RunDir {
             if frame {
                 m.evaluate_now().map_err(|e| Stop::Simulation(e.to_string()))?;
                 write_frame(m, &frame_path(dir, s)).map_err(Stop::Io)?;
-                record.last_frame_step = Some(s);
                 if let Some(Err(e)) = live.as_deref_mut().map(|live| live.frame(m)) {
                     watch(m, &Event::AnalysisFailed(e));
                 }
             }
             if frame || s == p.relax_steps {
                 write_checkpoint(m, &checkpoint).map_err(Stop::Io)?;
+                // The record's last frame advances only once the checkpoint of its step is
+                // safely written: a failed checkpoint write (a full disk) leaves the record at the
+                // previous checkpoint, which `--resume` continues from.
+                if frame {
+                    record.last_frame_step = Some(s);
+                }
                 record.save(dir).map_err(Stop::Io)?;
                 if frame {
                     watch(m, &Event::Frame);

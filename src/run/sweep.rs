@@ -53,6 +53,9 @@ pub struct SweepSpec {
     pub frame_interval: u64,
 }
 
+/// The most runs one sweep takes (the paper's whole plan is 1,002).
+pub const MAX_RUNS: usize = 100_000;
+
 fn default_seeds() -> Vec<u64> {
     vec![1]
 }
@@ -82,13 +85,18 @@ fn value_text(v: &toml::Value) -> String {
 impl SweepSpec {
     pub fn from_file(path: &Path) -> Result<Self, String> {
         let text = fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        toml::from_str(&text).map_err(|e: toml::de::Error| format!("{}: {}", path.display(), e.message()))
+        crate::run::config::from_toml(&text, &path.display().to_string())
     }
 
     /// `KEY=V1,V2,…` from the command line into the grid (values in TOML syntax; bare words
     /// are strings).
     pub fn add_grid(&mut self, arg: &str) -> Result<(), String> {
         let (k, values) = parse_list("--grid", arg)?;
+        if self.grid.contains_key(&k) {
+            return Err(format!(
+                "--grid {arg}: `{k}` is already a grid axis (give its values in one --grid {k}=V1,V2,…)"
+            ));
+        }
         self.grid.insert(k, toml::Value::Array(values));
         Ok(())
     }
@@ -143,7 +151,11 @@ impl SweepSpec {
             return Err("sweep: `frame_interval` must be ≥ 1".into());
         }
         // Two jobs of one name would share a directory, and the tables would count them twice.
-        if let Some(seed) = self.seeds.iter().enumerate().find_map(|(i, s)| self.seeds[..i].contains(s).then_some(s)) {
+        if self.seeds.len() > MAX_RUNS {
+            return Err(format!("sweep: {} seeds, more than a sweep's {MAX_RUNS} runs", self.seeds.len()));
+        }
+        let mut seen = std::collections::HashSet::new();
+        if let Some(seed) = self.seeds.iter().find(|s| !seen.insert(**s)) {
             return Err(format!("sweep: `seeds` lists {seed} twice"));
         }
         let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
@@ -153,11 +165,48 @@ impl SweepSpec {
                 toml::Value::Array(_) => return Err(format!("sweep: grid `{k}` is an empty list")),
                 other => vec![other.clone()],
             };
-            let texts: Vec<String> = values.iter().map(value_text).collect();
-            if let Some(t) = texts.iter().enumerate().find_map(|(i, t)| texts[..i].contains(t).then_some(t)) {
-                return Err(format!("sweep: grid `{k}` lists {t} twice"));
+            if values.len() > MAX_RUNS {
+                return Err(format!(
+                    "sweep: grid `{k}` lists {} values, more than a sweep's {MAX_RUNS} runs",
+                    values.len()
+                ));
+            }
+            // Equal as numbers is equal (`zeta = [1, 1.0]`): two runs of one point.
+            let mut seen = std::collections::HashMap::new();
+            for v in &values {
+                let id = match number(k, v) {
+                    Ok(x) => format!("{}", x + 0.0),
+                    Err(_) => value_text(v),
+                };
+                if let Some(first) = seen.insert(id, v) {
+                    let (a, b) = (value_text(first), value_text(v));
+                    return Err(format!(
+                        "sweep: grid `{k}` lists {a} twice ({a} and {b} are one value: two identical runs)"
+                    ));
+                }
             }
             axes.push((k.clone(), values));
+        }
+        // `chi` sets ξ_s = χ·ξ_cell: beside `xi_substrate` one of the two would be overridden
+        // silently, and the run named and tabled by the other.
+        let sets = |key: &str| {
+            self.base.contains_key(key)
+                || self.grid.contains_key(key)
+                || self.points.iter().any(|p| p.contains_key(key))
+        };
+        if sets("chi") && sets("xi_substrate") {
+            return Err("sweep: sets both `chi` and `xi_substrate` (χ sets ξ_s = χ·ξ_cell, so one would override \
+                        the other): give one of them"
+                .into());
+        }
+        let runs = axes
+            .iter()
+            .try_fold(self.points.len().max(1).saturating_mul(self.seeds.len()), |n, (_, v)| n.checked_mul(v.len()))
+            .filter(|&n| n <= MAX_RUNS);
+        if runs.is_none() {
+            return Err(format!(
+                "sweep: more than {MAX_RUNS} runs (the paper's whole plan is 1,002): split it into several sweeps"
+            ));
         }
         let mut points = self.starting_points()?;
         for (k, values) in &axes {
@@ -173,6 +222,7 @@ impl SweepSpec {
                 .collect();
         }
         let mut jobs = Vec::new();
+        let mut names = std::collections::HashMap::new();
         for point in &points {
             let mut table = self.base.clone();
             let mut chi = table.remove("chi");
@@ -202,12 +252,14 @@ impl SweepSpec {
                 let mut name: String = label.iter().map(|(k, v)| format!("{k}{v}_")).collect();
                 name = name.replace(['/', ' ', '"'], "");
                 name.push_str(&format!("seed{seed}"));
-                if let Some(other) = jobs.iter().find(|j: &&Job| j.name == name) {
+                if let Some(&other) = names.get(&name) {
+                    let other: &Job = &jobs[other];
                     return Err(format!(
                         "sweep: runs {:?} and {:?} would share the directory {name}",
                         other.values, label
                     ));
                 }
+                names.insert(name.clone(), jobs.len());
                 jobs.push(Job { name, values: label.clone(), params: params.clone(), seed });
             }
         }
@@ -480,7 +532,8 @@ pub fn run_sweep(
         for _ in 0..workers.max(1).min(total.max(1)) {
             scope.spawn(|| {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a one-thread pool");
-                loop {
+                // After SIGTERM or SIGINT no run starts; those under way stop after their step.
+                while crate::run::runner::stop_signal().is_none() {
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(job) = mine.get(i) else { break };
                     let dir = runs_dir.join(&job.name);

@@ -51,6 +51,9 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
         return Err("--jobs 0: must be ≥ 1".into());
     }
     let plan = Plan::new(o.scale, &figures, &o.sets)?;
+    if !o.dry_run {
+        crate::run::files::remove_dead_temporaries(&o.out);
+    }
     let mine: Vec<&Job> = plan
         .jobs
         .iter()
@@ -96,6 +99,10 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
             workers
         );
     }
+    if o.dry_run {
+        eprintln!("dry run: nothing run or written");
+        return Ok(());
+    }
     // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
     if matches!(o.scale, Scale::Paper | Scale::Evidence) && !o.yes && o.shard.is_none() && !todo.is_empty() {
         return Err(format!(
@@ -109,6 +116,9 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
     }
     if !todo.is_empty() {
         execute(&plan, &mine, o, steps)?;
+    }
+    if let Some((name, _)) = crate::run::runner::stop_signal() {
+        return Err(format!("stopped by {name}: the same command again continues the runs from their checkpoints"));
     }
     if o.stage == Stage::All {
         draw(&plan, &o.out, o.jobs)?;
@@ -168,6 +178,17 @@ fn submit(plan: &Plan, o: &FiguresOptions, speed: &Speed) -> Result<(), String> 
     }
     // The jobs may start in another directory: every path they see is absolute.
     let out = std::path::absolute(&o.out).map_err(|e| format!("--out {}: {e}", o.out.display()))?;
+    // `#SBATCH --output=…` takes no quotes: a space ends the option, Slurm expands `%`, and a
+    // newline would make the rest of the path a command.
+    for (what, text) in [("--out", out.display().to_string()), ("--partition", o.partition.clone().unwrap_or_default())]
+    {
+        if let Some(c) = text.chars().find(|c| c.is_whitespace() || c.is_control() || "%\"'\\$`".contains(*c)) {
+            return Err(format!(
+                "{what} {text:?}: holds {c:?}, which an #SBATCH line cannot hold (spaces, %, quotes, $, `, \\ and \
+                 control characters): choose one without"
+            ));
+        }
+    }
     let binary = std::env::current_exe().map_err(|e| format!("the path of this program: {e}"))?;
     let all: Vec<&Job> = plan.jobs.iter().collect();
     let total = speed.core_seconds(&all, Path::new("/nonexistent"));
