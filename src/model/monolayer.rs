@@ -633,3 +633,28 @@ fn first_out_of_range(c: &Cell, lo: f64, hi: f64) -> Option<(usize, usize, f64)>
     }
     None
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The active phase at the browser page's size, bit for bit: 300 active steps after the
+    /// page's 1,500 relaxation steps, seed 1, the defaults otherwise (χ = 0.001, ζ = 0.5). The
+    /// constant is what
+    ///
+    ///   monolayer fingerprint --set box_size=80 --set n_cells=33 --set gamma=0.06 \
+    ///     --relax-steps 1500 --total-steps 1800
+    ///
+    /// prints. A change of these bits is a deliberate edit of this constant, with its reason in
+    /// the commit. Run without the `parallel` feature too (scripts/test.sh), so it also guards the
+    /// serial path the browser takes.
+    #[test]
+    fn page_size_active_phase_fingerprint() {
+        let p = Params { box_size: 80, n_cells: 33, gamma: 0.06, relax_steps: 1500, ..Params::default() };
+        assert_eq!((p.zeta, p.xi_substrate / p.xi_cell), (0.5, 0.001));
+        let mut m = Monolayer::new(p, 1).unwrap();
+        m.advance(1800).unwrap();
+        assert_eq!(m.step_count(), 1800);
+        assert_eq!(format!("{:016x}", m.fingerprint()), "a766996f3a18dcef");
+    }
+}
