@@ -154,8 +154,10 @@ fn the_analysis_active_force_is_the_dynamics_one() {
     let l = 128;
     let p = Params { box_size: l, n_cells: 2, relax_steps: 0, zeta: 0.7, ..Params::default() };
     let (w, h) = (40, 30);
-    let cells =
-        vec![(Patch { x0: 20, y0: 20, w, h }, common::ellipse(w, h, 13.0, 6.0, 0.0)), (Patch { x0: 70, y0: 80, w, h }, common::ellipse(w, h, 12.0, 7.0, 0.6))];
+    let cells = vec![
+        (Patch { x0: 20, y0: 20, w, h }, common::ellipse(w, h, 13.0, 6.0, 0.0)),
+        (Patch { x0: 70, y0: 80, w, h }, common::ellipse(w, h, 12.0, 7.0, 0.6)),
+    ];
     let mut m = common::with_cells(p.clone(), cells, 0);
     m.evaluate_now().unwrap();
     let mut a = Analysis::new(&p);

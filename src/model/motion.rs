@@ -171,7 +171,14 @@ mod tests {
             let (mut vx, mut vy, mut rate) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
             velocity_and_rate(
                 patch,
-                MotionFields { phi: &phi, mu: &mu, fx: &fx, fy: &fy, velocity: Some((&mut vx, &mut vy)), rate: &mut rate },
+                MotionFields {
+                    phi: &phi,
+                    mu: &mu,
+                    fx: &fx,
+                    fy: &fy,
+                    velocity: Some((&mut vx, &mut vy)),
+                    rate: &mut rate,
+                },
                 &Drag { mobility: &mobility, pull: &pull },
                 l,
                 j0,
