@@ -20,6 +20,10 @@ cargo build --target wasm32-unknown-unknown --lib --no-default-features --releas
 step "tests (release; --include-ignored adds the integration tests at the paper's full size)"
 cargo test --release -- --include-ignored
 
+step "unit tests without the \`parallel\` feature (the serial path of par.rs the browser takes), debug assertions on"
+# No --release: the test profile ([profile.test] in Cargo.toml: optimised, debug assertions on).
+cargo test --no-default-features --lib
+
 step "browser demo (headless Chromium: WebGPU on SwiftShader, then the WebGL2 fallback)"
 # Debian's chromium and the npm packages of tests/browser; .ci/run installs both. No browser
 # is ever downloaded (playwright-core drives /usr/bin/chromium).

@@ -58,9 +58,23 @@ fn analyze_writes_tables_and_plots_like_run_analyze() {
     assert!(frames[0].starts_with("step,time,packing_fraction"));
     assert!(frames[1].starts_with("300,30,") && frames[4].starts_with("330,33,"), "{frames:?}");
     assert_eq!(frames, live_frames, "run --analyze and analyze agree");
+    // The packing fraction is the share of sites with Σφ ≥ ½, recomputed here from each frame file.
     for row in &frames[1..] {
-        let packing: f64 = row.split(',').nth(2).unwrap().parse().unwrap();
-        assert!(packing > 0.0 && packing <= 1.0, "{row}");
+        let mut cols = row.split(',');
+        let step: u64 = cols.next().unwrap().parse().unwrap();
+        let packing: f64 = cols.nth(1).unwrap().parse().unwrap();
+        let l = 60;
+        let frame = monolayer::run::files::read_frame(&monolayer::run::files::frame_path(&run, step), l).unwrap();
+        let mut sum = vec![0.0; l * l];
+        for (p, phi) in &frame.cells {
+            for b in 0..p.h {
+                for a in 0..p.w {
+                    sum[(p.y0 + b) % l * l + (p.x0 + a) % l] += phi[p.idx(a, b)];
+                }
+            }
+        }
+        let direct = sum.iter().filter(|&&s| s >= 0.5).count() as f64 / (l * l) as f64;
+        assert!((packing - direct).abs() < 1e-6, "step {step}: packing {packing}, Σφ ≥ ½ on {direct} of the box");
     }
     let holes = lines(&out.join("holes.csv"));
     assert!(holes[0].starts_with("id,nucleation_time,closing_time,lifetime,fate"));

@@ -102,6 +102,40 @@ fn instability_stops_with_step_cell_and_last_good_state() {
     assert!(record.contains("failed: unstable"), "{record}");
 }
 
+/// A cell whose patch can no longer follow it (here one relaxed cell with a margin of 9 sites
+/// needs a 44-site patch on a 40-site box at the first active step) stops the run, and the last good state is the state from before that step: the same
+/// cells and step as the checkpoint written when relaxation ended, not a half re-laid one.
+#[test]
+fn a_lost_cell_stops_with_the_state_from_before_its_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("lost");
+    let o = monolayer(&[
+        "run",
+        "--quiet",
+        "--set",
+        "box_size=40",
+        "--set",
+        "n_cells=1",
+        "--set",
+        "patch_margin=9",
+        "--set",
+        "relax_patch_size=38",
+        "--relax-steps",
+        "1000",
+        "--steps",
+        "50",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("step 1000: cell 0 spans the box") && e.contains("the state before this step is kept"), "{e}");
+    let saved = monolayer::run::files::read_checkpoint(&out.join("last_good_state.npz"), 40).unwrap();
+    let relaxed = monolayer::run::files::read_checkpoint(&out.join("checkpoint.npz"), 40).unwrap();
+    assert_eq!((saved.step, relaxed.step), (1000, 1000));
+    assert!(saved.cells == relaxed.cells, "the last good state is not the state before the failed step");
+}
+
 /// `monolayer sweep` from the command line: a small grid, its tables and plot; a bad grid value
 /// refused before anything is written.
 #[test]

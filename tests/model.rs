@@ -6,7 +6,7 @@ mod common;
 use common::{ellipse, with_cells};
 use monolayer::model::friction::{FrictionProblem, FrictionSolver};
 use monolayer::model::lattice::Patch;
-use monolayer::model::params::{FrictionWeights, PassiveForce};
+use monolayer::model::params::{Advection, FrictionWeights, PassiveForce};
 use monolayer::{Monolayer, Params};
 use num_complex::Complex64 as C64;
 use rustfft::FftPlanner;
@@ -51,43 +51,113 @@ fn a_single_cell_relaxes_to_a_round_cell_of_area_near_pi_r_squared() {
     assert!(vmax < 1e-5, "max |v| = {vmax}");
 }
 
-/// Two overlapping disks. With the usual form −φ_i∇μ_i the repulsion gives equal and opposite
-/// net forces that push them apart; with the printed form −∇μ_i each cell's net force vanishes
-/// (it integrates to a boundary term): the cells can only deform, not push each other as a whole.
+/// Two overlapping disks of different radii (8 and 6.5), placed off any symmetry axis of the
+/// box, so that no reflection maps one onto the other. With the usual form −φ_i∇μ_i the
+/// repulsion gives equal and opposite net forces (Newton's third law, which holds because μ_i is
+/// the derivative of one translation-invariant F: it would fail for a force not of this form,
+/// e.g. −φ_i²∇μ_i, or a repulsion term in μ that is not δF/δφ_i) pushing them apart along the
+/// line of their centres. With the printed form −∇μ_i each cell's net force vanishes (it
+/// integrates to a boundary term): the cells can only deform, not push each other as a whole;
+/// site by site it is the −φ_i∇μ_i force divided by φ_i.
 #[test]
 fn pair_forces_are_equal_and_opposite() {
     // Patches large enough that φ ≈ 1e-4 at their edges (the boundary terms of the sums).
-    let (w, h) = (38, 38);
-    let disk = ellipse(w, h, 8.0, 8.0, 0.0);
-    let cells = vec![(Patch { x0: 10, y0: 20, w, h }, disk.clone()), (Patch { x0: 22, y0: 23, w, h }, disk)];
-    for passive in [PassiveForce::PhiGradMu, PassiveForce::GradMu] {
+    let (big, small_w) = (38, 34);
+    let cells = vec![
+        (Patch { x0: 10, y0: 20, w: big, h: big }, ellipse(big, big, 8.0, 8.0, 0.0)),
+        (Patch { x0: 24, y0: 26, w: small_w, h: small_w }, ellipse(small_w, small_w, 6.5, 6.5, 0.0)),
+    ];
+    // Centres (28.5, 38.5) and (40.5, 42.5): 12.6 apart, 1.9 sites of overlap.
+    let line = [12.0f64, 4.0];
+    let run = |passive| {
         let p = Params { passive_force: passive, zeta: 0.0, ..small(2, 80) };
         let mut m = with_cells(p, cells.clone(), 0);
         m.evaluate_now().unwrap();
-        let f = net_forces(&m);
-        let scale = f[0][0].abs() + f[0][1].abs() + 1e-300;
-        let sum = [f[0][0] + f[1][0], f[0][1] + f[1][1]];
-        match passive {
-            PassiveForce::PhiGradMu => {
-                assert!(scale > 1e-2, "the overlap must repel: {f:?}");
-                assert!(sum[0].abs() + sum[1].abs() < 1e-9 * scale, "not opposite: {f:?}");
-                // Cell 0 sits at lower x and y than cell 1: pushed towards −x, −y.
-                assert!(f[0][0] < 0.0 && f[0][1] < 0.0, "not repulsive: {f:?}");
-            }
-            PassiveForce::GradMu => {
-                // Zero up to the boundary terms (μ at the patch edge, ~1e-4 of the −φ∇μ force).
-                let total: f64 = m
-                    .cells()
-                    .iter()
-                    .map(|c| {
-                        c.force().0.interior().iter().chain(c.force().1.interior().iter()).map(|v| v.abs()).sum::<f64>()
-                    })
-                    .sum();
-                for fi in &f {
-                    assert!(fi[0].abs() + fi[1].abs() < 1e-5 * total, "net −∇μ force {fi:?} of Σ|f| = {total}");
+        m
+    };
+    let (phi_form, printed) = (run(PassiveForce::PhiGradMu), run(PassiveForce::GradMu));
+    // −φ_i∇μ_i: equal, opposite, repulsive, along the line of centres.
+    let f = net_forces(&phi_form);
+    let scale = f[0][0].hypot(f[0][1]);
+    let sum = [f[0][0] + f[1][0], f[0][1] + f[1][1]];
+    assert!(scale > 1e-2, "the overlap must repel: {f:?}");
+    let along = (f[0][0] * line[0] + f[0][1] * line[1]) / (scale * line[0].hypot(line[1]));
+    eprintln!("−φ∇μ: net forces {f:?}, sum {sum:?}, cos(f₀, c₁ − c₀) = {along}");
+    // Measured: |f₀ + f₁| = 1.4e-3 |f₀| (central differences keep the third law only to
+    // O(Δx²)); with −φ_i²∇μ_i instead, or a repulsion φ_i²Σφ_j² in μ_i (not δF/δφ_i), 1.4e-2.
+    assert!(sum[0].hypot(sum[1]) < 5e-3 * scale, "not opposite: {f:?}");
+    assert!(along < -0.999, "not repulsive along the line of centres: cos = {along}, {f:?}");
+    // −∇μ_i: no net force on either cell (up to the boundary terms, μ at the patch edge).
+    let total: f64 = printed
+        .cells()
+        .iter()
+        .map(|c| c.force().0.interior().iter().chain(c.force().1.interior().iter()).map(|v| v.abs()).sum::<f64>())
+        .sum();
+    for fi in net_forces(&printed) {
+        assert!(fi[0].abs() + fi[1].abs() < 1e-5 * total, "net −∇μ force {fi:?} of Σ|f| = {total}");
+    }
+    // The same μ in both: f(−φ∇μ) = φ f(−∇μ) site by site.
+    for (a, b) in phi_form.cells().iter().zip(printed.cells()) {
+        let (phi, (ax, ay), (bx, by)) = (a.phi().interior(), a.force(), b.force());
+        for (k, ((ax, ay), (bx, by))) in
+            ax.interior().iter().zip(ay.interior()).zip(bx.interior().iter().zip(by.interior())).enumerate()
+        {
+            assert!((ax - phi[k] * bx).abs() + (ay - phi[k] * by).abs() < 1e-12 * scale, "site {k}");
+        }
+    }
+}
+
+/// Eq. 1 through the stepping itself: one step of Δt = 1e-4 from an ellipse out of equilibrium
+/// (μ ≠ 0, relaxation: v = f/ξ_relax) moves φ by Δt (−v·∇φ − J₀μ) up to O(Δt²), with J₀ = 0.6
+/// and ∇φ as the chosen scheme takes it, computed here from the cell's own φ, μ and v before the
+/// step. The test also checks that it can tell the alternatives apart: the rate with J₀ = 1, the
+/// other advection scheme and downwind differences all miss by more than ten times the error.
+#[test]
+fn one_step_follows_eq_1_with_its_j0_and_advection_scheme() {
+    let (w, l, dt, j0) = (31, 48, 1e-4, 0.6);
+    for adv in [Advection::Central, Advection::Upwind] {
+        let p = Params { relax_steps: 10, relax_patch_size: w, dt, j0, xi_relax: 0.5, advection: adv, ..small(1, l) };
+        let patch = Patch { x0: 8, y0: 8, w, h: w };
+        let mut m = with_cells(p, vec![(patch, ellipse(w, w, 9.0, 6.0, 0.4))], 0);
+        m.evaluate_now().unwrap();
+        let c = &m.cells()[0];
+        let (phi, mu, (vx, vy)) = (c.phi(), c.chemical_potential(), c.velocity());
+        let (phi0, mu, vx, vy) = (phi.data.to_vec(), mu.data.to_vec(), vx.data.to_vec(), vy.data.to_vec());
+        m.step().unwrap();
+        assert_eq!(m.cells()[0].patch(), patch, "the patch moved");
+        let phi1 = m.cells()[0].phi().data.to_vec();
+        let s = patch.stride();
+        // Rate with J₀ = `j`, and ∇φ from `side`: 0 central, 1 upwind, −1 downwind.
+        let rate = |i: usize, j: f64, side: i32| {
+            let d = |v: f64, step: usize| {
+                let (back, fwd) = (phi0[i] - phi0[i - step], phi0[i + step] - phi0[i]);
+                match side {
+                    0 => 0.5 * (back + fwd),
+                    1 if v > 0.0 => back,
+                    1 => fwd,
+                    _ if v > 0.0 => fwd,
+                    _ => back,
+                }
+            };
+            -(vx[i] * d(vx[i], 1) + vy[i] * d(vy[i], s)) - j * mu[i]
+        };
+        let side = if adv == Advection::Upwind { 1 } else { 0 };
+        let (mut err, mut scale, mut wrong) = (0.0f64, 0.0f64, [0.0f64; 3]);
+        for b in 1..w - 1 {
+            for a in 1..w - 1 {
+                let i = patch.idx(a, b);
+                let got = (phi1[i] - phi0[i]) / dt;
+                let want = rate(i, j0, side);
+                err = err.max((got - want).abs());
+                scale = scale.max(want.abs());
+                for (k, alt) in [rate(i, 1.0, side), rate(i, j0, 1 - side), rate(i, j0, -1)].into_iter().enumerate() {
+                    wrong[k] = wrong[k].max((got - alt).abs());
                 }
             }
         }
+        eprintln!("{adv:?}: error {err:.2e} of {scale:.2e}; J₀ = 1, other scheme, downwind miss by {wrong:?}");
+        assert!(err < 1e-3 * scale, "{adv:?}: Eq. 1 misses by {err} (largest rate {scale})");
+        assert!(wrong.iter().all(|&x| x > 10.0 * err), "{adv:?}: the alternatives are not told apart: {wrong:?}");
     }
 }
 

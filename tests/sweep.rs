@@ -42,8 +42,18 @@ fn a_sweep_runs_every_point_once_and_resumes() {
     for s in &first {
         assert_eq!(s.status, RunStatus::Finished, "{}", s.name);
         assert_eq!(s.steps, 250);
-        assert!(s.mean_speed > 0.0 && s.mean_speed < 1.0, "{}: speed {}", s.name, s.mean_speed);
         assert!(s.velocity_correlation_length.is_some());
+    }
+    // The speeds are the runs' own: at each ζ the lower substrate friction moves faster, and at
+    // each χ the stronger activity does.
+    let speed = |name: &str| first.iter().find(|s| s.name == name).map(|s| s.mean_speed).expect(name);
+    for zeta in ["0.2", "0.4"] {
+        let (stiff, soft) = (speed(&format!("chi0.1_zeta{zeta}_seed1")), speed(&format!("chi0.01_zeta{zeta}_seed1")));
+        assert!(soft > stiff, "ζ = {zeta}: speed {soft} at χ = 0.01, {stiff} at χ = 0.1");
+    }
+    for chi in ["0.1", "0.01"] {
+        let (weak, strong) = (speed(&format!("chi{chi}_zeta0.2_seed1")), speed(&format!("chi{chi}_zeta0.4_seed1")));
+        assert!(strong > weak, "χ = {chi}: speed {strong} at ζ = 0.4, {weak} at ζ = 0.2");
     }
     let files = write_tables(out, &first).unwrap();
     let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
@@ -82,11 +92,21 @@ fn a_sweep_runs_every_point_once_and_resumes() {
 
 #[test]
 fn a_bad_sweep_is_refused_before_anything_runs() {
-    let dir = tempfile::tempdir().unwrap();
     let spec: SweepSpec = toml::from_str("[grid]\nchi = [0.1, -1.0]\n").unwrap();
     let e = spec.jobs().unwrap_err();
     assert!(e.contains("chi = -1") && e.contains("xi_substrate"), "{e}");
-    assert!(std::fs::read_dir(dir.path()).unwrap().next().is_none());
+    // As a user meets it: refused, and nothing written where the sweep would go.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sweep");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_monolayer"))
+        .args(["sweep", "--quiet", "--grid", "chi=0.1,-1.0", "--set", "box_size=48", "--set", "n_cells=6", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("xi_substrate"), "{e}");
+    assert!(!out.exists() && std::fs::read_dir(dir.path()).unwrap().next().is_none(), "the refused sweep wrote files");
 }
 
 #[test]

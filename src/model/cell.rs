@@ -56,6 +56,8 @@ pub struct Cell {
     pub(crate) fault: Option<(usize, usize, f64)>,
     /// Why the patch could not follow the cell in the last step.
     pub(crate) lost: Option<String>,
+    /// The patch the cell moves to once every cell has one (see `Monolayer::update_patches`).
+    pub(crate) next: Patch,
 }
 
 impl Cell {
@@ -81,6 +83,7 @@ impl Cell {
             q_hat: [0.0; 2],
             fault: None,
             lost: None,
+            next: patch,
         }
     }
 

@@ -18,7 +18,7 @@ pub enum SimError {
         #[source]
         source: SolveError,
     },
-    #[error("step {step}: cell {cell} {what}")]
+    #[error("step {step}: cell {cell} {what}; the state before this step is kept")]
     CellLost { step: u64, cell: usize, what: String },
     #[error("{0}")]
     Invalid(String),

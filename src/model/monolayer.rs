@@ -445,6 +445,15 @@ impl Monolayer {
         let mut counters = std::mem::take(&mut self.counters);
         let r = counters.time(Stage::Patches, || self.update_patches(phase));
         self.counters = counters;
+        if r.is_err() {
+            // No patch has moved yet: the state is put back to the start of the step, which the
+            // error names, so that what is saved as the last good state is a state the
+            // simulation passed through. (The friction solver's warm start, a first guess, is
+            // the failed step's.)
+            self.restore();
+            self.step -= 1;
+            self.counters.steps -= 1;
+        }
         r
     }
 
@@ -577,6 +586,8 @@ impl Monolayer {
 
     /// Relaxation: fixed square patches re-centred on each cell. Active: each side sits
     /// `patch_margin` sites beyond the last site with φ > `presence_threshold` (paper Sec. A).
+    /// Every cell's new patch is found first; only if each has one do they move, so that on an
+    /// error every cell is still on the patch its φ₀ (the start of the step) was stored on.
     fn update_patches(&mut self, phase: Phase) -> Result<(), SimError> {
         let p = &self.params;
         let l = p.box_size;
@@ -613,11 +624,13 @@ impl Monolayer {
                     }
                 }
             };
-            c.relayout(new, l);
+            c.next = new;
         });
         if let Some((cell, what)) = self.cells.iter().enumerate().find_map(|(i, c)| c.lost.clone().map(|w| (i, w))) {
-            return Err(SimError::CellLost { step: self.step, cell, what });
+            // Named, like an instability, by the step it started from (the state `step` puts back).
+            return Err(SimError::CellLost { step: self.step - 1, cell, what });
         }
+        par::for_each_mut(&mut self.cells, |_, c| c.relayout(c.next, l));
         Ok(())
     }
 }
@@ -632,4 +645,86 @@ fn first_out_of_range(c: &Cell, lo: f64, hi: f64) -> Option<(usize, usize, f64)>
         }
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A cell whose φ is a smooth ellipse (semi-axes `a` along x, `b` along y) centred in its patch.
+    fn ellipse_cell(patch: Patch, a: f64, b: f64) -> Cell {
+        let mut phi = vec![0.0; patch.padded_len()];
+        let (cx, cy) = ((patch.w as f64 - 1.0) / 2.0, (patch.h as f64 - 1.0) / 2.0);
+        for j in 0..patch.h {
+            for i in 0..patch.w {
+                let r = (((i as f64 - cx) / a).powi(2) + ((j as f64 - cy) / b).powi(2)).sqrt();
+                phi[patch.idx(i, j)] = 1.0 / (1.0 + ((r - 1.0) * a.min(b)).exp());
+            }
+        }
+        Cell::new(patch, phi)
+    }
+
+    /// The active phase's patch rule (paper Sec. A): after a step each side of every patch sits
+    /// exactly `patch_margin` sites beyond the last site with φ > `presence_threshold`, wherever
+    /// the patch was before (here too large for one cell, too small for the other).
+    #[test]
+    fn active_patches_are_the_support_plus_the_margin() {
+        let p = Params { box_size: 64, n_cells: 2, relax_steps: 0, ..Params::default() };
+        let (m_, thr) = (p.patch_margin, p.presence_threshold);
+        let cells = vec![
+            ellipse_cell(Patch { x0: 60, y0: 2, w: 30, h: 30 }, 6.0, 5.0),
+            ellipse_cell(Patch { x0: 20, y0: 30, w: 24, h: 18 }, 9.0, 6.0),
+        ];
+        let mut m = Monolayer::with_cells(p, 1, cells, 0);
+        let before: Vec<Patch> = m.cells.iter().map(|c| c.patch).collect();
+        m.step().unwrap();
+        for (i, c) in m.cells.iter().enumerate() {
+            let p = c.patch;
+            assert_ne!(p, before[i], "cell {i}: the patch should have been re-laid");
+            assert_eq!(c.support(thr), Some((m_, p.w - 1 - m_, m_, p.h - 1 - m_)), "cell {i}: patch {p:?}");
+        }
+    }
+
+    /// A cell whose patch cannot follow it (it would span the box) stops the run with the state
+    /// from the start of the failed step, every cell on its old patch (including a cell whose
+    /// patch would have moved), and the step count of that state.
+    #[test]
+    fn a_lost_cell_leaves_the_state_from_before_the_step() {
+        let p = Params { box_size: 40, n_cells: 2, relax_steps: 0, ..Params::default() };
+        let cells = vec![
+            ellipse_cell(Patch { x0: 2, y0: 2, w: 20, h: 20 }, 5.0, 5.0),
+            ellipse_cell(Patch { x0: 1, y0: 24, w: 38, h: 12 }, 16.0, 4.0),
+        ];
+        let mut m = Monolayer::with_cells(p, 1, cells, 7);
+        let before = m.state();
+        match m.step() {
+            Err(SimError::CellLost { step: 7, cell: 1, what }) => assert!(what.contains("spans the box"), "{what}"),
+            other => panic!("expected cell 1 lost at step 7, got {other:?}"),
+        }
+        let after = m.state();
+        assert_eq!(after.step, before.step);
+        assert!(after.cells == before.cells, "the saved state is not the one before the step");
+        // A step from there fails the same way (nothing was half done).
+        assert!(matches!(m.step(), Err(SimError::CellLost { step: 7, cell: 1, .. })));
+    }
+
+    /// The active phase at the browser page's size, bit for bit: 300 active steps after the
+    /// page's 1,500 relaxation steps, seed 1, the defaults otherwise (χ = 0.001, ζ = 0.5). The
+    /// constant is what
+    ///
+    ///   monolayer fingerprint --set box_size=80 --set n_cells=33 --set gamma=0.06 \
+    ///     --relax-steps 1500 --total-steps 1800
+    ///
+    /// prints. A change of these bits is a deliberate edit of this constant, with its reason in
+    /// the commit. Run without the `parallel` feature too (scripts/test.sh), so it also guards the
+    /// serial path the browser takes.
+    #[test]
+    fn page_size_active_phase_fingerprint() {
+        let p = Params { box_size: 80, n_cells: 33, gamma: 0.06, relax_steps: 1500, ..Params::default() };
+        assert_eq!((p.zeta, p.xi_substrate / p.xi_cell), (0.5, 0.001));
+        let mut m = Monolayer::new(p, 1).unwrap();
+        m.advance(1800).unwrap();
+        assert_eq!(m.step_count(), 1800);
+        assert_eq!(format!("{:016x}", m.fingerprint()), "a766996f3a18dcef");
+    }
 }

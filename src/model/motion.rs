@@ -143,6 +143,71 @@ mod tests {
         }
     }
 
+    /// Eq. 1 site by site with everything non-trivial: μ ≠ 0, J₀ = 0.7, a pull, and a profile
+    /// φ = a² + 2b² (padded coordinates) whose backward, central and forward differences all
+    /// differ (2a − 1, 2a, 2a + 1 along x), under a velocity that changes sign across the patch.
+    /// Expected ∂_t φ = −v·∇φ − J₀ μ in closed form, with ∇φ taken from the upwind side (against
+    /// v) for `Upwind`. A wrong sign or factor of J₀ μ, a J₀ dropped, downwind for upwind, or
+    /// one-sided differences for central all miss it.
+    #[test]
+    fn rate_is_minus_advection_minus_j0_mu() {
+        let patch = Patch { x0: 0, y0: 0, w: 6, h: 5 };
+        let l = 8;
+        let n = patch.padded_len();
+        let (mut phi, mut mu, mut fx, mut fy) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for v in 0..patch.h + 2 {
+            for u in 0..patch.w + 2 {
+                let (i, uf, vf) = (v * patch.stride() + u, u as f64, v as f64);
+                phi[i] = uf * uf + 2.0 * vf * vf;
+                mu[i] = 0.3 + 0.1 * uf - 0.2 * vf;
+                fx[i] = uf - 3.5;
+                fy[i] = 2.0 - vf;
+            }
+        }
+        let mobility = vec![0.5; l * l];
+        let pull = vec![C64::new(0.25, -0.5); l * l];
+        let j0 = 0.7;
+        for adv in [Advection::Central, Advection::Upwind] {
+            let (mut vx, mut vy, mut rate) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+            velocity_and_rate(
+                patch,
+                MotionFields {
+                    phi: &phi,
+                    mu: &mu,
+                    fx: &fx,
+                    fy: &fy,
+                    velocity: Some((&mut vx, &mut vy)),
+                    rate: &mut rate,
+                },
+                &Drag { mobility: &mobility, pull: &pull },
+                l,
+                j0,
+                adv,
+            );
+            let mut signs = [0; 4];
+            for b in 0..patch.h {
+                for a in 0..patch.w {
+                    let (u, v) = ((a + 1) as f64, (b + 1) as f64);
+                    let (wx, wy) = (0.5 * (u - 3.5 + 0.25), 0.5 * (2.0 - v - 0.5));
+                    let (gx, gy) = match adv {
+                        Advection::Central => (2.0 * u, 4.0 * v),
+                        Advection::Upwind => (
+                            if wx > 0.0 { 2.0 * u - 1.0 } else { 2.0 * u + 1.0 },
+                            if wy > 0.0 { 4.0 * v - 2.0 } else { 4.0 * v + 2.0 },
+                        ),
+                    };
+                    let want = -(wx * gx + wy * gy) - j0 * (0.3 + 0.1 * u - 0.2 * v);
+                    let i = patch.idx(a, b);
+                    assert_eq!((vx[i], vy[i]), (wx, wy), "{adv:?} v at ({a}, {b})");
+                    assert!((rate[i] - want).abs() < 1e-12, "{adv:?} at ({a}, {b}): {} want {want}", rate[i]);
+                    signs[usize::from(wx > 0.0)] += 1;
+                    signs[2 + usize::from(wy > 0.0)] += 1;
+                }
+            }
+            assert!(signs.iter().all(|&k| k > 0), "v must change sign along both axes: {signs:?}");
+        }
+    }
+
     #[test]
     fn weights_are_clamped_or_counted() {
         assert_eq!(friction_weight(FrictionWeights::Phi, 1.2, 0.01), 1.0);

@@ -7,6 +7,11 @@
 //   MODES=webgl2 SKIP_HOLE=1 node --test …   one mode, without the first-hole test
 //
 // Screenshots and the measurements (results.json) go to test-output/browser/.
+//
+// No assertion depends on the machine's speed: the tests assert steps, counts and bits, and
+// report times (results.json, the console). Every wait is for a state, not for a time; the one
+// wall-clock bound, HANG_MS (30 min unless set), is a hang guard: it fails only a test that is
+// stuck, and says "hung".
 
 import { describe, before, after, it } from 'node:test';
 import assert from 'node:assert/strict';
@@ -59,6 +64,17 @@ function serve() {
   return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
 }
 
+// --- the hang guard ---------------------------------------------------------------------------
+const HANG_MS = Number(process.env.HANG_MS ?? 30 * 60 * 1000);
+// page.waitForFunction under the hang guard: waits for a state however long the machine takes.
+async function until(page, what, fn, arg) {
+  try {
+    return await page.waitForFunction(fn, arg, { timeout: HANG_MS, polling: 100 });
+  } catch (e) {
+    throw new Error(`hung: waited ${HANG_MS / 1000} s for ${what}: ${e.message}`);
+  }
+}
+
 // --- results.json: each test's outcome and the measurements ------------------------------------
 const results = [];
 const metrics = {};
@@ -67,7 +83,7 @@ const t0 = Date.now();
 // it() that also records the outcome for results.json.
 function check(name, opts, fn) {
   if (typeof opts === 'function') [opts, fn] = [{}, opts];
-  it(name, { timeout: 120000, ...opts }, async (t) => {
+  it(name, { timeout: HANG_MS, ...opts }, async (t) => {
     const start = Date.now();
     try {
       await fn(t);
@@ -87,7 +103,7 @@ async function open(context, base, query, errors) {
   });
   page.on('pageerror', (e) => errors.push(`pageerror: ${e.message}`));
   await page.goto(base + query);
-  await page.waitForFunction(() => window.demo && (window.demo.ready || window.demo.error), null, { timeout: 60000 });
+  await until(page, 'the page to load', () => window.demo && (window.demo.ready || window.demo.error));
   const err = await page.evaluate(() => window.demo.error);
   assert(!err, `page error: ${err}`);
   return page;
@@ -108,7 +124,7 @@ const stats = (page) => page.evaluate(() => window.demo.stats);
 const workerStats = (page) => page.evaluate(() => window.demo.call('stats'));
 async function waitStats(page) {
   // Stats and a drawn frame: the renderer's layout (pointer → lattice) is the drawn one.
-  await page.waitForFunction(() => window.demo.stats !== undefined && window.demo.drawn > 0, null, { timeout: 20000 });
+  await until(page, 'stats and a drawn frame', () => window.demo.stats !== undefined && window.demo.drawn > 0);
   return stats(page);
 }
 
@@ -222,38 +238,41 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
     check(`the simulation advances`, async () => {
       const a = (await stats(page)).step;
-      await page.waitForTimeout(1500);
+      await until(page, `a step after ${a}`, (a) => window.demo.stats.step > a, a);
       const b = (await stats(page)).step;
       assert(b > a, `step ${a} → ${b}`);
     });
 
     // A worker that steps on its own carries on while the main thread is blocked; one driven by
-    // the main thread could finish at most the batch it was given (at most `spf` steps). The
-    // block lasts long enough for 3 × spf steps at the worker's own rate, measured just before,
-    // so the check holds on a slow or loaded machine as on a fast one.
+    // the main thread could finish at most the batch it was given (at most `spf` steps) however
+    // long the block. So the main thread is blocked for 1.5 s, then twice as long, and so on,
+    // until one block sees more than `spf` steps: a count, on any machine. A worker driven by
+    // the main thread never gets there and the hang guard reports it.
     check('the simulation steps in its worker while the main thread is busy', async () => {
       assert(await page.evaluate(() => window.demo.worker === true), 'no worker');
       const spf = await page.evaluate(() => import('./js/state.js').then((m) => m.PARAMS.spf.def));
       const step = async () => (await page.evaluate(() => window.demo.call('stats'))).step;
-      const s0 = await step();
-      await page.waitForTimeout(1500);
-      const rate = ((await step()) - s0) / 1.5;
-      assert(rate > 0, 'the simulation does not advance');
-      const blockMs = Math.min(20000, Math.max(1500, (3 * spf * 1000) / rate));
-      const before = await step();
-      await page.evaluate((ms) => {
-        const t = performance.now();
-        while (performance.now() - t < ms);
-      }, blockMs);
-      const after = await step();
-      m.stepsWhileMainThreadBlocked = after - before;
-      assert(after - before > spf,
-        `${after - before} steps while the main thread was blocked for ${(blockMs / 1000).toFixed(1)} s (${rate.toFixed(0)} steps/s before; one batch is at most ${spf})`);
+      const blocks = [];
+      for (let blockMs = 1500; ; blockMs *= 2) {
+        const before = await step();
+        await page.evaluate((ms) => {
+          const t = performance.now();
+          while (performance.now() - t < ms);
+        }, blockMs);
+        const steps = (await step()) - before;
+        blocks.push({ ms: blockMs, steps });
+        if (steps > spf) break;
+        assert(blockMs < HANG_MS, `hung: never more than ${spf} steps while the main thread was blocked: ${JSON.stringify(blocks)}`);
+      }
+      m.stepsWhileMainThreadBlocked = blocks;
+      console.log(`       steps while the main thread was blocked: ${JSON.stringify(blocks)} (one batch is at most ${spf})`);
     });
 
     check(`the canvas is drawn and changes between two screenshots`, async () => {
       const a = await canvasShot(page, shot('1'));
-      await page.waitForTimeout(1500);
+      // A later frame of a later state (the canvas shows the simulation, which moves on).
+      const { step, drawn } = await page.evaluate(() => ({ step: window.demo.stats.step, drawn: window.demo.drawn }));
+      await until(page, 'a later frame', ([s, d]) => window.demo.stats.step > s && window.demo.drawn > d + 2, [step, drawn]);
       const b = await canvasShot(page, shot('2'));
       assert(a.colours > 20, `only ${a.colours} colours: blank canvas?`);
       assert(a.hash !== b.hash, 'the canvas did not change');
@@ -263,17 +282,27 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     check(`each field draws with its colour bar`, async () => {
       const fields = [['2', 'phisum'], ['3', 'speed'], ['4', 'director'], ['5', 'strainrate'], ['6', 'forcedivergence'], ['1', 'tissue']];
       for (const [key, f] of fields) {
+        const drawn = await page.evaluate(() => window.demo.drawn);
         await page.keyboard.press(key);
-        await page.waitForTimeout(300);
+        await until(page, `a frame of ${f}`, (d) => window.demo.drawn > d + 1, drawn);
         const s = await canvasShot(page, shot(`field-${f}`));
         assert(s.colours > 20, `${f}: only ${s.colours} colours`);
         const bar = await page.locator('#colorbar-labels').isVisible();
         assert(bar === (f !== 'tissue'), `${f}: colour bar labels visible = ${bar}`);
         assert(new URL(page.url()).searchParams.get('field') === (f === 'tissue' ? null : f), `${f}: URL ${page.url()}`);
         if (f === 'strainrate') {
-          // The ±½ defects of the smoothed nematic field come with it (analysis::defects).
-          const d = await page.evaluate(() => window.demo.call('defects'));
-          assert(d.length % 4 === 0, 'defects: 4 numbers each');
+          // The ±½ defects of the smoothed nematic field come with it (analysis::defects): a
+          // disordered active tissue has some, each of charge ±½, inside the box, a +½ with an
+          // orientation and a −½ without one.
+          const l = await page.evaluate(() => window.demo.call('box_size'));
+          const d = Array.from(await page.evaluate(() => window.demo.call('defects')));
+          assert(d.length > 0 && d.length % 4 === 0, `defects: 4 numbers each, at least one defect: ${d}`);
+          for (let i = 0; i < d.length; i += 4) {
+            const [x, y, twice, psi] = d.slice(i, i + 4);
+            assert(x >= 0 && x < l && y >= 0 && y < l, `defect at (${x}, ${y}) outside the ${l} box`);
+            assert(twice === 1 || twice === -1, `defect of twice the charge ${twice}`);
+            assert(twice === 1 ? Number.isFinite(psi) : Number.isNaN(psi), `defect ${twice}/2 with orientation ${psi}`);
+          }
           m.defectsSeen = d.length / 4;
         }
       }
@@ -283,12 +312,11 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await page.keyboard.press('5');
       // Spiral cores come and go with the flow: wait for a frame that has some.
       const cores = await page.evaluate(async () => {
-        for (let i = 0; i < 100; i++) {
+        for (;;) {
           const c = await window.demo.call('spiral_cores');
           if (c.length) return Array.from(c);
           await new Promise((r) => setTimeout(r, 200));
         }
-        return [];
       });
       assert(cores.length > 0 && cores.length % 3 === 0, `spiral cores: ${cores}`);
       for (let i = 0; i < cores.length; i += 3) assert(cores[i + 2] > 0, `a spiral core with ∇·v = ${cores[i + 2]}`);
@@ -303,6 +331,9 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await page.click('#play');
       await page.waitForTimeout(200);
       const a = await step();
+      // Nothing may happen while paused: a window in which a slow machine only steps less, so
+      // it cannot fail for the machine's speed (the worker answers calls in order, so `a` is
+      // already after the pause).
       await page.waitForTimeout(800);
       const b = await step();
       assert(a === b, `paused, yet step ${a} → ${b}`);
@@ -312,9 +343,9 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await page.waitForTimeout(200);
       const c = await step();
       assert(c === b + spf, `Step: ${b} → ${c}, expected +${spf}`);
-      await page.waitForFunction((c) => window.demo.stats.step === c, c, { timeout: 10000 });
+      await until(page, `the readout at step ${c}`, (c) => window.demo.stats.step === c, c);
       await page.locator('body').press(' ');
-      await page.waitForTimeout(800);
+      await until(page, 'a step after Space', (c) => window.demo.stats.step > c, c);
       assert((await step()) > c, 'Space did not resume');
     });
 
@@ -353,11 +384,13 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check('the record button saves a WebM of the canvas', async () => {
+      const drawn = await page.evaluate(() => window.demo.drawn);
       await page.click('#record');
       assert((await page.textContent('#record')) === 'Stop', 'the button does not say Stop');
-      await page.waitForTimeout(2500);
+      // Some frames recorded, however long they take to draw.
+      await until(page, '30 frames drawn while recording', (d) => window.demo.drawn > d + 30, drawn);
       await page.click('#record');
-      await page.waitForFunction(() => window.demo.lastRecording, null, { timeout: 10000 });
+      await until(page, 'the recording', () => window.demo.lastRecording);
       const r = await page.evaluate(() => window.demo.lastRecording);
       m.recording = r;
       assert(r.type === 'video/webm' && r.size > 1000, `recording ${JSON.stringify(r)}`);
@@ -373,7 +406,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       // Relax the tissue so that there is a cell under the pointer.
       const drawn = await p.evaluate(() => window.demo.drawn);
       await p.evaluate(() => window.demo.call('step', 300));
-      await p.waitForFunction((d) => window.demo.drawn > d, drawn, { timeout: 20000 }); // drawn after
+      await until(p, 'a frame after 300 steps', (d) => window.demo.drawn > d, drawn); // drawn after
       // Where the centre is at the moment of the click: checking a radio low in the panel may
       // scroll the page.
       const clickCentre = async () => {
@@ -382,14 +415,13 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       };
       const l = await p.evaluate(() => window.demo.call('box_size'));
       // ξs multiplier at the centre once it differs from `was` (a stroke reaches the worker
-      // after the click), or `was` after 2 s.
+      // after the click; the hang guard reports a click that never arrives).
       const substrateAtCentre = (was) => p.evaluate(async ([l, was]) => {
-        for (let i = 0; i < 20; i++) {
+        for (;;) {
           const v = await window.demo.call('substrate_at', l / 2, l / 2);
           if (v !== was) return v;
           await new Promise((r) => setTimeout(r, 100));
         }
-        return was;
       }, [l, was]);
       await p.check('input[name=tool][value=soft]');
       await clickCentre();
@@ -407,12 +439,11 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await p.check('input[name=tool][value=ablate]');
       await clickCentre();
       const after = await p.evaluate(async (before) => {
-        for (let i = 0; i < 20; i++) {
+        for (;;) {
           const n = await window.demo.call('n_cells');
           if (n !== before) return n;
           await new Promise((r) => setTimeout(r, 100));
         }
-        return before;
       }, before);
       const at = await p.evaluate(() => window.demo.lastPointer);
       assert(after === before - 1, `cells ${before} → ${after}; the click reached lattice point ${at}`);
@@ -427,7 +458,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert(!(await p.locator('#zeta').isVisible()), 'sliders visible in embed mode');
       assert(await p.locator('#view').isVisible(), 'no canvas in embed mode');
       await p.click('#shot');
-      await p.waitForFunction(() => window.demo.lastScreenshot, null, { timeout: 10000 });
+      await until(p, 'the screenshot', () => window.demo.lastScreenshot);
       const url = await p.evaluate(() => window.demo.lastScreenshot);
       assert(url.startsWith('data:image/png;base64,'), 'not a PNG');
       const png = Buffer.from(url.slice(url.indexOf(',') + 1), 'base64');
@@ -479,12 +510,12 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await p.locator('#seed').dispatchEvent('change');
       await p.click('#reset');
       const progress = () => p.evaluate(() => document.getElementById('r-time').textContent);
-      await p.waitForFunction(() => /relaxing \d+ %/.test(document.getElementById('r-time').textContent), null, { timeout: 20000 });
+      await until(p, 'the relaxation progress', () => /relaxing \d+ %/.test(document.getElementById('r-time').textContent));
       const first = Number((await progress()).match(/(\d+) %/)[1]);
-      await p.waitForFunction((f) => {
+      await until(p, 'the relaxation to progress', (f) => {
         const m = document.getElementById('r-time').textContent.match(/relaxing (\d+) %/);
         return !m || Number(m[1]) > f;
-      }, first, { timeout: 20000 });
+      }, first);
       const s = await workerStats(p);
       assert(s.startedFrom === 'disks', `seed 2 started from ${s.startedFrom}`);
       await p.close();
@@ -508,7 +539,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await p.close();
     });
 
-    check(`speed of the wasm core vs native, and drawing fps`, async () => {
+    check(`speed of the wasm core vs native, and drawing fps (reported, not asserted)`, async () => {
       const p = await open(context, base, '/?paused&seed=1', errors);
       await waitStats(p);
       const size = await p.evaluate(() => window.demo.size);
@@ -536,19 +567,19 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       m.stepsPerSecondPlaying = s.sps;
       m.renderScale = s.renderScale;
       console.log(`       wasm ${wasmMs.toFixed(2)} ms/step, native ${nativeMs.toFixed(2)} ms/step (ratio ${m.speedRatio.toFixed(2)}); playing: ${s.fps.toFixed(0)} fps at ${Math.round(100 * s.renderScale)} % resolution, ${s.sps.toFixed(0)} steps/s`);
-      // Reported, not held to a target: on this shared machine the same build measured 0.26 to
-      // 1.26 in one afternoon. Only a gross loss (an unoptimised build is ~0.05) fails.
-      assert(m.speedRatio >= 0.2, `wasm is ${m.speedRatio.toFixed(2)}× native`);
+      // Reported, never asserted: on this shared machine the same build measured 0.26 to 1.26 in
+      // one afternoon, and the native side is a difference of two separate process runs.
+      assert(Number.isFinite(wasmMs) && wasmMs > 0, `wasm ms per step: ${wasmMs}`);
       await p.close();
     });
 
     // The hole's step is the same on every machine (the core is deterministic, and the page
     // counts holes after every batch of at most `spf` steps); the seconds it takes are this
     // machine's, reported in results.json and not asserted.
-    check('the default preset opens its first hole at its step', { skip: SKIP_HOLE, timeout: 240000 }, async () => {
+    check('the default preset opens its first hole at its step', { skip: SKIP_HOLE }, async () => {
       const p = await open(context, base, '/', errors);
       const spfMax = await p.evaluate(() => import('./js/state.js').then((m) => m.PARAMS.spf.max));
-      await p.waitForFunction(() => window.demo.firstHole !== null, null, { timeout: 200000, polling: 250 });
+      await until(p, 'the first hole', () => window.demo.firstHole !== null);
       const hole = await p.evaluate(() => window.demo.firstHole);
       m.firstHole = hole;
       await p.waitForTimeout(1500);
@@ -578,7 +609,7 @@ describe('nogpu: Chromium --disable-3d-apis (neither WebGPU nor WebGL2)', { skip
   check('the canvas says why instead of staying blank', async () => {
     const page = await context.newPage();
     await page.goto(base + '/');
-    await page.waitForFunction(() => window.demo && (window.demo.ready || window.demo.error), null, { timeout: 30000 });
+    await until(page, 'the page to load or fail', () => window.demo && (window.demo.ready || window.demo.error));
     const err = await page.evaluate(() => window.demo.error);
     assert(err && /WebGPU|WebGL2/.test(err), `no error shown: ${err}`);
     assert(await page.locator('#message').isVisible(), 'message hidden');
