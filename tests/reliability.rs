@@ -23,6 +23,17 @@ use ndarray_npy::{NpzReader, NpzWriter};
 const SMALL_RUN: [&str; 10] =
     ["run", "--quiet", "--threads", "1", "--set", "box_size=48", "--set", "n_cells=6", "--relax-steps", "100"];
 
+/// Waits until `path` exists, however long that takes (no test depends on the machine's speed):
+/// the child ending before it writes the file is the failure.
+fn wait_for_file(child: &mut std::process::Child, path: &Path, what: &str) {
+    while !path.exists() {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("{what} ended ({status}) before writing {}", path.display());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// [`SMALL_RUN`] for `active_steps`, frames every 50 steps.
 fn small(out: &Path, active_steps: u64, extra: &[&str]) -> Output {
     let steps = active_steps.to_string();
@@ -734,18 +745,14 @@ fn a_signal_stops_a_run_gracefully_and_it_resumes_to_the_same_bits() {
     ok(&monolayer(&args(&whole).iter().map(String::as_str).collect::<Vec<_>>()));
     for (signal, status) in [("TERM", 143), ("INT", 130)] {
         let run = dir.path().join(signal);
-        let child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+        let mut child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
             .args(args(&run))
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
         // Once it is in its active phase (a frame written), the signal.
-        let deadline = Instant::now() + Duration::from_secs(600);
-        while !frame_path(&run, 200).exists() {
-            assert!(Instant::now() < deadline, "the run never wrote its second frame");
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        wait_for_file(&mut child, &frame_path(&run, 200), "the run");
         let sent = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
         assert!(sent.success());
         let o = child.wait_with_output().unwrap();
@@ -976,18 +983,14 @@ fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
         "--set",
         "active_steps=3000",
     ];
-    let child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+    let mut child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
         .args(args)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     let first = out.join("runs/zeta0.2_seed1");
-    let deadline = Instant::now() + Duration::from_secs(600);
-    while !frame_path(&first, 200).exists() {
-        assert!(Instant::now() < deadline, "the first run never wrote its second frame");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_for_file(&mut child, &frame_path(&first, 200), "the sweep");
     assert!(Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap().success());
     let o = child.wait_with_output().unwrap();
     assert_eq!(o.status.code(), Some(143), "{}", stderr(&o));
