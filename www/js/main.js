@@ -3,7 +3,7 @@
 // the controls (controls.js) and the readouts (readouts.js) to them. Every change of state goes
 // through the actions below, which keep the worker, the controls and the URL in step.
 
-import init, { Renderer, WebView, FieldKind } from '../pkg/monolayer.js';
+import init, { Renderer, WebView, FieldKind, codeVersion } from '../pkg/monolayer.js';
 import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZE, parseUrl, toUrl, relaxedStateFor } from './state.js';
 import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
@@ -20,7 +20,7 @@ window.demo = demo;
 
 // The renderer, the state (what the URL carries), the pending screenshot, and the last stats
 // the worker sent.
-const page = { renderer: null, state: null, screenshot: false, stats: null };
+const page = { renderer: null, state: null, screenshot: false, stats: null, version: undefined };
 
 function showMessage(text, isError = false) {
   message.textContent = text;
@@ -172,6 +172,28 @@ function updateReadouts() {
   };
 }
 
+// Saves `blob` under `name` (the browser's download; nothing leaves the machine).
+function saveBlob(blob, name) {
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(blob);
+  a.download = name;
+  a.click();
+  setTimeout(() => URL.revokeObjectURL(a.href), 60000);
+}
+
+// The Download button: the readouts since the last reset as CSV (its last row the state now),
+// and the state now as a frame file in the native format with a run.json, so that
+// `mkdir -p run/frames`, the frame into run/frames and run.json into run/ make a run that
+// `monolayer analyze run` reads (README, "Data out of the page").
+async function download() {
+  const d = await call('download');
+  const stem = `monolayer-seed${page.state.seed}-step${d.step}`;
+  saveBlob(new Blob([d.csv], { type: 'text/csv' }), `${stem}.csv`);
+  saveBlob(new Blob([d.npz], { type: 'application/octet-stream' }), d.frameName);
+  saveBlob(new Blob([d.runJson], { type: 'application/json' }), 'run.json');
+  demo.lastDownload = { step: d.step, csvName: `${stem}.csv`, frameName: d.frameName, npzBytes: d.npz.length };
+}
+
 // Right after drawing, in the same task: the canvas still holds this frame.
 function saveScreenshot() {
   page.screenshot = false;
@@ -188,7 +210,7 @@ const isPlaying = () => !page.state.paused;
 
 function changed() {
   controls.refresh(page.state, isPlaying());
-  history.replaceState(null, '', toUrl(page.state));
+  history.replaceState(null, '', toUrl(page.state, page.version));
 }
 
 // A new tissue from the state's parameters and seed; resolves once the worker has it.
@@ -281,6 +303,7 @@ const controls = new Controls({
     loop.dirty = true;
   },
   record: () => toggleRecording(),
+  download: () => download().catch((e) => notify([`Download: ${e.message ?? e}`])),
   brush: (x, y, radius, multiplier) => edit('paint_substrate', x, y, radius, multiplier),
   ablate: (x, y) => edit('remove_cell_at', x, y),
   latticeAt,
@@ -288,18 +311,22 @@ const controls = new Controls({
 
 // --- start ----------------------------------------------------------------------------------------
 async function boot() {
-  const parsed = parseUrl(location.search);
-  page.state = parsed.state;
-  notify(parsed.notices);
-  document.body.classList.toggle('embed', page.state.embed);
-  changed();
-  worker.postMessage({ type: 'spf', n: page.state.spf });
   try {
     await init();
   } catch (e) {
     fatal('Could not load the WebAssembly core (build it with `bash scripts/serve.sh`)', e);
     return;
   }
+  // The code version goes into every share link; a link from another version says so.
+  page.version = codeVersion();
+  demo.version = page.version;
+  $('version').textContent = `Code version ${page.version}.`;
+  const parsed = parseUrl(location.search, page.version);
+  page.state = parsed.state;
+  notify(parsed.notices);
+  document.body.classList.toggle('embed', page.state.embed);
+  changed();
+  worker.postMessage({ type: 'spf', n: page.state.spf });
   showMessage('Looking for WebGPU or WebGL2…');
   loop.resizeCanvas();
   try {

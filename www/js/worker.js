@@ -155,6 +155,16 @@ const CALLS = {
   defects: () => sim.defects(),
   spiral_cores: () => sim.spiral_cores(),
   stats: () => stats(),
+  // The Download button: the readouts since the tissue was made (CSV), the current state as a
+  // native frame file and a run.json that makes a run of it for `monolayer analyze`.
+  download: () => ({
+    csv: sim.readouts_csv(),
+    npz: sim.frame_npz(),
+    frameName: sim.frame_name(),
+    runJson: sim.run_json(),
+    step: sim.step_count(),
+  }),
+  readout_rows: () => sim.readout_rows(),
 };
 
 // Messages are handled one after the other, each after the last one's awaits (the core's
