@@ -11,10 +11,13 @@
 
 pub mod frame_file;
 pub mod measure;
+pub mod playback;
 pub mod readouts;
 pub mod version;
 pub mod view;
 
+#[cfg(target_arch = "wasm32")]
+pub mod player;
 #[cfg(target_arch = "wasm32")]
 pub mod render;
 #[cfg(target_arch = "wasm32")]

@@ -179,4 +179,90 @@ describe('the page as an instrument (Chromium, WebGL2)', () => {
     assert(errors.length === 0, errors.join('\n'));
     await page.close();
   });
+
+  it("a native run's frames open in the page, play, and show the analysis of `monolayer analyze`; a damaged frame is reported and skipped", { timeout: 240000 }, async () => {
+    // A small run: frames at the end of relaxation (step 300) and every 10 steps to 340; 14
+    // cells cover about 80 % of the box, so that the frames hold holes.
+    const run = path.join(work, 'native-run');
+    native(['run', '--quiet', '--set', 'box_size=60', '--set', 'n_cells=14', '--relax-steps', '300', '--steps', '40',
+      '--frame-interval', '10', '--threads', '1', '--out', run]);
+    native(['analyze', run, '--out', path.join(work, 'native-analysis')]);
+    const table = (await readFile(path.join(work, 'native-analysis', 'frames.csv'), 'utf8')).trim().split('\n');
+    const cols = table[0].split(',');
+    const byStep = new Map(table.slice(1).map((l) => {
+      const r = Object.fromEntries(l.split(',').map((v, i) => [cols[i], Number(v)]));
+      return [r.step, r];
+    }));
+    const frameDir = path.join(run, 'frames');
+    const names = (await readdir(frameDir)).filter((n) => n.endsWith('.npz')).sort();
+    assert.deepEqual(names, [300, 310, 320, 330, 340].map((s) => `frame_${String(s).padStart(7, '0')}.npz`));
+    // Damage one frame (cut in half), and add a file that is no part of a run.
+    const damaged = path.join(frameDir, 'frame_0000320.npz');
+    const bytes = await readFile(damaged);
+    await writeFile(damaged, bytes.subarray(0, bytes.length >> 1));
+    await writeFile(path.join(work, 'notes.txt'), 'not a frame');
+
+    const page = await open('/?seed=1&field=director');
+    await page.setInputFiles('#open-files', [path.join(run, 'run.json'), ...names.map((n) => path.join(frameDir, n)), path.join(work, 'notes.txt')]);
+    await page.waitForFunction(() => window.demo.playback.opened === 1, null, { timeout: 60000 });
+    const pb = await page.evaluate(() => window.demo.playback);
+    assert.deepEqual(pb.frames.map((f) => f.step), [300, 310, 330, 340], 'the good frames, in step order');
+    assert(pb.errors.some((e) => e.startsWith('frame_0000320.npz: not a readable .npz')), `errors: ${pb.errors}`);
+    assert(pb.errors.some((e) => e.startsWith('notes.txt: ')), `errors: ${pb.errors}`);
+    assert.match(await page.textContent('#player-errors'), /frame_0000320\.npz/);
+    assert(await page.locator('#player').isVisible(), 'the player is shown');
+
+    // Each frame through the slider: drawn with its defects and its holes as analyze measures them.
+    let holesSeen = 0;
+    for (const [i, f] of pb.frames.entries()) {
+      await page.evaluate((i) => {
+        const s = document.getElementById('player-slider');
+        s.value = String(i);
+        s.dispatchEvent(new Event('input'));
+      }, i);
+      await page.waitForFunction((step) => window.demo.stats?.step === step && window.demo.stats.startedFrom === 'frames', f.step, { timeout: 30000 });
+      const st = await page.evaluate(() => window.demo.stats);
+      const row = byStep.get(f.step);
+      assert.equal(st.l, 60);
+      assert.equal(st.cells, 14);
+      holesSeen += st.holes;
+      assert(Math.abs(st.area / 3600 - row.void_fraction) < 1e-6, `step ${f.step}: void ${st.area} sites, analyze ${row.void_fraction}`);
+      assert(Math.abs(st.packing - row.packing_fraction) < 1e-6, `step ${f.step}: packing ${st.packing}, analyze ${row.packing_fraction}`);
+      const d = await page.evaluate(() => window.demo.call('defects'));
+      const plus = d.filter((_, k) => k % 4 === 2 && d[k] > 0).length;
+      const minus = d.filter((_, k) => k % 4 === 2 && d[k] < 0).length;
+      assert.deepEqual([plus, minus], [row.plus_half_defects, row.minus_half_defects], `step ${f.step}: ±½ defects`);
+    }
+    assert(holesSeen > 0, 'no holes in the frames: the test proves little');
+    await page.locator('#view').screenshot({ path: path.join(OUT, 'viewer-frame.png') });
+
+    // Play: every frame is shown, in turn.
+    await page.click('#player-play');
+    const from = (await page.evaluate(() => window.demo.playback.shown.length));
+    await page.waitForFunction(({ from, steps }) => {
+      const seen = new Set(window.demo.playback.shown.slice(from));
+      return steps.every((s) => seen.has(s));
+    }, { from, steps: pb.frames.map((f) => f.step) }, { timeout: 60000 });
+    await page.click('#player-play');
+
+    // A drop (DataTransfer) of run.json and two frames opens them in turn.
+    const dropped = await Promise.all(['run.json', 'frames/frame_0000310.npz', 'frames/frame_0000340.npz']
+      .map(async (n) => [path.basename(n), (await readFile(path.join(run, n))).toString('base64')]));
+    const dt = await page.evaluateHandle((files) => {
+      const dt = new DataTransfer();
+      for (const [name, b64] of files) dt.items.add(new File([Uint8Array.from(atob(b64), (c) => c.charCodeAt(0))], name));
+      return dt;
+    }, dropped);
+    await page.dispatchEvent('#view', 'drop', { dataTransfer: dt });
+    await page.waitForFunction(() => window.demo.playback.opened === 2, null, { timeout: 60000 });
+    assert.deepEqual(await page.evaluate(() => window.demo.playback.frames.map((f) => f.step)), [310, 340]);
+    assert.deepEqual(await page.evaluate(() => window.demo.playback.errors), []);
+
+    // Reset returns to the live tissue.
+    await page.click('#reset');
+    await page.waitForFunction(() => window.demo.stats?.startedFrom !== 'frames' && window.demo.stats.l === 80, null, { timeout: 60000 });
+    assert(!(await page.locator('#player').isVisible()), 'the player is hidden again');
+    assert(errors.length === 0, errors.join('\n'));
+    await page.close();
+  });
 });

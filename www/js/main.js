@@ -9,6 +9,7 @@ import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
 import { Readouts, formatSeconds } from './readouts.js';
 import { Recorder } from './recorder.js';
+import { Viewer } from './viewer.js';
 
 const $ = (id) => document.getElementById(id);
 const canvas = $('view');
@@ -215,6 +216,7 @@ function changed() {
 
 // A new tissue from the state's parameters and seed; resolves once the worker has it.
 function newSim() {
+  viewer.close();
   const s = page.state;
   const ready = new Promise((resolve) => {
     onReady = resolve;
@@ -292,7 +294,7 @@ const controls = new Controls({
     page.state.seed = v;
     changed();
   },
-  togglePlay: () => setPlaying(!isPlaying()),
+  togglePlay: () => (viewer.active ? viewer.toggle() : setPlaying(!isPlaying())),
   stepOnce() {
     setPlaying(false);
     call('step', page.state.spf);
@@ -308,6 +310,23 @@ const controls = new Controls({
   ablate: (x, y) => edit('remove_cell_at', x, y),
   latticeAt,
 });
+
+// A run's frames (viewer.js): they replace the live tissue until Reset.
+const viewer = new Viewer({
+  call,
+  opened(r) {
+    setPlaying(false);
+    readouts.reset(page.stats?.timeUnitSeconds ?? 1);
+    loop.restart();
+    message.hidden = true;
+    const from = r.runVersion && r.runVersion !== page.version ? ` (written by version ${r.runVersion}; this page is ${page.version})` : '';
+    $('backend').textContent = `Showing ${r.frames.length} frames of a run, seed ${r.seed}${from}. Drawing with ${page.renderer.backend()}.`;
+  },
+  frameShown() {
+    loop.dirty = true;
+  },
+});
+demo.playback = viewer.state;
 
 // --- start ----------------------------------------------------------------------------------------
 async function boot() {
