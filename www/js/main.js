@@ -131,7 +131,7 @@ function caption() {
   const t = s.active ? `t = ${s.time.toFixed(0)} (${formatSeconds(s.time * s.timeUnitSeconds)})` : 'relaxing';
   return [
     `${t}, step ${s.step.toLocaleString('en')}`,
-    `ζ = ${s.zeta}, χ = ${Number(s.chi.toPrecision(3))}, γ = ${s.gamma}, seed ${st.seed}, L = ${s.l}, N = ${s.cells}`,
+    `ζ = ${s.zeta}, χ = ${Number(s.chi.toPrecision(3))}, γ = ${s.gamma}, seed ${viewer.active ? viewer.seed : st.seed}, L = ${s.l}, N = ${s.cells}`,
     FIELDS.get(st.field).label,
   ];
 }

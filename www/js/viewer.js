@@ -74,6 +74,7 @@ export class Viewer {
     }
     this.errors(r.errors);
     this.active = true;
+    this.seed = r.seed;
     this.frames = r.frames;
     this.index = 0;
     this.state.frames = r.frames;
