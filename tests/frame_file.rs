@@ -79,3 +79,40 @@ fn the_pages_frame_is_the_native_frame_and_its_download_is_a_run_analyze_reads()
     assert!(o.status.success(), "analyze refused the page's download: {}", stderr(&o));
     assert!(fs::read_dir(&out).unwrap().count() > 0, "analyze wrote nothing");
 }
+
+/// The page opens a full-size frame (100 cells on 140×140, the paper's size) of `monolayer run`
+/// as it opens a small one: the same code as in the browser, here natively.
+#[test]
+fn a_full_size_frame_opens_in_the_pages_playback() {
+    use monolayer::web::playback::Playback;
+    use monolayer::web::view::FieldKind;
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let o = monolayer(&[
+        "run",
+        "--quiet",
+        "--relax-steps",
+        "10",
+        "--steps",
+        "10",
+        "--frame-interval",
+        "10",
+        "--threads",
+        "1",
+        "--out",
+        arg(&run),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let frames = RunFrames::open(&run).unwrap();
+    assert_eq!((frames.record.params.box_size, frames.record.params.n_cells), (140, 100), "the paper's size");
+    let json = fs::read_to_string(run.join("run.json")).unwrap();
+    let mut play = Playback::new(Some(("run.json", &json))).unwrap();
+    for (step, path) in &frames.frames {
+        let name = path.file_name().unwrap().to_string_lossy();
+        let bytes = fs::read(path).unwrap();
+        assert_eq!(play.check(&name, &bytes), Ok(*step));
+        play.show(&name, &bytes).unwrap();
+        let view = play.view(FieldKind::StrainRate, 1.0).unwrap();
+        assert_eq!((view.l, view.tissue.len()), (140, 140 * 140));
+    }
+}
