@@ -243,6 +243,14 @@ describe('the page as an instrument (Chromium, WebGL2)', () => {
       const seen = new Set(window.demo.playback.shown.slice(from));
       return steps.every((s) => seen.has(s));
     }, { from, steps: pb.frames.map((f) => f.step) }, { timeout: 60000 });
+    // Recording works on the frames as on the live tissue: a WebM of four more frames shown.
+    await page.click('#record');
+    const recFrom = await page.evaluate(() => window.demo.playback.shown.length);
+    await page.waitForFunction((n) => window.demo.playback.shown.length >= n + 4, recFrom, { timeout: 60000 });
+    await page.click('#record');
+    await page.waitForFunction(() => window.demo.lastRecording, null, { timeout: 30000 });
+    const rec = await page.evaluate(() => window.demo.lastRecording);
+    assert(rec.type === 'video/webm' && rec.size > 1000 && rec.head === '1a45dfa3', `recording ${JSON.stringify(rec)}`);
     await page.click('#player-play');
 
     // A drop (DataTransfer) of run.json and two frames opens them in turn.
