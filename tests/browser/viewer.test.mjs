@@ -200,15 +200,15 @@ describe('the page as an instrument (Chromium, WebGL2)', () => {
     const damaged = path.join(frameDir, 'frame_0000320.npz');
     const bytes = await readFile(damaged);
     await writeFile(damaged, bytes.subarray(0, bytes.length >> 1));
-    await writeFile(path.join(work, 'notes.txt'), 'not a frame');
+    await writeFile(path.join(work, 'state.npz'), 'not a frame');
 
     const page = await open('/?seed=1&field=director');
-    await page.setInputFiles('#open-files', [path.join(run, 'run.json'), ...names.map((n) => path.join(frameDir, n)), path.join(work, 'notes.txt')]);
+    await page.setInputFiles('#open-files', [path.join(run, 'run.json'), ...names.map((n) => path.join(frameDir, n)), path.join(work, 'state.npz')]);
     await page.waitForFunction(() => window.demo.playback.opened === 1, null, { timeout: 60000 });
     const pb = await page.evaluate(() => window.demo.playback);
     assert.deepEqual(pb.frames.map((f) => f.step), [300, 310, 330, 340], 'the good frames, in step order');
     assert(pb.errors.some((e) => e.startsWith('frame_0000320.npz: not a readable .npz')), `errors: ${pb.errors}`);
-    assert(pb.errors.some((e) => e.startsWith('notes.txt: ')), `errors: ${pb.errors}`);
+    assert(pb.errors.some((e) => e.startsWith('state.npz: not a frame')), `errors: ${pb.errors}`);
     assert.match(await page.textContent('#player-errors'), /frame_0000320\.npz/);
     assert(await page.locator('#player').isVisible(), 'the player is shown');
 
@@ -253,6 +253,15 @@ describe('the page as an instrument (Chromium, WebGL2)', () => {
     assert(rec.type === 'video/webm' && rec.size > 1000 && rec.head === '1a45dfa3', `recording ${JSON.stringify(rec)}`);
     await page.click('#player-play');
 
+    // The run directory itself, picked: its frames, the damaged one named, its other files
+    // (checkpoint, lock) skipped without a word.
+    await page.setInputFiles('#open-dir', run);
+    await page.waitForFunction(() => window.demo.playback.opened === 2, null, { timeout: 60000 });
+    const dir = await page.evaluate(() => window.demo.playback);
+    assert.deepEqual(dir.frames.map((f) => f.step), [300, 310, 330, 340]);
+    assert.equal(dir.errors.length, 1, `errors: ${dir.errors}`);
+    assert.match(dir.errors[0], /^frame_0000320\.npz: /);
+
     // A drop (DataTransfer) of run.json and two frames opens them in turn.
     const dropped = await Promise.all(['run.json', 'frames/frame_0000310.npz', 'frames/frame_0000340.npz']
       .map(async (n) => [path.basename(n), (await readFile(path.join(run, n))).toString('base64')]));
@@ -262,7 +271,7 @@ describe('the page as an instrument (Chromium, WebGL2)', () => {
       return dt;
     }, dropped);
     await page.dispatchEvent('#view', 'drop', { dataTransfer: dt });
-    await page.waitForFunction(() => window.demo.playback.opened === 2, null, { timeout: 60000 });
+    await page.waitForFunction(() => window.demo.playback.opened === 3, null, { timeout: 60000 });
     assert.deepEqual(await page.evaluate(() => window.demo.playback.frames.map((f) => f.step)), [310, 340]);
     assert.deepEqual(await page.evaluate(() => window.demo.playback.errors), []);
 

@@ -182,6 +182,9 @@ const CALLS = {
 };
 
 const FRAME_NAME = /^frame_\d+\.npz$/;
+// A run directory's other files (its checkpoints, lock, and the tables and plots of `analyze`):
+// skipped without a word when a whole directory is opened.
+const RUN_FILES = /^(checkpoint\.npz|last_good_state\.npz|\..*|.*\.(csv|png|svg|md|txt|webm))$/;
 
 // Opens the files of a run (its run.json and frame_*.npz; a directory's other files are
 // ignored): every frame is read and checked on its own, so that a bad one is reported, naming
@@ -192,7 +195,7 @@ async function openRun(files) {
   const records = files.filter((f) => f.name === 'run.json');
   const frames = files.filter((f) => FRAME_NAME.test(f.name)).sort((a, b) => (a.name < b.name ? -1 : 1));
   for (const f of files) {
-    if (!records.includes(f) && !frames.includes(f) && !f.name.startsWith('.')) {
+    if (!records.includes(f) && !frames.includes(f) && !RUN_FILES.test(f.name)) {
       errors.push(`${f.name}: not a frame (frame_<step>.npz) or run.json: ignored`);
     }
   }
