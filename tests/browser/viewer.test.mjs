@@ -1,5 +1,5 @@
 // Browser tests of the page as an instrument (issue 27), in Debian's headless Chromium on the
-// WebGL2 fallback (the drawing is not what is tested here; demo.test.mjs covers both backends):
+// WebGL2 fallback (VIEWER_BACKEND=webgpu for WebGPU; demo.test.mjs covers both backends):
 // the Download button's CSV and frame (which `monolayer analyze` reads), the code version in
 // share links, and a native run's frames opened in the page. Needs www/pkg (scripts/serve.sh
 // --build-only) and the native binary (cargo build --release --bin monolayer).
@@ -27,9 +27,12 @@ const OUT = path.join(ROOT, 'test-output', 'browser');
 const NATIVE = process.env.MONOLAYER_BIN
   ?? path.join(process.env.CARGO_TARGET_DIR ?? path.join(ROOT, 'target'), 'release', 'monolayer');
 const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
+// WebGL2 by default; VIEWER_BACKEND=webgpu runs the same tests on WebGPU (SwiftShader).
+const WEBGPU = process.env.VIEWER_BACKEND === 'webgpu';
 const FLAGS = [
   '--no-sandbox', '--disable-background-networking', '--disable-component-update', '--disable-sync',
   '--no-first-run', '--disable-quic', '--window-size=1280,900', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
+  ...(WEBGPU ? ['--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader'] : []),
 ];
 
 const TYPES = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.wasm': 'application/wasm', '.png': 'image/png' };
@@ -69,7 +72,7 @@ describe('share links', () => {
 });
 
 // --- the page in Chromium -----------------------------------------------------------------------
-describe('the page as an instrument (Chromium, WebGL2)', () => {
+describe(`the page as an instrument (Chromium, ${WEBGPU ? 'WebGPU' : 'WebGL2'})`, () => {
   let server;
   let base;
   let context;
@@ -109,6 +112,8 @@ describe('the page as an instrument (Chromium, WebGL2)', () => {
 
   it('a link from another version opens with a notice, and the page writes its own version into the URL', { timeout: 120000 }, async () => {
     const page = await open('/?seed=1&paused&v=0.0.1%2Bdeadbeef0000');
+    const backend = await page.evaluate(() => window.demo.backend);
+    assert(backend.startsWith(WEBGPU ? 'WebGPU' : 'WebGL2'), `drawing with ${backend}`);
     const version = await page.evaluate(() => window.demo.version);
     assert.match(version, /^\d+\.\d+\.\d+\+([0-9a-f]{12}|unknown)$/, version);
     const notices = await page.evaluate(() => window.demo.notices);
@@ -234,7 +239,7 @@ describe('the page as an instrument (Chromium, WebGL2)', () => {
       assert.deepEqual([plus, minus], [row.plus_half_defects, row.minus_half_defects], `step ${f.step}: ±½ defects`);
     }
     assert(holesSeen > 0, 'no holes in the frames: the test proves little');
-    await page.locator('#view').screenshot({ path: path.join(OUT, 'viewer-frame.png') });
+    await page.locator('#view').screenshot({ path: path.join(OUT, `viewer-frame-${WEBGPU ? 'webgpu' : 'webgl2'}.png`) });
 
     // Play: every frame is shown, in turn.
     await page.click('#player-play');
