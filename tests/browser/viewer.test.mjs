@@ -258,6 +258,14 @@ describe(`the page as an instrument (Chromium, ${WEBGPU ? 'WebGPU' : 'WebGL2'})`
     assert(rec.type === 'video/webm' && rec.size > 1000 && rec.head === '1a45dfa3', `recording ${JSON.stringify(rec)}`);
     await page.click('#player-play');
 
+    // Step shows the next frame; Download, which takes data out of the live simulation, says so.
+    const shownBefore = await page.evaluate(() => window.demo.playback.shown.length);
+    await page.click('#step');
+    await page.waitForFunction((n) => window.demo.playback.shown.length > n, shownBefore, { timeout: 30000 });
+    await page.click('#download');
+    await page.waitForFunction(() => window.demo.notices.some((n) => n.startsWith('Download: ')), null, { timeout: 30000 });
+    assert.equal(await page.evaluate(() => window.demo.error), null);
+
     // The run directory itself, picked: its frames, the damaged one named, its other files
     // (checkpoint, lock) skipped without a word.
     await page.setInputFiles('#open-dir', run);

@@ -185,7 +185,7 @@ function saveBlob(blob, name) {
 // The Download button: the readouts since the last reset as CSV (its last row the state now),
 // and the state now as a frame file in the native format with a run.json, so that
 // `mkdir -p run/frames`, the frame into run/frames and run.json into run/ make a run that
-// `monolayer analyze run` reads (README, "Data out of the page").
+// `monolayer analyze run` reads (README, "Data out").
 async function download() {
   const d = await call('download');
   const stem = `monolayer-seed${page.state.seed}-step${d.step}`;
@@ -216,6 +216,7 @@ function changed() {
 
 // A new tissue from the state's parameters and seed; resolves once the worker has it.
 function newSim() {
+  if (viewer.active && page.renderer) $('backend').textContent = `Drawing with ${page.renderer.backend()}.`;
   viewer.close();
   const s = page.state;
   const ready = new Promise((resolve) => {
@@ -296,6 +297,11 @@ const controls = new Controls({
   },
   togglePlay: () => (viewer.active ? viewer.toggle() : setPlaying(!isPlaying())),
   stepOnce() {
+    if (viewer.active) {
+      viewer.setPlaying(false);
+      viewer.show((viewer.index + 1) % viewer.frames.length);
+      return;
+    }
     setPlaying(false);
     call('step', page.state.spf);
   },

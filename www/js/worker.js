@@ -168,18 +168,25 @@ const CALLS = {
   stats: () => stats(),
   // The Download button: the readouts since the tissue was made (CSV), the current state as a
   // native frame file and a run.json that makes a run of it for `monolayer analyze`.
-  download: () => ({
-    csv: sim.readouts_csv(),
-    npz: sim.frame_npz(),
-    frameName: sim.frame_name(),
-    runJson: sim.run_json(),
-    step: sim.step_count(),
-  }),
+  download: () => {
+    if (!sim) throw new Error("this takes data out of the live simulation, and a run's frames are shown (Reset returns to it)");
+    return downloadParts();
+  },
   readout_rows: () => sim.readout_rows(),
   // A run's frames: `files` (File objects the page was given) replace the live simulation.
   open: (files) => openRun(files),
   show: (index) => showFrame(index),
 };
+
+function downloadParts() {
+  return {
+    csv: sim.readouts_csv(),
+    npz: sim.frame_npz(),
+    frameName: sim.frame_name(),
+    runJson: sim.run_json(),
+    step: sim.step_count(),
+  };
+}
 
 const FRAME_NAME = /^frame_\d+\.npz$/;
 // A run directory's other files (its checkpoints, lock, and the tables and plots of `analyze`):
