@@ -34,4 +34,4 @@ fi
 bash scripts/serve.sh --build-only
 (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
 cargo build --release --bin monolayer
-node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/demo.test.mjs
+node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/demo.test.mjs tests/browser/viewer.test.mjs

@@ -9,9 +9,15 @@
 //! `view` and `measure` are plain Rust, built and unit-tested natively like the rest of the
 //! crate; only the binding and the GPU need the browser.
 
+pub mod frame_file;
 pub mod measure;
+pub mod playback;
+pub mod readouts;
+pub mod version;
 pub mod view;
 
+#[cfg(target_arch = "wasm32")]
+pub mod player;
 #[cfg(target_arch = "wasm32")]
 pub mod render;
 #[cfg(target_arch = "wasm32")]

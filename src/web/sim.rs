@@ -4,7 +4,9 @@
 
 use wasm_bindgen::prelude::*;
 
+use super::frame_file::encode_frame;
 use super::measure::{tissue_stats, TissueStats};
+use super::readouts::{frame_file_name, run_record_json, ReadoutLog};
 use super::render::WebView;
 use super::view::{FieldKind, ViewBuilder};
 use crate::analysis::holes::VoidRegions;
@@ -34,6 +36,8 @@ pub struct WebSim {
     /// Step at which `stats` was measured (u64::MAX: never).
     stats_step: u64,
     regions: VoidRegions,
+    /// The readouts since the tissue was made (the Download button's CSV).
+    log: ReadoutLog,
 }
 
 #[wasm_bindgen]
@@ -86,7 +90,10 @@ impl WebSim {
 
     fn wrap(m: Monolayer) -> WebSim {
         let (n, l) = (m.params().n_cells, m.params().box_size);
+        let mut log = ReadoutLog::default();
+        log.record_if_due(&m);
         WebSim {
+            log,
             keys: (1..=n as u32).collect(),
             substrate: vec![1.0; l * l],
             view: ViewBuilder::default(),
@@ -100,7 +107,33 @@ impl WebSim {
     /// Runs `n` steps. On an error (instability, failed solve) the state before the failing
     /// step is kept and the error's message is thrown to the page.
     pub fn step(&mut self, n: u32) -> Result<(), JsError> {
-        self.m.advance(n as u64).map_err(js_err)
+        self.log.advance(&mut self.m, n as u64).map_err(js_err)
+    }
+
+    /// The readouts since the tissue was made as CSV, its last row the current state
+    /// (`readouts::ReadoutLog::csv`).
+    pub fn readouts_csv(&mut self) -> String {
+        self.log.csv(&self.m)
+    }
+
+    /// Rows recorded so far.
+    pub fn readout_rows(&self) -> usize {
+        self.log.rows.len()
+    }
+
+    /// The current state as a frame file in the native format (`monolayer run`'s `.npz`).
+    pub fn frame_npz(&mut self) -> Result<Vec<u8>, JsError> {
+        encode_frame(&mut self.m).map_err(js_err)
+    }
+
+    /// Its name in a run directory (`frame_<step>.npz`).
+    pub fn frame_name(&self) -> String {
+        frame_file_name(self.m.step_count())
+    }
+
+    /// A `run.json` that makes a run directory of the frame, for `monolayer analyze`.
+    pub fn run_json(&self) -> String {
+        run_record_json(&self.m)
     }
 
     fn update(&mut self, f: impl FnOnce(&mut Params)) -> Result<(), JsError> {

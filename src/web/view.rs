@@ -11,6 +11,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use super::frame_file::FrameData;
 use crate::analysis::defects::Defect;
 use crate::analysis::spirals::PlusOne;
 use crate::analysis::Analysis;
@@ -117,6 +118,20 @@ impl ViewBuilder {
     /// Rebuilds `self.view` for `kind`. `keys[i]` is cell i's colour key (stable when a cell is
     /// removed, so the other cells keep their colours). `dpr` scales line widths.
     pub fn build(&mut self, m: &mut Monolayer, keys: &[u32], kind: FieldKind, dpr: f32) -> &View {
+        self.build_from(m, keys, kind, dpr, None)
+    }
+
+    /// As [`ViewBuilder::build`]; with `recorded`, a frame file of the state of `m` (opened in
+    /// the page), the speed and the analysis read the frame's own arrays (its Σφv and Q̂), as
+    /// `monolayer analyze` does, rather than the velocities of `m`'s last evaluation.
+    pub fn build_from(
+        &mut self,
+        m: &mut Monolayer,
+        keys: &[u32],
+        kind: FieldKind,
+        dpr: f32,
+        recorded: Option<&FrameData>,
+    ) -> &View {
         let l = m.params().box_size;
         self.view.l = l;
         self.view.kind = kind;
@@ -144,17 +159,17 @@ impl ViewBuilder {
                 self.view.range = (0.0, 1.2);
             }
             FieldKind::Speed => {
-                self.speed(m, l, dpr);
-                self.analyse(m);
+                self.speed(m, l, dpr, recorded);
+                self.analyse(m, recorded);
                 self.spiral_marks(dpr);
             }
             FieldKind::Director => {
-                self.analyse(m);
+                self.analyse(m, recorded);
                 self.director(m.params().q_magnitude, l, dpr);
                 self.defect_marks(dpr);
             }
             FieldKind::StrainRate | FieldKind::ForceDivergence => {
-                self.analyse(m);
+                self.analyse(m, recorded);
                 let a = self.analysis.as_ref().expect("built by analyse");
                 let source = if kind == FieldKind::StrainRate { &a.strain_rate } else { &a.active_force_divergence };
                 let top = source.iter().fold(0.0f64, |a, v| a.max(v.abs()));
@@ -174,13 +189,19 @@ impl ViewBuilder {
 
     /// The offline analysis of the current state: Eq. S4's fields smoothed over the paper's 2R
     /// window, the ±½ defects and the spiral cores.
-    fn analyse(&mut self, m: &Monolayer) {
+    fn analyse(&mut self, m: &Monolayer, recorded: Option<&FrameData>) {
         let l = m.params().box_size;
-        if self.analysis.as_ref().is_none_or(|a| a.l != l) {
+        if self.analysis.as_ref().is_none_or(|a| a.l != l || a.radius != m.params().radius) {
             self.analysis = Some(Analysis::new(m.params()));
         }
         let a = self.analysis.as_mut().expect("built above");
-        a.measure(m);
+        match recorded {
+            Some(f) => {
+                a.zeta = m.params().zeta;
+                a.measure_cells(f.cell_views(), &f.velocity);
+            }
+            None => a.measure(m),
+        }
         self.defects.clone_from(&a.defects);
         self.spiral_cores.clear();
         self.spiral_cores.extend(a.spiral_cores().copied());
@@ -271,8 +292,11 @@ impl ViewBuilder {
         }
     }
 
-    fn speed(&mut self, m: &mut Monolayer, l: usize, dpr: f32) {
-        let v = m.velocity_field().to_vec();
+    fn speed(&mut self, m: &mut Monolayer, l: usize, dpr: f32, recorded: Option<&FrameData>) {
+        let v = match recorded {
+            Some(f) => f.velocity.clone(),
+            None => m.velocity_field().to_vec(),
+        };
         let mut vmax = 0.0f64;
         for (f, c) in self.view.field.iter_mut().zip(&v) {
             let s = c.norm();

@@ -12,7 +12,7 @@ const BRUSH_RADIUS = 6;
 
 export class Controls {
   // actions: setParam(name, v), applyPreset(name), setField(kind), setSeed(v), togglePlay(),
-  // stepOnce(), reset(), screenshot(), record(), brush(x, y, multiplier), ablate(x, y), latticeAt(event).
+  // stepOnce(), reset(), screenshot(), record(), download(), brush(x, y, multiplier), ablate(x, y), latticeAt(event).
   constructor(actions) {
     this.actions = actions;
     this.tool = 'none';
@@ -69,6 +69,7 @@ export class Controls {
     $('reset').addEventListener('click', () => this.actions.reset());
     $('shot').addEventListener('click', () => this.actions.screenshot());
     $('record').addEventListener('click', () => this.actions.record());
+    $('download').addEventListener('click', () => this.actions.download());
     for (const r of document.querySelectorAll('input[name=tool]')) {
       r.addEventListener('change', () => {
         this.tool = r.value;
@@ -109,6 +110,7 @@ export class Controls {
     else if (k === 'r') $('reset').click();
     else if (k === 'p') $('shot').click();
     else if (k === 'v') $('record').click();
+    else if (k === 'd') $('download').click();
     else if (k === 'b') {
       const tools = [...document.querySelectorAll('input[name=tool]')];
       const i = tools.findIndex((t) => t.checked);

@@ -3,12 +3,13 @@
 // the controls (controls.js) and the readouts (readouts.js) to them. Every change of state goes
 // through the actions below, which keep the worker, the controls and the URL in step.
 
-import init, { Renderer, WebView, FieldKind } from '../pkg/monolayer.js';
+import init, { Renderer, WebView, FieldKind, codeVersion } from '../pkg/monolayer.js';
 import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZE, parseUrl, toUrl, relaxedStateFor } from './state.js';
 import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
 import { Readouts, formatSeconds } from './readouts.js';
 import { Recorder } from './recorder.js';
+import { Viewer } from './viewer.js';
 
 const $ = (id) => document.getElementById(id);
 const canvas = $('view');
@@ -20,7 +21,7 @@ window.demo = demo;
 
 // The renderer, the state (what the URL carries), the pending screenshot, and the last stats
 // the worker sent.
-const page = { renderer: null, state: null, screenshot: false, stats: null };
+const page = { renderer: null, state: null, screenshot: false, stats: null, version: undefined };
 
 function showMessage(text, isError = false) {
   message.textContent = text;
@@ -130,7 +131,7 @@ function caption() {
   const t = s.active ? `t = ${s.time.toFixed(0)} (${formatSeconds(s.time * s.timeUnitSeconds)})` : 'relaxing';
   return [
     `${t}, step ${s.step.toLocaleString('en')}`,
-    `ζ = ${s.zeta}, χ = ${Number(s.chi.toPrecision(3))}, γ = ${s.gamma}, seed ${st.seed}, L = ${s.l}, N = ${s.cells}`,
+    `ζ = ${s.zeta}, χ = ${Number(s.chi.toPrecision(3))}, γ = ${s.gamma}, seed ${viewer.active ? viewer.seed : st.seed}, L = ${s.l}, N = ${s.cells}`,
     FIELDS.get(st.field).label,
   ];
 }
@@ -172,6 +173,28 @@ function updateReadouts() {
   };
 }
 
+// Saves `blob` under `name` (the browser's download; nothing leaves the machine).
+function saveBlob(blob, name) {
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(blob);
+  a.download = name;
+  a.click();
+  setTimeout(() => URL.revokeObjectURL(a.href), 60000);
+}
+
+// The Download button: the readouts since the last reset as CSV (its last row the state now),
+// and the state now as a frame file in the native format with a run.json, so that
+// `mkdir -p run/frames`, the frame into run/frames and run.json into run/ make a run that
+// `monolayer analyze run` reads (README, "Data out").
+async function download() {
+  const d = await call('download');
+  const stem = `monolayer-seed${page.state.seed}-step${d.step}`;
+  saveBlob(new Blob([d.csv], { type: 'text/csv' }), `${stem}.csv`);
+  saveBlob(new Blob([d.npz], { type: 'application/octet-stream' }), d.frameName);
+  saveBlob(new Blob([d.runJson], { type: 'application/json' }), 'run.json');
+  demo.lastDownload = { step: d.step, csvName: `${stem}.csv`, frameName: d.frameName, npzBytes: d.npz.length };
+}
+
 // Right after drawing, in the same task: the canvas still holds this frame.
 function saveScreenshot() {
   page.screenshot = false;
@@ -188,11 +211,13 @@ const isPlaying = () => !page.state.paused;
 
 function changed() {
   controls.refresh(page.state, isPlaying());
-  history.replaceState(null, '', toUrl(page.state));
+  history.replaceState(null, '', toUrl(page.state, page.version));
 }
 
 // A new tissue from the state's parameters and seed; resolves once the worker has it.
 function newSim() {
+  if (viewer.active && page.renderer) $('backend').textContent = `Drawing with ${page.renderer.backend()}.`;
+  viewer.close();
   const s = page.state;
   const ready = new Promise((resolve) => {
     onReady = resolve;
@@ -270,8 +295,13 @@ const controls = new Controls({
     page.state.seed = v;
     changed();
   },
-  togglePlay: () => setPlaying(!isPlaying()),
+  togglePlay: () => (viewer.active ? viewer.toggle() : setPlaying(!isPlaying())),
   stepOnce() {
+    if (viewer.active) {
+      viewer.setPlaying(false);
+      viewer.show((viewer.index + 1) % viewer.frames.length);
+      return;
+    }
     setPlaying(false);
     call('step', page.state.spf);
   },
@@ -281,25 +311,47 @@ const controls = new Controls({
     loop.dirty = true;
   },
   record: () => toggleRecording(),
+  download: () => download().catch((e) => notify([`Download: ${e.message ?? e}`])),
   brush: (x, y, radius, multiplier) => edit('paint_substrate', x, y, radius, multiplier),
   ablate: (x, y) => edit('remove_cell_at', x, y),
   latticeAt,
 });
 
+// A run's frames (viewer.js): they replace the live tissue until Reset.
+const viewer = new Viewer({
+  call,
+  opened(r) {
+    setPlaying(false);
+    readouts.reset(page.stats?.timeUnitSeconds ?? 1);
+    loop.restart();
+    message.hidden = true;
+    const from = r.runVersion && r.runVersion !== page.version ? ` (written by version ${r.runVersion}; this page is ${page.version})` : '';
+    $('backend').textContent = `Showing ${r.frames.length} frames of a run, seed ${r.seed}${from}. Drawing with ${page.renderer.backend()}.`;
+  },
+  frameShown() {
+    loop.dirty = true;
+  },
+});
+demo.playback = viewer.state;
+
 // --- start ----------------------------------------------------------------------------------------
 async function boot() {
-  const parsed = parseUrl(location.search);
-  page.state = parsed.state;
-  notify(parsed.notices);
-  document.body.classList.toggle('embed', page.state.embed);
-  changed();
-  worker.postMessage({ type: 'spf', n: page.state.spf });
   try {
     await init();
   } catch (e) {
     fatal('Could not load the WebAssembly core (build it with `bash scripts/serve.sh`)', e);
     return;
   }
+  // The code version goes into every share link; a link from another version says so.
+  page.version = codeVersion();
+  demo.version = page.version;
+  $('version').textContent = `Code version ${page.version}.`;
+  const parsed = parseUrl(location.search, page.version);
+  page.state = parsed.state;
+  notify(parsed.notices);
+  document.body.classList.toggle('embed', page.state.embed);
+  changed();
+  worker.postMessage({ type: 'spf', n: page.state.spf });
   showMessage('Looking for WebGPU or WebGL2…');
   loop.resizeCanvas();
   try {

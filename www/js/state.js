@@ -81,10 +81,16 @@ function clampParam(name, raw, notices, fallback) {
   return v;
 }
 
-// Reads the state from a query string. Returns { state, notices }.
-export function parseUrl(search) {
+// Reads the state from a query string. Returns { state, notices }. `version` is the page's code
+// version (crate version + git commit, `codeVersion()` of the core): a link made by another
+// version (its `v`) says so, since the same parameters and seed may then show another tissue.
+export function parseUrl(search, version) {
   const q = new URLSearchParams(search);
   const notices = [];
+  const linkVersion = q.get('v');
+  if (version !== undefined && linkVersion !== null && linkVersion !== version) {
+    notices.push(`This link was made by version ${linkVersion || '(none)'} of the page; this is ${version}: the same parameters and seed may show another tissue.`);
+  }
   let preset = q.get('preset');
   if (preset !== null && !(preset in PRESETS)) {
     notices.push(`preset=${preset} is unknown: using ${DEFAULT_PRESET}.`);
@@ -121,8 +127,8 @@ export function parseUrl(search) {
 }
 
 // The query string that reproduces the view (only what differs from the defaults, plus the
-// seed so that a shared link shows the same tissue).
-export function toUrl(state) {
+// seed so that a shared link shows the same tissue, and the code version `v` when given).
+export function toUrl(state, version) {
   const q = new URLSearchParams();
   if (state.preset) q.set('preset', state.preset);
   else for (const k of MODEL_PARAMS) q.set(k, String(state[k]));
@@ -132,6 +138,7 @@ export function toUrl(state) {
   if (state.embed) q.set('embed', '');
   if (state.paused) q.set('paused', '');
   if (state.relax) q.set('relax', '');
+  if (version !== undefined) q.set('v', version);
   return '?' + q.toString().replace(/=(&|$)/g, '$1');
 }
 

@@ -7,9 +7,12 @@
 // Messages out: { type: 'ready', info }, { type: 'frame', parts, stats }, { type: 'stopped', why,
 // active }, { type: 'result', id, value | error }, { type: 'fatal', message }.
 
-import init, { WebSim } from '../pkg/monolayer.js';
+import init, { WebSim, WebPlayback } from '../pkg/monolayer.js';
 
 let sim = null;
+// A run's frames opened in the page instead of the live simulation (null while live):
+// { p: WebPlayback, frames: [{ name, step, file }], index }.
+let playback = null;
 // How the current tissue started: 'snapshot' (a shipped relaxed state) or 'disks' (relaxing here).
 let startedFrom = null;
 let playing = false;
@@ -73,9 +76,9 @@ function refill() {
 
 function pump() {
   scheduled = false;
-  if (!sim) return;
+  if (!sim && !playback) return;
   try {
-    if (playing) {
+    if (playing && sim) {
       refill();
       const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(BATCH_MS / msPerStep)));
       if (n >= 1) {
@@ -98,6 +101,14 @@ function pump() {
 }
 
 function stats() {
+  if (playback) {
+    const a = playback.p.stats();
+    return {
+      step: a[0], time: a[1], holes: a[2], area: a[3], packing: a[4], active: a[0] >= a[10], zeta: a[5], chi: a[6],
+      gamma: a[7], cells: a[8], l: a[9], relaxSteps: a[10], timeUnitSeconds: a[11], msPerStep, startedFrom: 'frames',
+      frame: playback.index, frames: playback.frames.length,
+    };
+  }
   return {
     step: sim.step_count(),
     holes: sim.holes(),
@@ -123,7 +134,7 @@ function sendFrame() {
   frameRequest = null;
   changed = false;
   lastSent = { field, dpr };
-  const view = sim.view(field, dpr);
+  const view = (playback ? playback.p : sim).view(field, dpr);
   const parts = {
     l: view.l(),
     kind: view.kind(),
@@ -152,10 +163,96 @@ const CALLS = {
   n_cells: () => sim.n_cells(),
   box_size: () => sim.box_size(),
   fingerprint: () => sim.fingerprint(),
-  defects: () => sim.defects(),
-  spiral_cores: () => sim.spiral_cores(),
+  defects: () => (playback ? playback.p : sim).defects(),
+  spiral_cores: () => (playback ? playback.p : sim).spiral_cores(),
   stats: () => stats(),
+  // The Download button: the readouts since the tissue was made (CSV), the current state as a
+  // native frame file and a run.json that makes a run of it for `monolayer analyze`.
+  download: () => {
+    if (!sim) throw new Error("this takes data out of the live simulation, and a run's frames are shown (Reset returns to it)");
+    return downloadParts();
+  },
+  readout_rows: () => sim.readout_rows(),
+  // A run's frames: `files` (File objects the page was given) replace the live simulation.
+  open: (files) => openRun(files),
+  show: (index) => showFrame(index),
 };
+
+function downloadParts() {
+  return {
+    csv: sim.readouts_csv(),
+    npz: sim.frame_npz(),
+    frameName: sim.frame_name(),
+    runJson: sim.run_json(),
+    step: sim.step_count(),
+  };
+}
+
+const FRAME_NAME = /^frame_\d+\.npz$/;
+// A run directory's other files (its checkpoints, lock, and the tables and plots of `analyze`):
+// skipped without a word when a whole directory is opened.
+const RUN_FILES = /^(checkpoint\.npz|last_good_state\.npz|\..*|.*\.(csv|png|svg|md|txt|webm))$/;
+
+// Opens the files of a run (its run.json and frame_*.npz; a directory's other files are
+// ignored): every frame is read and checked on its own, so that a bad one is reported, naming
+// the file, and skipped. Returns { frames: [{ name, step }], errors, seed, runVersion, hasRecord }
+// or { error, errors } when nothing can be shown (the live simulation then carries on).
+async function openRun(files) {
+  const errors = [];
+  const records = files.filter((f) => f.name === 'run.json');
+  const frames = files.filter((f) => FRAME_NAME.test(f.name)).sort((a, b) => (a.name < b.name ? -1 : 1));
+  for (const f of files) {
+    if (!records.includes(f) && !frames.includes(f) && !RUN_FILES.test(f.name)) {
+      errors.push(`${f.name}: not a frame (frame_<step>.npz) or run.json: ignored`);
+    }
+  }
+  if (records.length > 1) errors.push(`${records.length} files named run.json: using the first`);
+  let p;
+  try {
+    p = records.length ? new WebPlayback('run.json', await records[0].text()) : new WebPlayback('', '');
+  } catch (e) {
+    return { error: String(e.message ?? e), errors };
+  }
+  if (!records.length) errors.push('no run.json: the frames are shown with the default parameters (R, ζ, Δt) at their own size');
+  const good = [];
+  for (const file of frames) {
+    try {
+      const step = p.check(file.name, new Uint8Array(await file.arrayBuffer()));
+      if (good.some((g) => g.step === step)) errors.push(`${file.name}: step ${step} again: skipped`);
+      else good.push({ name: file.name, step, file });
+    } catch (e) {
+      errors.push(String(e.message ?? e));
+    }
+  }
+  if (!good.length) {
+    p.free();
+    return { error: frames.length ? 'none of the frames could be read' : 'no frame_<step>.npz among the files', errors };
+  }
+  good.sort((a, b) => a.step - b.step);
+  playing = false;
+  if (sim) sim.free();
+  sim = null;
+  if (playback) playback.p.free();
+  playback = { p, frames: good, index: -1 };
+  const first = await showFrame(0);
+  return {
+    frames: good.map(({ name, step }) => ({ name, step })), errors: first.error ? [...errors, first.error] : errors,
+    seed: p.seed(), runVersion: p.run_version(), hasRecord: p.has_record(),
+  };
+}
+
+// Shows frame `index` of the run opened: { step } or { error } (naming the file).
+async function showFrame(index) {
+  const f = playback.frames[index];
+  try {
+    playback.p.show(f.name, new Uint8Array(await f.file.arrayBuffer()));
+  } catch (e) {
+    return { index, step: f.step, error: String(e.message ?? e) };
+  }
+  playback.index = index;
+  changed = true;
+  return { index, step: f.step };
+}
 
 // Messages are handled one after the other, each after the last one's awaits (the core's
 // instantiation, a relaxed state's download): a call or a second 'new' never meets a
@@ -171,6 +268,8 @@ async function handle(m) {
       if (!sim) await init();
       if (sim) sim.free();
       sim = null;
+      if (playback) playback.p.free();
+      playback = null;
       const { size, params: p, seed } = m;
       const args = [size.box, size.cells, size.relaxSteps, p.zeta, p.chi, p.gamma, seed];
       if (m.relaxed) {
@@ -203,7 +302,7 @@ async function handle(m) {
       frameRequest = m;
     } else if (m.type === 'call') {
       try {
-        const value = CALLS[m.method](...(m.args ?? []));
+        const value = await CALLS[m.method](...(m.args ?? []));
         changed = true; // cheap to assume: a call may have edited the tissue
         postMessage({ type: 'result', id: m.id, value });
       } catch (err) {

@@ -1,0 +1,85 @@
+//! `WebPlayback`: the binding of [`Playback`], a run's frames opened in the page (worker.js
+//! reads the dropped or picked files and hands their bytes here, one at a time).
+
+use wasm_bindgen::prelude::*;
+
+use super::playback::Playback;
+use super::render::WebView;
+use super::view::FieldKind;
+
+#[wasm_bindgen]
+pub struct WebPlayback(Playback);
+
+#[wasm_bindgen]
+impl WebPlayback {
+    /// A playback of the run whose `run.json` (its name and text) is given, or of frames alone
+    /// (empty name). Throws, naming the file, if the record is not a run of this program.
+    #[wasm_bindgen(constructor)]
+    pub fn new(run_json_name: &str, run_json: &str) -> Result<WebPlayback, JsError> {
+        let record = (!run_json_name.is_empty()).then_some((run_json_name, run_json));
+        Playback::new(record).map(WebPlayback).map_err(|e| JsError::new(&e))
+    }
+
+    /// Checks a frame file against the run: its step, or throws what is wrong with it.
+    pub fn check(&self, name: &str, bytes: &[u8]) -> Result<f64, JsError> {
+        self.0.check(name, bytes).map(|s| s as f64).map_err(|e| JsError::new(&e))
+    }
+
+    /// Shows a frame file.
+    pub fn show(&mut self, name: &str, bytes: &[u8]) -> Result<(), JsError> {
+        self.0.show(name, bytes).map_err(|e| JsError::new(&e))
+    }
+
+    /// Whether the run's record was given (else the native defaults are assumed).
+    pub fn has_record(&self) -> bool {
+        self.0.info.is_some()
+    }
+
+    /// The code version that wrote the run ("" without run.json).
+    pub fn run_version(&self) -> String {
+        self.0.info.as_ref().map(|i| i.version.clone()).unwrap_or_default()
+    }
+
+    /// The run's seed (0 without run.json).
+    pub fn seed(&self) -> f64 {
+        self.0.info.as_ref().map_or(0.0, |i| i.seed as f64)
+    }
+
+    /// The frame shown: [step, active time, holes, void area, packing, ζ, χ, γ, cells, L,
+    /// relaxation steps, seconds per time unit] (empty before the first).
+    pub fn stats(&self) -> Vec<f64> {
+        let Some(m) = self.0.monolayer() else { return Vec::new() };
+        let p = m.params();
+        let s = self.0.stats;
+        let t = m.step_count().saturating_sub(p.relax_steps) as f64 * p.dt;
+        vec![
+            m.step_count() as f64,
+            t,
+            s.holes as f64,
+            s.void_area as f64,
+            s.packing,
+            p.zeta,
+            p.chi(),
+            p.gamma,
+            m.cells().len() as f64,
+            p.box_size as f64,
+            p.relax_steps as f64,
+            p.time_unit_seconds,
+        ]
+    }
+
+    /// What the renderer draws of the frame shown for `field` (throws before the first frame).
+    pub fn view(&mut self, field: FieldKind, dpr: f32) -> Result<WebView, JsError> {
+        self.0.view(field, dpr).map(|v| WebView(v.clone())).ok_or_else(|| JsError::new("no frame shown yet"))
+    }
+
+    /// ±½ defects as last drawn: [x, y, twice the charge, orientation] per defect.
+    pub fn defects(&self) -> Vec<f64> {
+        self.0.builder().defects.iter().flat_map(|d| [d.x, d.y, d.twice_charge as f64, d.orientation]).collect()
+    }
+
+    /// Spiral cores as last drawn: [x, y, ∇·v] per core.
+    pub fn spiral_cores(&self) -> Vec<f64> {
+        self.0.builder().spiral_cores.iter().flat_map(|p| [p.x, p.y, p.divergence]).collect()
+    }
+}

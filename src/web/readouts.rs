@@ -1,0 +1,217 @@
+//! The page's readouts over time, for its Download button: a row every [`ROW_EVERY`] active
+//! steps since the tissue was made (a Reset makes a new one), measured by the analysis module
+//! as offline ([`Analysis::summary`]), and the CSV with a header naming the code version, the
+//! seed and the parameters. With it the page writes the current state as a frame file
+//! ([`super::frame_file::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
+
+use crate::analysis::Analysis;
+use crate::model::error::SimError;
+use crate::Monolayer;
+
+use super::version::code_version;
+
+/// Active steps between two rows (10 steps = one time unit at the default Δt = 0.1).
+pub const ROW_EVERY: u64 = 10;
+
+/// The CSV's columns, in order.
+pub const COLUMNS: &str = "step,time,time_s,holes,void_area,packing,mean_speed,plus_half_defects,\
+minus_half_defects,spiral_cores,zeta,chi,gamma,n_cells";
+
+/// One row: the readouts of one state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// Steps since the random disks, relaxation included.
+    pub step: u64,
+    /// Time since activity started, in time units ((step − relax_steps)·Δt).
+    pub time: f64,
+    /// The same in seconds (× time_unit_seconds).
+    pub time_s: f64,
+    /// Void regions above πR²/4.
+    pub holes: usize,
+    /// Void sites (Σφ < 0.01), in lattice units (µm² at Δx ≈ 1 µm).
+    pub void_area: usize,
+    /// Fraction of sites with Σφ ≥ ½.
+    pub packing: f64,
+    /// Σ|Σφv| / ΣΣφ, sites per time unit (velocities of the last step's evaluation).
+    pub mean_speed: f64,
+    pub plus_half: usize,
+    pub minus_half: usize,
+    pub spiral_cores: usize,
+    /// The sliders' parameters at this row (they may change during a run).
+    pub zeta: f64,
+    pub chi: f64,
+    pub gamma: f64,
+    pub n_cells: usize,
+}
+
+/// The rows since the tissue was made, and the analysis that measures them.
+#[derive(Default)]
+pub struct ReadoutLog {
+    pub rows: Vec<Row>,
+    analysis: Option<Analysis>,
+}
+
+impl ReadoutLog {
+    /// Whether the state of `m` is due a row: active, a multiple of [`ROW_EVERY`] steps since
+    /// activity started, and not recorded yet.
+    fn due(&self, m: &Monolayer) -> bool {
+        let (step, relax) = (m.step_count(), m.params().relax_steps);
+        step >= relax && (step - relax) % ROW_EVERY == 0 && self.rows.last().is_none_or(|r| r.step != step)
+    }
+
+    /// Measures the state of `m` as a row (whether due or not).
+    pub fn measure(&mut self, m: &Monolayer) -> Row {
+        let p = m.params();
+        if self.analysis.as_ref().is_none_or(|a| a.l != p.box_size) {
+            self.analysis = Some(Analysis::new(p));
+        }
+        let a = self.analysis.as_mut().expect("made above");
+        a.measure(m);
+        let s = a.summary();
+        let time = m.step_count().saturating_sub(p.relax_steps) as f64 * p.dt;
+        Row {
+            step: m.step_count(),
+            time,
+            time_s: time * p.time_unit_seconds,
+            holes: s.holes,
+            void_area: a.voids.regions.iter().map(|r| r.area).sum(),
+            packing: s.packing_fraction,
+            mean_speed: s.mean_speed,
+            plus_half: s.plus_half_defects,
+            minus_half: s.minus_half_defects,
+            spiral_cores: s.spiral_cores,
+            zeta: p.zeta,
+            chi: p.chi(),
+            gamma: p.gamma,
+            n_cells: m.cells().len(),
+        }
+    }
+
+    /// Records a row if the state of `m` is due one.
+    pub fn record_if_due(&mut self, m: &Monolayer) {
+        if self.due(m) {
+            let row = self.measure(m);
+            self.rows.push(row);
+        }
+    }
+
+    /// Runs `n` steps of `m`, stopping at each state due a row to record it. On an error the
+    /// state before the failing step is kept, with the rows up to it.
+    pub fn advance(&mut self, m: &mut Monolayer, n: u64) -> Result<(), SimError> {
+        let mut left = n;
+        while left > 0 {
+            let (step, relax) = (m.step_count(), m.params().relax_steps);
+            let to_next = if step < relax { relax - step } else { ROW_EVERY - (step - relax) % ROW_EVERY };
+            let k = left.min(to_next);
+            m.advance(k)?;
+            left -= k;
+            self.record_if_due(m);
+        }
+        Ok(())
+    }
+
+    /// The CSV: a header of `#` lines (code version, seed, every parameter, what the columns
+    /// mean), the columns, then a row per recorded state and, when the current state of `m` is
+    /// not the last row, a last row for it: the last row is what the page shows.
+    pub fn csv(&mut self, m: &Monolayer) -> String {
+        let p = m.params();
+        let mut out = String::new();
+        out.push_str(&format!("# monolayer browser page readouts; code version {}\n", code_version()));
+        out.push_str(&format!("# seed {}\n", m.seed()));
+        let params = serde_json::to_string(p).expect("parameters serialise");
+        out.push_str(&format!("# parameters at download (zeta, chi, gamma, n_cells per row): {params}\n"));
+        out.push_str(&format!(
+            "# a row every {ROW_EVERY} active steps since the tissue was made, and the state at download; time in \
+             time units since activity started ((step - {}) * dt, dt = {}) and in seconds \
+             (time_unit_seconds = {}); void_area in sites (um^2 at dx = 1 um); holes are void regions \
+             (sum phi < 0.01) larger than pi R^2 / 4; packing is the fraction of sites with sum phi >= 1/2; \
+             mean_speed in sites per time unit\n",
+            p.relax_steps, p.dt, p.time_unit_seconds
+        ));
+        out.push_str(COLUMNS);
+        out.push('\n');
+        let last = (self.rows.last().map(|r| r.step) != Some(m.step_count())).then(|| self.measure(m));
+        for r in self.rows.iter().chain(&last) {
+            out.push_str(&format!(
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                r.step,
+                r.time,
+                r.time_s,
+                r.holes,
+                r.void_area,
+                r.packing,
+                r.mean_speed,
+                r.plus_half,
+                r.minus_half,
+                r.spiral_cores,
+                r.zeta,
+                r.chi,
+                r.gamma,
+                r.n_cells
+            ));
+        }
+        out
+    }
+}
+
+/// A `run.json` for the current state of `m` as a run of one frame, in the format of the native
+/// runs (`run::files::RunRecord`, which the native tests read it with): with the frame file in
+/// `DIR/frames/frame_<step>.npz`, `monolayer analyze DIR` reads it.
+pub fn run_record_json(m: &Monolayer) -> String {
+    let record = serde_json::json!({
+        "format": "monolayer-run",
+        "format_version": 1,
+        "version": code_version(),
+        "seed": m.seed(),
+        "frame_interval": 1,
+        "status": "stopped: the state of the browser page, downloaded",
+        "last_frame_step": m.step_count(),
+        "params": m.params(),
+    });
+    let mut s = serde_json::to_string_pretty(&record).expect("record serialises");
+    s.push('\n');
+    s
+}
+
+/// The frame file's name in a run directory, as the native runs name it.
+pub fn frame_file_name(step: u64) -> String {
+    format!("frame_{step:07}.npz")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::web::measure::tissue_stats;
+    use crate::Params;
+
+    #[test]
+    fn rows_fall_every_row_every_active_steps_and_match_the_live_readouts() {
+        let p = Params { box_size: 40, n_cells: 4, relax_steps: 7, ..Params::default() };
+        let mut m = Monolayer::new(p, 2).unwrap();
+        let mut log = ReadoutLog::default();
+        log.advance(&mut m, 3).unwrap();
+        assert!(log.rows.is_empty(), "no row while relaxing");
+        log.advance(&mut m, 4 + 2 * ROW_EVERY + 3).unwrap();
+        let steps: Vec<u64> = log.rows.iter().map(|r| r.step).collect();
+        assert_eq!(steps, [7, 7 + ROW_EVERY, 7 + 2 * ROW_EVERY]);
+        // The same stepping, bit for bit, as without the rows.
+        let mut plain = Monolayer::new(m.params().clone(), 2).unwrap();
+        plain.advance(m.step_count()).unwrap();
+        assert_eq!(plain.fingerprint(), m.fingerprint());
+        let csv = log.csv(&m);
+        let lines: Vec<&str> = csv.lines().filter(|l| !l.starts_with('#')).collect();
+        assert_eq!(lines[0], COLUMNS);
+        assert_eq!(lines.len(), 1 + 3 + 1, "three rows and the current state");
+        let last: Vec<&str> = lines[4].split(',').collect();
+        assert_eq!(last.len(), COLUMNS.split(',').count());
+        assert_eq!(last[0], m.step_count().to_string());
+        let radius = m.params().radius;
+        let s = tissue_stats(m.phi_sum(), 40, radius, &mut Default::default());
+        assert_eq!(last[3].parse::<u32>().unwrap(), s.holes);
+        assert_eq!(last[4].parse::<u32>().unwrap(), s.void_area);
+        assert_eq!(last[5].parse::<f64>().unwrap(), s.packing);
+        assert!(csv.contains(&format!("code version {}", code_version())));
+        assert!(csv.contains("# seed 2\n"));
+        assert!(csv.contains("\"box_size\":40"));
+    }
+}
