@@ -351,42 +351,10 @@ fn complex_field(v: &[C64], l: usize) -> Array3<f64> {
 }
 
 /// Writes one frame of the current state (after [`Monolayer::evaluate_now`] so that velocities
-/// belong to this φ). Arrays (N cells, L box; lattice arrays are indexed [y, x]):
-/// `step` (), `time` (), `centres` (N, 2), `areas` (N,), `q_hat` (N, 2: Q̂_xx, Q̂_xy),
-/// `shape_tensor` (N, 2), `patches` (N, 4: x0, y0, w, h), `phi` (Σ w·h: each cell's φ on its
-/// patch, row by row, concatenated), `phi_offsets` (N + 1), `phi_sum` (L, L), `velocity` (L, L, 2).
+/// belong to this φ), atomically; the format is [`crate::web::frame_file::frame_bytes`]'s.
 pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
-    let l = m.params().box_size;
-    let n = m.cells().len();
-    let phi_sum = Array2::from_shape_vec((l, l), m.phi_sum().to_vec()).expect("L×L");
-    let velocity = complex_field(m.velocity_field(), l);
-    let cells = m.cells();
-    let centres = Array2::from_shape_fn((n, 2), |(i, k)| cells[i].centre(l)[k]);
-    let areas = Array1::from_iter(cells.iter().map(|c| c.area()));
-    let q_hat = Array2::from_shape_fn((n, 2), |(i, k)| cells[i].q_hat()[k]);
-    let shape = Array2::from_shape_fn((n, 2), |(i, k)| cells[i].shape_tensor()[k]);
-    let patches = patch_table(cells.iter().map(|c| c.patch()), n);
-    let mut offsets = vec![0i64];
-    let mut phi = Vec::new();
-    for c in cells {
-        phi.extend(c.phi().interior());
-        offsets.push(phi.len() as i64);
-    }
-    let step = m.step_count();
-    let time = step as f64 * m.params().dt;
-    write_npz(path, |z| {
-        z.add_array("step", &arr0(step as i64))?;
-        z.add_array("time", &arr0(time))?;
-        z.add_array("centres", &centres)?;
-        z.add_array("areas", &areas)?;
-        z.add_array("q_hat", &q_hat)?;
-        z.add_array("shape_tensor", &shape)?;
-        z.add_array("patches", &patches)?;
-        z.add_array("phi", &Array1::from(phi))?;
-        z.add_array("phi_offsets", &Array1::from(offsets))?;
-        z.add_array("phi_sum", &phi_sum)?;
-        z.add_array("velocity", &velocity)
-    })
+    let bytes = crate::web::frame_file::frame_bytes(m).map_err(npz_err(path))?;
+    write_atomic(path, |w| w.write_all(&bytes).map_err(|x| err(path, x)))
 }
 
 /// Writes the exact state (f64 bits, padded patches, the solver's warm start).

@@ -46,6 +46,16 @@ impl FrameData {
 /// belong to this φ).
 pub fn encode_frame(m: &mut Monolayer) -> Result<Vec<u8>, String> {
     m.evaluate_now().map_err(|e| e.to_string())?;
+    frame_bytes(m).map_err(|e| format!("writing the frame: {e}"))
+}
+
+/// The frame file of `m` as it stands (its velocities as last evaluated): the one encoder of the
+/// format, shared by `monolayer run` (`run::files::write_frame`) and the page's download.
+/// Arrays (N cells, L box; lattice arrays are indexed [y, x]): `step` (), `time` (), `centres`
+/// (N, 2), `areas` (N,), `q_hat` (N, 2: Q̂_xx, Q̂_xy), `shape_tensor` (N, 2), `patches` (N, 4: x0,
+/// y0, w, h), `phi` (Σ w·h: each cell's φ on its patch, row by row, concatenated), `phi_offsets`
+/// (N + 1), `phi_sum` (L, L), `velocity` (L, L, 2).
+pub fn frame_bytes(m: &mut Monolayer) -> Result<Vec<u8>, WriteNpzError> {
     let l = m.params().box_size;
     let n = m.cells().len();
     let phi_sum = Array2::from_shape_vec((l, l), m.phi_sum().to_vec()).expect("L×L");
@@ -69,22 +79,19 @@ pub fn encode_frame(m: &mut Monolayer) -> Result<Vec<u8>, String> {
     }
     let step = m.step_count();
     let time = step as f64 * m.params().dt;
-    let build = || -> Result<Vec<u8>, WriteNpzError> {
-        let mut z = NpzWriter::new_compressed(Cursor::new(Vec::new()));
-        z.add_array("step", &arr0(step as i64))?;
-        z.add_array("time", &arr0(time))?;
-        z.add_array("centres", &centres)?;
-        z.add_array("areas", &areas)?;
-        z.add_array("q_hat", &q_hat)?;
-        z.add_array("shape_tensor", &shape)?;
-        z.add_array("patches", &patches)?;
-        z.add_array("phi", &Array1::from(phi))?;
-        z.add_array("phi_offsets", &Array1::from(offsets))?;
-        z.add_array("phi_sum", &phi_sum)?;
-        z.add_array("velocity", &velocity)?;
-        Ok(z.finish()?.into_inner())
-    };
-    build().map_err(|e| format!("writing the frame: {e}"))
+    let mut z = NpzWriter::new_compressed(Cursor::new(Vec::new()));
+    z.add_array("step", &arr0(step as i64))?;
+    z.add_array("time", &arr0(time))?;
+    z.add_array("centres", &centres)?;
+    z.add_array("areas", &areas)?;
+    z.add_array("q_hat", &q_hat)?;
+    z.add_array("shape_tensor", &shape)?;
+    z.add_array("patches", &patches)?;
+    z.add_array("phi", &Array1::from(phi))?;
+    z.add_array("phi_offsets", &Array1::from(offsets))?;
+    z.add_array("phi_sum", &phi_sum)?;
+    z.add_array("velocity", &velocity)?;
+    Ok(z.finish()?.into_inner())
 }
 
 /// Refuses NaN and infinities: no file this program writes holds one.
