@@ -66,7 +66,7 @@ fn analyze_writes_tables_and_plots_like_run_analyze() {
         let l = 60;
         let frame = monolayer::run::files::read_frame(&monolayer::run::files::frame_path(&run, step), l).unwrap();
         let mut sum = vec![0.0; l * l];
-        for (p, phi) in &frame.cells {
+        for (p, phi) in &frame.data.cells {
             for b in 0..p.h {
                 for a in 0..p.w {
                     sum[(p.y0 + b) % l * l + (p.x0 + a) % l] += phi[p.idx(a, b)];
@@ -207,5 +207,5 @@ fn analyze_refuses_what_is_not_a_complete_run_and_writes_nothing() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     fs::copy(other.join("frames").join("frame_0000060.npz"), damaged.join("frames").join("frame_0000330.npz")).unwrap();
-    check(&damaged, "array `velocity` is (50, 50, 2), the run's lattice is 60×60×2");
+    check(&damaged, "a 50×50 lattice, the run's run.json has box_size = 60");
 }

@@ -26,6 +26,7 @@ pub mod correlations;
 pub mod defects;
 pub mod elongation;
 pub mod fields;
+pub mod frame_file;
 pub mod holes;
 pub mod nucleation;
 pub mod precursors;

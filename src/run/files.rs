@@ -8,11 +8,12 @@ use std::io::{BufReader, BufWriter, Cursor, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use ndarray::{arr0, Array0, Array1, Array2, Array3};
+use ndarray::{arr0, Array1, Array2, Array3};
 use ndarray_npy::{NpzReader, NpzWriter};
 use num_complex::Complex64 as C64;
 use serde::{Deserialize, Serialize};
 
+use crate::analysis::frame_file::{self, FrameData};
 use crate::model::lattice::Patch;
 use crate::model::monolayer::{Monolayer, State};
 use crate::model::params::Params;
@@ -351,9 +352,9 @@ fn complex_field(v: &[C64], l: usize) -> Array3<f64> {
 }
 
 /// Writes one frame of the current state (after [`Monolayer::evaluate_now`] so that velocities
-/// belong to this φ), atomically; the format is [`crate::web::frame_file::frame_bytes`]'s.
+/// belong to this φ), atomically; the format is [`frame_file::frame_bytes`]'s.
 pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
-    let bytes = crate::web::frame_file::frame_bytes(m).map_err(npz_err(path))?;
+    let bytes = frame_file::frame_bytes(m).map_err(npz_err(path))?;
     write_atomic(path, |w| w.write_all(&bytes).map_err(|x| err(path, x)))
 }
 
@@ -381,73 +382,16 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     })
 }
 
-/// The shape and item size an `.npy` header declares: `(shape, bytes per item)`.
-fn npy_header(bytes: &[u8]) -> Option<(Vec<u64>, u64)> {
-    let rest = bytes.strip_prefix(b"\x93NUMPY")?;
-    let (len, start) = match rest.first()? {
-        1 => (u16::from_le_bytes([*rest.get(2)?, *rest.get(3)?]) as usize, 4),
-        _ => (u32::from_le_bytes(rest.get(2..6)?.try_into().ok()?) as usize, 6),
-    };
-    let text = std::str::from_utf8(rest.get(start..start + len)?).ok()?;
-    let after = |key: &str| text.find(key).map(|i| &text[i + key.len()..]);
-    let shape = after("'shape':")?;
-    let shape = &shape[shape.find('(')? + 1..shape.find(')')?];
-    let shape =
-        shape.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse().ok()).collect::<Option<_>>()?;
-    let descr = after("'descr':")?;
-    let descr = descr.trim_start().trim_start_matches(['\'', '"']);
-    let digits: String = descr.chars().skip_while(|c| !c.is_ascii_digit()).take_while(char::is_ascii_digit).collect();
-    Some((shape, digits.parse().ok().filter(|&b| b > 0)?))
-}
-
-/// Checks every array's header in the `.npz` at `path` before anything is allocated from it: a
-/// damaged or hostile header may declare any shape (ndarray-npy would allocate it whole, and the
-/// process abort). No array of a run on an L×L lattice holds more than `max_values`, and no
-/// array holds more bytes than its zip entry, whose size deflate bounds by its compressed size.
-fn check_npz_headers(path: &Path, max_values: u64) -> IoResult<()> {
+/// Checks every array's header in the `.npz` at `path` before anything is allocated from it
+/// ([`frame_file::check_npz_headers`]).
+fn check_npz_file_headers(path: &Path, max_values: u64) -> IoResult<()> {
     let file = File::open(path).map_err(|e| err(path, e))?;
-    let mut zip =
-        zip::ZipArchive::new(BufReader::new(file)).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
-    for i in 0..zip.len() {
-        let mut entry = zip.by_index(i).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
-        let name = entry.name().trim_end_matches(".npy").to_string();
-        // Deflate expands at most 1032-fold.
-        let (size, packed) = (entry.size(), entry.compressed_size());
-        if size > packed.saturating_mul(1100).saturating_add(4096) {
-            return Err(err(path, format!("array `{name}`: {size} bytes from {packed} compressed: a damaged file")));
-        }
-        let mut head = Vec::new();
-        (&mut entry).take(1 << 16).read_to_end(&mut head).map_err(|e| err(path, format!("array `{name}`: {e}")))?;
-        let (shape, item) =
-            npy_header(&head).ok_or_else(|| err(path, format!("array `{name}`: not a readable .npy header")))?;
-        let values = shape.iter().try_fold(1u64, |a, &d| a.checked_mul(d));
-        let bytes = values.and_then(|v| v.checked_mul(item));
-        match (values, bytes) {
-            (Some(v), Some(b)) if v <= max_values && b <= size => {}
-            _ => {
-                return Err(err(
-                    path,
-                    format!(
-                        "array `{name}`: its header declares shape {shape:?}, more than the file holds or a run on \
-                         this lattice has ({max_values} values at most): a damaged file"
-                    ),
-                ))
-            }
-        }
-    }
-    Ok(())
-}
-
-/// The most values one array of a frame or checkpoint of an L×L run holds: the lattice fields
-/// (2 L²), or every cell's φ together (each cell's patch is at most L² and the cells cover the
-/// box a few times at most: 64 L², against ≈ 5 L² at the paper's density).
-fn max_array_values(l: usize) -> u64 {
-    64 * (l as u64).pow(2) + 4096
+    frame_file::check_npz_headers(BufReader::new(file), max_values).map_err(|e| err(path, e))
 }
 
 /// Reads a checkpoint written by [`write_checkpoint`].
 pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
-    check_npz_headers(path, max_array_values(l))?;
+    check_npz_file_headers(path, frame_file::max_array_values(l))?;
     let file = File::open(path).map_err(|e| err(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let e = |name: &str| {
@@ -499,24 +443,11 @@ pub use super::config::load_params;
 
 // ---- Reading frames (offline analysis) ----
 
-/// One frame: what the analysis needs of it.
+/// One frame of a run: its file and what the analysis needs of it.
 #[derive(Clone, Debug)]
 pub struct Frame {
     pub path: PathBuf,
-    pub step: u64,
-    pub time: f64,
-    /// Each cell's patch and φ on the padded patch storage (halo of zeros).
-    pub cells: Vec<(Patch, Vec<f64>)>,
-    pub q_hat: Vec<[f64; 2]>,
-    /// Σ_i φ_i v_i, (v_x, v_y) as (re, im), index y·L + x.
-    pub velocity: Vec<C64>,
-}
-
-impl Frame {
-    /// The cells as [`super::Analysis::measure_cells`] takes them.
-    pub fn cell_views(&self) -> impl Iterator<Item = (Patch, &[f64], [f64; 2])> {
-        self.cells.iter().zip(&self.q_hat).map(|((p, phi), q)| (*p, phi.as_slice(), *q))
-    }
+    pub data: FrameData,
 }
 
 /// A run directory checked for analysis: its record and its complete frames, in step order.
@@ -579,79 +510,24 @@ impl RunFrames {
     }
 }
 
-/// Reads one frame of a run on an L×L lattice, checking every array's shape.
+/// The largest frame file read: the arrays of a 2,048² run with the cells' φ, deflated, are far
+/// smaller. A larger file is not a frame, and reading it whole would exhaust the memory.
+const MAX_FRAME_BYTES: u64 = 1 << 32;
+
+/// Reads one frame of a run on an L×L lattice ([`frame_file::decode_frame_of_box`], the decoder
+/// the page uses), checking every array's shape.
 pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
-    check_npz_headers(path, max_array_values(l))?;
-    let file = File::open(path).map_err(|e| err(path, e))?;
-    let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, format!("not a readable .npz: {e}")))?;
-    let e = |name: &'static str| move |x: ndarray_npy::ReadNpzError| err(path, format!("array `{name}`: {x}"));
-    let step: Array0<i64> = z.by_name("step").map_err(e("step"))?;
-    let time: Array0<f64> = z.by_name("time").map_err(e("time"))?;
-    let patches: Array2<i64> = z.by_name("patches").map_err(e("patches"))?;
-    let phi: Array1<f64> = z.by_name("phi").map_err(e("phi"))?;
-    let offsets: Array1<i64> = z.by_name("phi_offsets").map_err(e("phi_offsets"))?;
-    let q_hat: Array2<f64> = z.by_name("q_hat").map_err(e("q_hat"))?;
-    let velocity: Array3<f64> = z.by_name("velocity").map_err(e("velocity"))?;
-    if velocity.dim() != (l, l, 2) {
-        return Err(err(path, format!("array `velocity` is {:?}, the run's lattice is {l}×{l}×2", velocity.dim())));
+    // A FIFO or a device would block the reader, or never end.
+    let meta = fs::metadata(path).map_err(|e| err(path, e))?;
+    if !meta.is_file() {
+        return Err(err(path, "not a regular file: not a frame"));
     }
-    let n = patches.nrows();
-    if patches.ncols() != 4 || offsets.len() != n + 1 || q_hat.dim() != (n, 2) {
-        return Err(err(
-            path,
-            format!(
-                "`patches` {:?}, `phi_offsets` ({}), `q_hat` {:?} disagree on the number of cells",
-                patches.dim(),
-                offsets.len(),
-                q_hat.dim()
-            ),
-        ));
+    if meta.len() > MAX_FRAME_BYTES {
+        return Err(err(path, format!("{} bytes: larger than any frame ({MAX_FRAME_BYTES} at most)", meta.len())));
     }
-    let phi = phi.as_slice().ok_or_else(|| err(path, "array `phi` is not contiguous"))?;
-    let step = step.into_scalar();
-    if step < 0 {
-        return Err(err(path, format!("array `step` = {step}: a step is ≥ 0")));
-    }
-    let time = time.into_scalar();
-    finite(path, "time", [time].iter())?;
-    finite(path, "phi", phi.iter())?;
-    finite(path, "q_hat", q_hat.iter())?;
-    finite(path, "velocity", velocity.iter())?;
-    let mut cells = Vec::with_capacity(n);
-    for i in 0..n {
-        let [x0, y0, w, h] = [0, 1, 2, 3].map(|k| patches[[i, k]]);
-        if x0 < 0
-            || y0 < 0
-            || x0 as usize >= l
-            || y0 as usize >= l
-            || w < 1
-            || h < 1
-            || w as usize > l
-            || h as usize > l
-        {
-            return Err(err(path, format!("cell {i}: patch ({x0}, {y0}, {w}, {h}) does not fit the {l}×{l} lattice")));
-        }
-        let p = Patch { x0: x0 as usize, y0: y0 as usize, w: w as usize, h: h as usize };
-        let (a, b) = (offsets[i], offsets[i + 1]);
-        if a < 0 || b < a || b as usize > phi.len() || b - a != (p.w * p.h) as i64 {
-            return Err(err(path, format!("cell {i}: `phi_offsets` [{a}, {b}) do not hold its {}×{} patch", p.w, p.h)));
-        }
-        let mut padded = vec![0.0; p.padded_len()];
-        for bb in 0..p.h {
-            let src = a as usize + bb * p.w;
-            padded[p.idx(0, bb)..][..p.w].copy_from_slice(&phi[src..src + p.w]);
-        }
-        cells.push((p, padded));
-    }
-    let v = velocity.as_slice().ok_or_else(|| err(path, "array `velocity` is not contiguous"))?;
-    Ok(Frame {
-        path: path.to_path_buf(),
-        step: step as u64,
-        time,
-        cells,
-        q_hat: q_hat.rows().into_iter().map(|r| [r[0], r[1]]).collect(),
-        velocity: v.chunks_exact(2).map(|c| C64::new(c[0], c[1])).collect(),
-    })
+    let bytes = fs::read(path).map_err(|e| err(path, e))?;
+    let data = frame_file::decode_frame_of_box(&path.display().to_string(), &bytes, l)?;
+    Ok(Frame { path: path.to_path_buf(), data })
 }
 
 /// Checks a frame read from a run against the run's record: a frame with cells missing would be
@@ -659,18 +535,18 @@ pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
 pub fn check_frame(frame: &Frame, params: &Params) -> IoResult<()> {
     // A step leaves every φ in [phi_min, phi_max] or fails the run: a frame beyond is damaged.
     let (lo, hi) = (params.phi_min, params.phi_max);
-    if let Some(v) = frame.cells.iter().flat_map(|(_, phi)| phi.iter()).find(|&&v| !(lo..=hi).contains(&v)) {
+    if let Some(v) = frame.data.cells.iter().flat_map(|(_, phi)| phi.iter()).find(|&&v| !(lo..=hi).contains(&v)) {
         return Err(err(
             &frame.path,
             format!("holds φ = {v}, outside [{lo}, {hi}] where every run stays: a damaged file"),
         ));
     }
-    if frame.cells.len() != params.n_cells {
+    if frame.data.cells.len() != params.n_cells {
         return Err(err(
             &frame.path,
             format!(
                 "holds {} cells, the run has n_cells = {}: not a frame of this run",
-                frame.cells.len(),
+                frame.data.cells.len(),
                 params.n_cells
             ),
         ));

@@ -64,8 +64,8 @@ impl RunAnalysis {
 
     /// Measures the next frame from a file.
     pub fn push_frame(&mut self, frame: &Frame) {
-        self.analysis.measure_cells(frame.cell_views(), &frame.velocity);
-        self.record(frame.step, frame.time);
+        self.analysis.measure_cells(frame.data.cell_views(), &frame.data.velocity);
+        self.record(frame.data.step, frame.data.time);
     }
 
     /// Measures the next frame from the running simulation (after `evaluate_now`).
@@ -310,8 +310,8 @@ impl RunAnalysis {
         written.extend(plots::correlations(&out.join("correlations"), &cv, &cq, lengths, self.frames.len())?);
         if let Some(frame) = snapshot {
             let mut a = Analysis::new(params);
-            a.measure_cells(frame.cell_views(), &frame.velocity);
-            let base = out.join(snapshot_name(frame.step));
+            a.measure_cells(frame.data.cell_views(), &frame.data.velocity);
+            let base = out.join(snapshot_name(frame.data.step));
             written.extend(plots::snapshot(&base, frame, &a, field)?);
         }
         Ok(written)
@@ -352,8 +352,8 @@ fn measure_frames(
     for (step, path) in frames {
         let frame = read_frame(path, params.box_size)?;
         check_frame(&frame, params)?;
-        if frame.step != *step {
-            return Err(format!("{}: holds step {}, its name says {step}", path.display(), frame.step));
+        if frame.data.step != *step {
+            return Err(format!("{}: holds step {}, its name says {step}", path.display(), frame.data.step));
         }
         ra.push_frame(&frame);
         if Some(*step) == keep {
@@ -402,7 +402,7 @@ impl LiveRun {
         let snapshot = snapshot_frame(&self.ra, &self.dir, self.params.box_size)?;
         let out = self.dir.join("analysis");
         self.ra.write(&out, snapshot.as_ref(), Background::StrainRate, &self.params)?;
-        let now = snapshot.map(|f| f.step);
+        let now = snapshot.map(|f| f.data.step);
         if let Some(old) = self.snapshot.filter(|&old| Some(old) != now) {
             // The snapshot follows the last frame until a hole nucleates: drop the one it replaces.
             for ext in ["png", "svg"] {

@@ -276,7 +276,7 @@ impl Draw for Snapshot<'_> {
             }
         };
         let scale = field.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(f64::MIN_POSITIVE);
-        let caption = format!("step {}, t = {}: {name}", frame.step, frame.time);
+        let caption = format!("step {}, t = {}: {name}", frame.data.step, frame.data.time);
         let mut chart = ChartBuilder::on(root)
             .caption(caption, (FONT, 20))
             .margin(10)
@@ -295,7 +295,7 @@ impl Draw for Snapshot<'_> {
             }))
             .map_err(plot_err)?;
         // Outlines at φ = ½ and elongation axes through the centres.
-        for ((patch, phi), q) in frame.cells.iter().zip(&frame.q_hat) {
+        for ((patch, phi), q) in frame.data.cells.iter().zip(&frame.data.q_hat) {
             chart
                 .draw_series(outline(*patch, phi, l).into_iter().map(|s| PathElement::new(s.to_vec(), BLACK)))
                 .map_err(plot_err)?;

@@ -395,7 +395,7 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
         let frame = read_frame(path, p.box_size)?;
         check_frame(&frame, p)?;
         ra.push_frame(&frame);
-        s.steps = frame.step;
+        s.steps = frame.data.step;
     }
     let first = ra.frames.first().map(|f| f.time).unwrap_or(0.0);
     let last = ra.frames.last().map(|f| f.time).unwrap_or(0.0);

@@ -9,7 +9,6 @@
 //! `view` and `measure` are plain Rust, built and unit-tested natively like the rest of the
 //! crate; only the binding and the GPU need the browser.
 
-pub mod frame_file;
 pub mod measure;
 pub mod playback;
 pub mod readouts;

@@ -8,9 +8,9 @@ use crate::analysis::holes::VoidRegions;
 use crate::model::monolayer::State;
 use crate::{Monolayer, Params};
 
-use super::frame_file::{decode_frame, FrameData};
 use super::measure::{tissue_stats, TissueStats};
 use super::view::{FieldKind, View, ViewBuilder};
+use crate::analysis::frame_file::{decode_frame, FrameData};
 
 /// What the page needs of a run's `run.json` (the native `run::files::RunRecord`).
 #[derive(Clone, Debug, PartialEq)]
@@ -135,8 +135,8 @@ impl Playback {
 
 #[cfg(test)]
 mod tests {
-    use super::super::frame_file::encode_frame;
     use super::*;
+    use crate::analysis::frame_file::encode_frame;
     use crate::analysis::Analysis;
 
     fn run_json(p: &Params, seed: u64) -> String {

@@ -2,7 +2,7 @@
 //! steps since the tissue was made (a Reset makes a new one), measured by the analysis module
 //! as offline ([`Analysis::summary`]), and the CSV with a header naming the code version, the
 //! seed and the parameters. With it the page writes the current state as a frame file
-//! ([`super::frame_file::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
+//! ([`crate::analysis::frame_file::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
 
 use crate::analysis::Analysis;
 use crate::model::error::SimError;

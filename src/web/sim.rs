@@ -4,11 +4,11 @@
 
 use wasm_bindgen::prelude::*;
 
-use super::frame_file::encode_frame;
 use super::measure::{tissue_stats, TissueStats};
 use super::readouts::{frame_file_name, run_record_json, ReadoutLog};
 use super::render::WebView;
 use super::view::{FieldKind, ViewBuilder};
+use crate::analysis::frame_file::encode_frame;
 use crate::analysis::holes::VoidRegions;
 use crate::model::snapshot::{self, relaxation_key};
 use crate::{Monolayer, Params};

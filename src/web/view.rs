@@ -11,8 +11,8 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::frame_file::FrameData;
 use crate::analysis::defects::Defect;
+use crate::analysis::frame_file::FrameData;
 use crate::analysis::spirals::PlusOne;
 use crate::analysis::Analysis;
 use crate::model::shape::gradient;

@@ -1,16 +1,17 @@
-//! Frame files (`frame_*.npz`, the native format of `monolayer run`) in the page: the current
-//! state written as one, and a run's frames read back, from bytes (the page has no files, only
-//! what the user drops or picks). Both go through `ndarray-npy`, the crate the native writer and
-//! reader use, and its `zip` with pure-Rust deflate: the same code builds natively, where
-//! `tests/frame_file.rs` checks it against `monolayer run`'s own frames byte for byte and array
-//! for array.
+//! Frame files (`frame_*.npz`): the one encoder and the one decoder of the format, from and to
+//! bytes, shared by `monolayer run` and `analyze` (`run::files`, which adds the files) and by the
+//! page (which has no files, only what the user drops or picks, and downloads its state). Both go
+//! through `ndarray-npy` and its `zip` with pure-Rust deflate, so the same code builds for wasm32;
+//! `tests/frame_file.rs` checks the page's path against `monolayer run`'s frames.
+//!
+//! A frame is the analysis's input, so the format lives in this layer, below both `run` and `web`.
 //!
 //! Arrays of a frame (N cells, L box; lattice arrays are indexed [y, x]): `step` (), `time` (),
 //! `centres` (N, 2), `areas` (N,), `q_hat` (N, 2), `shape_tensor` (N, 2), `patches` (N, 4: x0,
 //! y0, w, h), `phi` (each cell's φ on its patch, row by row, concatenated), `phi_offsets`
 //! (N + 1), `phi_sum` (L, L), `velocity` (L, L, 2).
 
-use std::io::Cursor;
+use std::io::{Cursor, Read};
 
 use ndarray::{arr0, Array0, Array1, Array2, Array3};
 use ndarray_npy::{NpzReader, NpzWriter, ReadNpzError, WriteNpzError};
@@ -94,9 +95,11 @@ pub fn frame_bytes(m: &mut Monolayer) -> Result<Vec<u8>, WriteNpzError> {
     Ok(z.finish()?.into_inner())
 }
 
-/// Refuses NaN and infinities: no file this program writes holds one.
+/// Refuses NaN, infinities and absurd magnitudes (beyond 10¹⁰⁰, whose squares overflow): no file
+/// this program writes holds one, so a file that does is damaged, and the tables measured from it
+/// would fill with NaN.
 fn finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> Result<(), String> {
-    match values.enumerate().find(|(_, v)| !v.is_finite()) {
+    match values.enumerate().find(|(_, v)| !(v.is_finite() && v.abs() <= 1e100)) {
         Some((k, v)) => Err(format!("array `{name}` holds {v} at index {k}: a damaged file")),
         None => Ok(()),
     }
@@ -106,10 +109,77 @@ fn finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> Result<(), S
 /// `expect` is (L, N) of the run's `run.json` when known. Errors start with `name` (the file's
 /// name) and say which array is wrong, as `monolayer analyze` does.
 pub fn decode_frame(name: &str, bytes: &[u8], expect: Option<(usize, usize)>) -> Result<FrameData, String> {
-    decode(bytes, expect).map_err(|e| format!("{name}: {e}"))
+    let (l, n) = expect.unzip();
+    decode(bytes, l, n).map_err(|e| format!("{name}: {e}"))
 }
 
-fn decode(bytes: &[u8], expect: Option<(usize, usize)>) -> Result<FrameData, String> {
+/// [`decode_frame`] for a run on an L×L lattice whose number of cells is checked afterwards
+/// against the run's record (`run::files::check_frame`).
+pub fn decode_frame_of_box(name: &str, bytes: &[u8], l: usize) -> Result<FrameData, String> {
+    decode(bytes, Some(l), None).map_err(|e| format!("{name}: {e}"))
+}
+
+/// The shape and item size an `.npy` header declares: `(shape, bytes per item)`.
+fn npy_header(bytes: &[u8]) -> Option<(Vec<u64>, u64)> {
+    let rest = bytes.strip_prefix(b"\x93NUMPY")?;
+    let (len, start) = match rest.first()? {
+        1 => (u16::from_le_bytes([*rest.get(2)?, *rest.get(3)?]) as usize, 4),
+        _ => (u32::from_le_bytes(rest.get(2..6)?.try_into().ok()?) as usize, 6),
+    };
+    let text = std::str::from_utf8(rest.get(start..start + len)?).ok()?;
+    let after = |key: &str| text.find(key).map(|i| &text[i + key.len()..]);
+    let shape = after("'shape':")?;
+    let shape = &shape[shape.find('(')? + 1..shape.find(')')?];
+    let shape =
+        shape.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse().ok()).collect::<Option<_>>()?;
+    let descr = after("'descr':")?;
+    let descr = descr.trim_start().trim_start_matches(['\'', '"']);
+    let digits: String = descr.chars().skip_while(|c| !c.is_ascii_digit()).take_while(char::is_ascii_digit).collect();
+    Some((shape, digits.parse().ok().filter(|&b| b > 0)?))
+}
+
+/// The most values one array of a frame or checkpoint of an L×L run holds: the lattice fields
+/// (2 L²), or every cell's φ together (each cell's patch is at most L² and the cells cover the
+/// box a few times at most: 64 L², against ≈ 5 L² at the paper's density).
+pub fn max_array_values(l: usize) -> u64 {
+    64 * (l as u64).pow(2) + 4096
+}
+
+/// Checks every array's header in an `.npz` before anything is allocated from it: a damaged or
+/// hostile header may declare any shape (ndarray-npy would allocate it whole, and the process
+/// abort). No array holds more than `max_values`, nor more bytes than its zip entry, whose size
+/// deflate bounds by its compressed size.
+pub fn check_npz_headers(archive: impl Read + std::io::Seek, max_values: u64) -> Result<(), String> {
+    let mut zip = zip::ZipArchive::new(archive).map_err(|e| format!("not a readable .npz: {e}"))?;
+    for i in 0..zip.len() {
+        let mut entry = zip.by_index(i).map_err(|e| format!("not a readable .npz: {e}"))?;
+        let name = entry.name().trim_end_matches(".npy").to_string();
+        // Deflate expands at most 1032-fold.
+        let (size, packed) = (entry.size(), entry.compressed_size());
+        if size > packed.saturating_mul(1100).saturating_add(4096) {
+            return Err(format!("array `{name}`: {size} bytes from {packed} compressed: a damaged file"));
+        }
+        let mut head = Vec::new();
+        (&mut entry).take(1 << 16).read_to_end(&mut head).map_err(|e| format!("array `{name}`: {e}"))?;
+        let (shape, item) = npy_header(&head).ok_or_else(|| format!("array `{name}`: not a readable .npy header"))?;
+        let values = shape.iter().try_fold(1u64, |a, &d| a.checked_mul(d));
+        let bytes = values.and_then(|v| v.checked_mul(item));
+        match (values, bytes) {
+            (Some(v), Some(b)) if v <= max_values && b <= size => {}
+            _ => {
+                return Err(format!(
+                    "array `{name}`: its header declares shape {shape:?}, more than the file holds or a run on this \
+                     lattice has ({max_values} values at most): a damaged file"
+                ))
+            }
+        }
+    }
+    Ok(())
+}
+
+fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> Result<FrameData, String> {
+    // Without the run's box, an array is bounded by its bytes alone (≤ 1100× the file's size).
+    check_npz_headers(Cursor::new(bytes), expect_l.map_or(u64::MAX, max_array_values))?;
     let mut z = NpzReader::new(Cursor::new(bytes)).map_err(|e| format!("not a readable .npz: {e}"))?;
     let e = |name: &'static str| move |x: ReadNpzError| format!("array `{name}`: {x}");
     let step: Array0<i64> = z.by_name("step").map_err(e("step"))?;
@@ -124,13 +194,11 @@ fn decode(bytes: &[u8], expect: Option<(usize, usize)>) -> Result<FrameData, Str
         return Err(format!("array `velocity` is {:?}, not L×L×2 for a box of L ≥ 4 sites", velocity.dim()));
     }
     let n = patches.nrows();
-    if let Some((el, en)) = expect {
-        if l != el {
-            return Err(format!("a {l}×{l} lattice, the run's run.json has box_size = {el}: not a frame of this run"));
-        }
-        if n != en {
-            return Err(format!("holds {n} cells, the run's run.json has n_cells = {en}: not a frame of this run"));
-        }
+    if let Some(el) = expect_l.filter(|&el| el != l) {
+        return Err(format!("a {l}×{l} lattice, the run's run.json has box_size = {el}: not a frame of this run"));
+    }
+    if let Some(en) = expect_n.filter(|&en| en != n) {
+        return Err(format!("holds {n} cells, the run's run.json has n_cells = {en}: not a frame of this run"));
     }
     if patches.ncols() != 4 || offsets.len() != n + 1 || q_hat.dim() != (n, 2) {
         return Err(format!(
@@ -221,5 +289,33 @@ mod tests {
         assert!(other.contains("box_size = 48"), "{other}");
         let other = decode_frame("o.npz", &bytes, Some((40, 5))).unwrap_err();
         assert!(other.contains("n_cells = 5"), "{other}");
+    }
+
+    /// An .npz whose .npy header declares 2⁴⁰ values: refused before anything is allocated, by
+    /// the decoder the page and `analyze` share (ndarray-npy would try to allocate 8 TiB).
+    fn npz_declaring(shape: &str) -> Vec<u8> {
+        use std::io::Write;
+        let dict = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({shape}), }}");
+        let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+        let len = (dict.len() + 1).div_ceil(64) * 64;
+        npy.extend((len as u16).to_le_bytes());
+        npy.extend(format!("{dict:<w$}\n", w = len - 1).bytes());
+        npy.extend([0u8; 16]);
+        let mut z = zip::ZipWriter::new(Cursor::new(Vec::new()));
+        z.start_file("step.npy", zip::write::SimpleFileOptions::default()).unwrap();
+        z.write_all(&npy).unwrap();
+        z.finish().unwrap().into_inner()
+    }
+
+    #[test]
+    fn a_header_declaring_more_than_the_file_holds_is_refused_before_allocating() {
+        let e = decode_frame("big.npz", &npz_declaring("1099511627776,"), None).unwrap_err();
+        assert!(e.starts_with("big.npz: array `step`: its header declares shape [1099511627776]"), "{e}");
+        let e = decode_frame_of_box("big.npz", &npz_declaring("1000, 1000"), 40).unwrap_err();
+        assert!(e.contains("106496 values at most"), "{e}");
+        // The same archive with an honest header gets past the bound, to ndarray-npy (which
+        // refuses an f64 `step`).
+        let e = decode_frame("ok.npz", &npz_declaring("2,"), None).unwrap_err();
+        assert!(e.starts_with("ok.npz: array `step`: error reading npy"), "{e}");
     }
 }
