@@ -86,12 +86,8 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
     let mut relaxed = Monolayer::new(base.clone(), o.seed).map_err(|e| e.to_string())?;
     let t = Instant::now();
     pools[0].install(|| relaxed.advance(o.relax_steps)).map_err(|e| e.to_string())?;
-    println!(
-        "relaxation, {} thread(s): {:.3} ms/step\n{}",
-        o.threads[0],
-        1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64,
-        relaxed.counters().report()
-    );
+    let relax_ms = 1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64;
+    println!("relaxation, {} thread(s): {relax_ms:.3} ms/step\n{}", o.threads[0], relaxed.counters().report());
     for &chi in &o.chis {
         let mut p = base.clone();
         p.set_chi(chi);
@@ -157,6 +153,9 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
                 c.report()
             );
         }
+        if o.relax_steps > 0 && !block_ms[0].is_empty() {
+            println!("  {}", paper_length_line(o.threads[0], relax_ms, median(&block_ms[0])));
+        }
         for (times, threads) in block_ms.iter().zip(&o.threads).skip(1) {
             let ratios: Vec<f64> = block_ms[0].iter().zip(times).map(|(t0, t)| t0 / t).collect();
             println!(
@@ -185,6 +184,29 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// Wall time of a run of `relax_steps` relaxation and `active_steps` active steps, in minutes,
+/// from the time per step of each phase.
+pub fn projected_minutes(relax_ms: f64, active_ms: f64, relax_steps: u64, active_steps: u64) -> f64 {
+    (relax_ms * relax_steps as f64 + active_ms * active_steps as f64) / 60e3
+}
+
+/// The paper-length projection (the defaults' 10,000 relaxation and 100,000 active steps, the
+/// protocol of every figure run) from the relaxation's time per step and the active steps' median
+/// block; both phases on `threads` thread(s), which is one core when it is 1.
+fn paper_length_line(threads: usize, relax_ms: f64, active_ms: f64) -> String {
+    let d = Params::default();
+    let total = projected_minutes(relax_ms, active_ms, d.relax_steps, d.active_steps);
+    let where_ = if threads == 1 { "one core".to_string() } else { format!("{threads} threads") };
+    format!(
+        "paper-length run ({} relaxation + {} active steps) on {where_}, projected: {total:.1} min \
+         (relaxation {:.1} min at {relax_ms:.3} ms/step, activity {:.1} min at {active_ms:.3} ms/step)",
+        d.relax_steps,
+        d.active_steps,
+        projected_minutes(relax_ms, 0.0, d.relax_steps, 0),
+        projected_minutes(0.0, active_ms, 0, d.active_steps),
+    )
 }
 
 /// Times [`Analysis::measure`] on a full-size active state, and `analyze` over `frames` frames
@@ -237,6 +259,16 @@ mod tests {
         assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
         assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
         assert!(median(&[]).is_nan());
+    }
+
+    #[test]
+    fn the_paper_length_projection_adds_both_phases() {
+        // 10,000 steps at 3 ms and 100,000 at 6 ms: 30 s + 600 s = 10.5 min.
+        assert!((projected_minutes(3.0, 6.0, 10_000, 100_000) - 10.5).abs() < 1e-12);
+        let line = paper_length_line(1, 3.0, 6.0);
+        assert!(line.contains("on one core, projected: 10.5 min (relaxation 0.5 min"), "{line}");
+        assert!(line.contains("activity 10.0 min at 6.000 ms/step"), "{line}");
+        assert!(paper_length_line(2, 3.0, 6.0).contains("on 2 threads"));
     }
 
     /// A tiny bench runs through every branch (thread counts, the ceiling) and refuses bad
