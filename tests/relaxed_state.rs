@@ -28,34 +28,42 @@ fn number_after_in(s: &str, key: &str) -> f64 {
     num.parse().unwrap_or_else(|_| panic!("{key} in {s}"))
 }
 
-/// The page's size and its listed relaxed states: (seed, γ, file under www/).
-fn page() -> (Params, Vec<(u64, f64, PathBuf)>) {
-    let p = Params {
-        box_size: number_after("export const SIZE", "box") as usize,
-        n_cells: number_after("export const SIZE", "cells") as usize,
-        relax_steps: number_after("export const SIZE", "relaxSteps") as u64,
+/// The page's size called `name` in state.js's SIZES (`  name: { box: …, cells: …, relaxSteps: … },`).
+fn page_size(name: &str) -> Params {
+    let line = format!("{name}:");
+    Params {
+        box_size: number_after(&line, "box") as usize,
+        n_cells: number_after(&line, "cells") as usize,
+        relax_steps: number_after(&line, "relaxSteps") as u64,
         ..Params::default()
-    };
-    let line = STATE_JS.lines().find(|l| l.starts_with("export const RELAXED_STATES")).expect("RELAXED_STATES");
-    let entries = line
-        .split("{ seed:")
-        .skip(1)
+    }
+}
+
+/// The page's listed relaxed states: (its size's parameters, seed, γ, file under www/), one
+/// entry a line in RELAXED_STATES.
+fn page() -> Vec<(Params, u64, f64, PathBuf)> {
+    let start = STATE_JS.find("export const RELAXED_STATES").expect("RELAXED_STATES");
+    let block = &STATE_JS[start..start + STATE_JS[start..].find("];").expect("RELAXED_STATES ends")];
+    let entries = block
+        .lines()
+        .filter(|l| l.trim_start().starts_with("{ size:"))
         .map(|e| {
-            let seed = e.trim_start().split(',').next().unwrap().trim().parse().unwrap();
+            let size = e.split('\'').nth(1).expect("size name");
+            let seed = number_after_in(e, "seed") as u64;
             let gamma = number_after_in(e, "gamma");
-            let file = e.split("'../").nth(1).unwrap().split('\'').next().unwrap();
-            (seed, gamma, Path::new(env!("CARGO_MANIFEST_DIR")).join("www").join(file))
+            let file = e.split("asset('").nth(1).unwrap().split('\'').next().unwrap();
+            let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("www").join("assets").join(file);
+            (page_size(size), seed, gamma, path)
         })
         .collect::<Vec<_>>();
-    assert!(!entries.is_empty(), "state.js lists no relaxed state");
-    (p, entries)
+    assert!(entries.len() >= 2, "state.js lists {} relaxed states, expected the reduced and the paper's", entries.len());
+    entries
 }
 
 #[test]
 fn shipped_relaxed_states_are_what_the_core_relaxes_now() {
-    let (size, entries) = page();
-    for (seed, gamma, file) in entries {
-        let p = Params { gamma, ..size.clone() };
+    for (size, seed, gamma, file) in page() {
+        let p = Params { gamma, ..size };
         let remake = format!(
             "cargo run --release -- relaxed-state --set box_size={} --set n_cells={} --relax-steps {} --set gamma={gamma} \
              --seed {seed} --out www/{}",

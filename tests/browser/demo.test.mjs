@@ -521,6 +521,40 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await p.close();
     });
 
+    // The paper's own tissue (issue 26): the shipped full-size relaxed state, stepped on the CPU
+    // engine, which the page names; chosen from the preset menu, the tissue is remade at 140².
+    check("the paper's preset opens the shipped full-size tissue, steps it, and names its engine", async () => {
+      const p = await open(context, base, '/?preset=paper&paused', errors);
+      await waitStats(p);
+      const s = await workerStats(p);
+      assert(s.startedFrom === 'snapshot' && s.step === 10000 && s.l === 140 && s.cells === 100 && s.active,
+        `?preset=paper: ${s.cells} cells on ${s.l}², started from ${s.startedFrom} at step ${s.step}`);
+      assert.deepEqual([s.chi, s.zeta, s.gamma], [0.001, 0.5, 0.06]);
+      const after = await p.evaluate(async () => {
+        const t = await window.demo.call('step', 3);
+        return { step: (await window.demo.call('stats')).step, ms: t / 3 };
+      });
+      assert.equal(after.step, 10003);
+      m.paperMsPerStep = after.ms;
+      const engine = await p.textContent('#engine');
+      assert(engine.includes('Engine: CPU (WebAssembly), bit-identical to native, 100 cells on 140²') && engine.includes('minutes'),
+        `engine label: ${engine}`);
+      assert.equal(await p.evaluate(() => window.demo.engine), 'cpu');
+      await p.close();
+
+      const q = await open(context, base, '/?seed=1&paused', errors);
+      await waitStats(q);
+      assert.equal((await workerStats(q)).l, 80);
+      assert((await q.textContent('#engine')).includes('33 cells on 80²'), 'reduced engine label');
+      await q.selectOption('#preset', 'paper');
+      await until(q, 'the tissue at 140²', () => window.demo.stats?.l === 140);
+      const r = await workerStats(q);
+      assert(r.startedFrom === 'snapshot' && r.step === 10000, `from the menu: ${r.startedFrom} at ${r.step}`);
+      assert.match(q.url(), /preset=paper/);
+      console.log(`       the paper's tissue on the CPU engine: ${after.ms.toFixed(1)} ms per step`);
+      await q.close();
+    });
+
     check(`the wasm core's fingerprint equals the native one`, async () => {
       const p = await open(context, base, '/?paused&seed=7', errors);
       await waitStats(p);
@@ -615,6 +649,8 @@ describe('nogpu: Chromium --disable-3d-apis (neither WebGPU nor WebGL2)', { skip
     assert(await page.locator('#message').isVisible(), 'message hidden');
     const text = await page.textContent('#message');
     assert(text.includes('WebGPU or WebGL2'), `message: ${text}`);
+    assert.equal(await page.evaluate(() => window.demo.engine), 'none');
+    assert((await page.textContent('#engine')).startsWith('Engine: none'), 'the engine label without a GPU');
     await page.screenshot({ path: path.join(OUT, 'no-gpu.png') });
   });
 });

@@ -6,7 +6,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 
-import { PARAMS, FIELDS, PRESETS, parseUrl, toUrl, fieldName } from '../../www/js/state.js';
+import { PARAMS, FIELDS, PRESETS, SIZES, parseUrl, toUrl, fieldName, relaxedStateFor } from '../../www/js/state.js';
 
 // mulberry32: a small, well-mixed 32-bit generator.
 function rng(seed) {
@@ -20,7 +20,7 @@ function rng(seed) {
   };
 }
 
-const KEYS = [...Object.keys(PARAMS), 'preset', 'field', 'embed', 'paused', 'relax', 'junk', ''];
+const KEYS = [...Object.keys(PARAMS), 'preset', 'field', 'embed', 'paused', 'relax', 'size', 'junk', ''];
 const NASTY = ['', 'NaN', 'nan', 'Infinity', '-Infinity', '1e999', '-1e999', '.5', '5.', '0x10', '1e-400', ' 3 ',
   'abc', '%', '%%20', '∞', '🙂', '-0', '4294967296', '-1', '1,5', 'null', 'undefined', '[]', '{}', '&&', '=='];
 
@@ -28,7 +28,8 @@ function value(r) {
   const k = r();
   if (k < 0.3) return NASTY[Math.floor(r() * NASTY.length)];
   if (k < 0.6) return String((r() - 0.5) * 10 ** Math.floor(r() * 12 - 4));
-  if (k < 0.75) return Object.keys(PRESETS)[Math.floor(r() * 3)] ?? 'x';
+  if (k < 0.7) return Object.keys(PRESETS)[Math.floor(r() * 5)] ?? 'x';
+  if (k < 0.75) return Object.keys(SIZES)[Math.floor(r() * 3)] ?? 'x';
   if (k < 0.9) return fieldName([...FIELDS.keys()][Math.floor(r() * FIELDS.size)]);
   return String.fromCharCode(...Array.from({ length: Math.floor(r() * 6) }, () => 32 + Math.floor(r() * 0x2fff)));
 }
@@ -52,6 +53,7 @@ function assertValid(state, search) {
   }
   assert.ok(FIELDS.has(state.field), `${search}: field ${state.field} is not a FieldKind`);
   assert.ok(state.preset === null || state.preset in PRESETS, `${search}: preset ${state.preset}`);
+  assert.ok(state.size in SIZES, `${search}: size ${state.size}`);
 }
 
 test('any query string parses to a valid state, and its URL round-trips', () => {
@@ -90,4 +92,27 @@ test('bad values are named in a notice and replaced', () => {
   for (const name of ['zeta', 'chi', 'gamma', 'seed', 'field', 'preset']) {
     assert.ok(notices.some((n) => n.startsWith(`${name}=`)), `no notice names ${name}: ${notices}`);
   }
+});
+
+test("the paper's preset is the paper's tissue, and its size survives a changed parameter", () => {
+  const { state, notices } = parseUrl('?preset=paper');
+  assert.deepEqual(notices, []);
+  assert.equal(state.size, 'paper');
+  assert.deepEqual(SIZES.paper, { box: 140, cells: 100, relaxSteps: 10000 });
+  assert.deepEqual([state.chi, state.zeta, state.gamma], [0.001, 0.5, 0.06]);
+  assert.match(relaxedStateFor(state), /relaxed-paper-seed1\.bin$/);
+  // Another ζ keeps the size: the URL says size=paper, and the page does not silently shrink.
+  const changed = parseUrl('?preset=paper&zeta=0.4').state;
+  assert.equal(changed.preset, null);
+  assert.equal(changed.size, 'paper');
+  assert.match(toUrl(changed), /size=paper/);
+  assert.equal(parseUrl(toUrl(changed)).state.size, 'paper');
+  // A reduced preset at the paper's size is no longer that preset; the default is reduced.
+  assert.equal(parseUrl('?preset=persistent&size=paper').state.preset, null);
+  assert.equal(parseUrl('').state.size, 'reduced');
+  assert.match(relaxedStateFor(parseUrl('?seed=1').state), /relaxed-seed1\.bin$/);
+  assert.equal(relaxedStateFor(parseUrl('?preset=paper&seed=2').state), null);
+  const bad = parseUrl('?size=huge');
+  assert.equal(bad.state.size, 'reduced');
+  assert.ok(bad.notices.some((n) => n.startsWith('size=huge')), `${bad.notices}`);
 });

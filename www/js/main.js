@@ -4,7 +4,7 @@
 // through the actions below, which keep the worker, the controls and the URL in step.
 
 import init, { Renderer, WebView, FieldKind, codeVersion } from '../pkg/monolayer.js';
-import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZE, parseUrl, toUrl, relaxedStateFor } from './state.js';
+import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZES, parseUrl, toUrl, relaxedStateFor } from './state.js';
 import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
 import { Readouts, formatSeconds } from './readouts.js';
@@ -85,6 +85,7 @@ worker.onmessage = (e) => {
     else c.resolve(m.value);
   } else if (m.type === 'ready') {
     page.stats = m.stats;
+    showEngine(m.stats);
     readouts.reset(m.stats.timeUnitSeconds);
     onReady?.();
   } else if (m.type === 'stopped') {
@@ -98,6 +99,18 @@ worker.onmessage = (e) => {
     fatal('The simulation stopped', m.message);
   }
 };
+
+// Which engine steps the tissue, said plainly (issue 26: a GPU engine in f32 is to come; until
+// then every tissue steps on the CPU core compiled to WebAssembly, which gives the same bits as
+// the native program for the same parameters and seed).
+const ENGINES = { cpu: 'CPU (WebAssembly), bit-identical to native' };
+function showEngine(s) {
+  const engine = ENGINES[s.engine];
+  const big = s.l >= SIZES.paper.box;
+  const slow = big ? ' At the paper\'s size the CPU engine takes minutes to reach the first hole; the GPU engine that would step it faster is not in this page yet.' : '';
+  $('engine').textContent = `Engine: ${engine}, ${s.cells} cells on ${s.l}².${slow}`;
+  demo.engine = s.engine;
+}
 
 // --- drawing and readouts ---------------------------------------------------------------------------
 const readouts = new Readouts();
@@ -223,8 +236,9 @@ function newSim() {
     onReady = resolve;
   });
   worker.postMessage({
-    type: 'new', size: SIZE, params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed, relaxed: relaxedStateFor(s),
+    type: 'new', size: SIZES[s.size], params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed, relaxed: relaxedStateFor(s),
   });
+  demo.size = SIZES[s.size];
   tellWorkerToPlay();
   loop.restart();
   demo.firstHole = null;
@@ -277,9 +291,13 @@ const edit = (method, ...args) => call(method, ...args).catch((e) => notify([Str
 const controls = new Controls({
   setParam,
   applyPreset(name) {
+    const resize = PRESETS[name].size !== page.state.size;
+    page.state.size = PRESETS[name].size;
     for (const k of MODEL_PARAMS) setParam(k, PRESETS[name][k], true);
     page.state.preset = name;
     changed();
+    // Another size is another tissue: a new one, from the shipped relaxed state if there is one.
+    if (resize) newSim();
   },
   setField(kind) {
     page.state.field = kind;
@@ -357,6 +375,8 @@ async function boot() {
   try {
     page.renderer = await Renderer.create(canvas);
   } catch (e) {
+    $('engine').textContent = 'Engine: none (nothing steps without WebGPU or WebGL2 to draw the tissue).';
+    demo.engine = 'none';
     fatal('This page needs WebGPU or WebGL2 to draw the tissue', e);
     return;
   }
@@ -365,7 +385,6 @@ async function boot() {
   await newSim();
   if (demo.error) return;
   demo.renderer = page.renderer;
-  demo.size = SIZE;
   demo.ready = true;
   loop.start();
 }

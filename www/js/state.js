@@ -6,19 +6,31 @@
 // itself is instantiated by main.js.
 import { FieldKind } from '../pkg/monolayer.js';
 
-// Size of the browser's tissue, chosen from measurements (README, "Browser demo"): big enough
-// for a hole to be a hole (several cells around it), small enough that the default preset opens
-// its first hole within a minute.
-export const SIZE = { box: 80, cells: 33, relaxSteps: 1500 };
+// Sizes of the browser's tissue. `reduced`, chosen from measurements (README, "Browser demo"):
+// big enough for a hole to be a hole (several cells around it), small enough that the default
+// preset opens its first hole within a minute on the CPU engine. `paper`: the paper's own
+// tissue, 100 cells on 140² after 10,000 relaxation steps (the native defaults).
+export const SIZES = {
+  reduced: { box: 80, cells: 33, relaxSteps: 1500 },
+  paper: { box: 140, cells: 100, relaxSteps: 10000 },
+};
+export const DEFAULT_SIZE = 'reduced';
 
 // Relaxed tissues shipped with the page (`monolayer relaxed-state`, README "Browser demo"): the
-// state at the end of the relaxation for these seeds at this size and γ, so that the page opens
-// on a confluent tissue. The core checks that a file was made with exactly the page's
-// parameters and seed, and refuses it otherwise; any other seed or γ relaxes live, with its
-// progress shown, as does `?relax` (to watch the tissue close up).
-export const RELAXED_STATES = [{ seed: 1, gamma: 0.06, file: new URL('../assets/relaxed-seed1.bin', import.meta.url).href }];
+// state at the end of the relaxation for these sizes, seeds and γ, so that the page opens on a
+// confluent tissue. The core checks that a file was made with exactly the page's parameters and
+// seed, and refuses it otherwise; any other seed or γ relaxes live, with its progress shown, as
+// does `?relax` (to watch the tissue close up). One entry a line (tests/relaxed_state.rs reads
+// them).
+const asset = (name) => new URL(`../assets/${name}`, import.meta.url).href;
+export const RELAXED_STATES = [
+  { size: 'reduced', seed: 1, gamma: 0.06, file: asset('relaxed-seed1.bin') },
+  { size: 'paper', seed: 1, gamma: 0.06, file: asset('relaxed-paper-seed1.bin') },
+];
 export const relaxedStateFor = (state) =>
-  state.relax ? null : RELAXED_STATES.find((r) => r.seed === state.seed && r.gamma === state.gamma)?.file ?? null;
+  state.relax
+    ? null
+    : RELAXED_STATES.find((r) => r.size === state.size && r.seed === state.seed && r.gamma === state.gamma)?.file ?? null;
 
 // Each parameter: label, range, default, and whether its slider is logarithmic. The page makes
 // one slider for each entry with `slider` (in this order); `model` ones are the core's.
@@ -55,11 +67,18 @@ const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === na
 //                       small one after ≈ 5,250 that closes by 7,000 (seed 2);
 //   χ = 0.001, ζ = 2.5: a hole that grows to 34–40 % of the box and stays open, after ≈ 1,200
 //                       active steps for seed 1 (the default) and ≈ 4,000 for seed 2.
+//
+// The `paper` preset is the paper's own tissue at its parameters (Fig. 1a: χ = 0.001, ζ = 0.5,
+// γ = 0.06), 100 cells on 140²; natively its first hole opens 4,000–12,000 active steps after
+// the relaxation (docs/calibration.md), which the CPU engine takes minutes to reach.
 export const PRESETS = {
-  'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 2, chi: 0.1, gamma: 0.06 },
-  'short-lived': { label: 'Short-lived holes (χ = 0.001, ζ = 1.5)', zeta: 1.5, chi: 0.001, gamma: 0.06 },
-  persistent: { label: 'Persistent holes (low friction, χ = 0.001)', zeta: 2.5, chi: 0.001, gamma: 0.06 },
+  'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 2, chi: 0.1, gamma: 0.06, size: 'reduced' },
+  'short-lived': { label: 'Short-lived holes (χ = 0.001, ζ = 1.5)', zeta: 1.5, chi: 0.001, gamma: 0.06, size: 'reduced' },
+  persistent: { label: 'Persistent holes (low friction, χ = 0.001)', zeta: 2.5, chi: 0.001, gamma: 0.06, size: 'reduced' },
+  paper: { label: "The paper's tissue (100 cells on 140², χ = 0.001, ζ = 0.5)", zeta: 0.5, chi: 0.001, gamma: 0.06, size: 'paper' },
 };
+// Whether the state is still exactly the preset (its model parameters and its size).
+const isPreset = (state, name) => MODEL_PARAMS.every((k) => state[k] === PRESETS[name][k]) && state.size === PRESETS[name].size;
 export const DEFAULT_PRESET = 'persistent';
 
 // `fallback` is what the state holds without this value (the preset's, or the default).
@@ -108,13 +127,19 @@ export function parseUrl(search, version) {
     embed: q.has('embed'),
     paused: q.has('paused'),
     relax: q.has('relax'),
+    size: base.size,
   };
+  const size = q.get('size');
+  if (size !== null) {
+    if (size in SIZES) state.size = size;
+    else notices.push(`size=${size} is unknown (${Object.keys(SIZES).join(' or ')}): using ${state.size}.`);
+  }
   for (const name of Object.keys(PARAMS)) {
     if (q.has(name)) state[name] = clampParam(name, q.get(name), notices, state[name]);
   }
   // A preset with a model parameter changed is no longer that preset: the URL written back
   // must carry the values, or a shared link would show another tissue.
-  if (state.preset !== null && MODEL_PARAMS.some((k) => state[k] !== PRESETS[state.preset][k])) {
+  if (state.preset !== null && !isPreset(state, state.preset)) {
     state.preset = null;
   }
   const field = q.get('field');
@@ -131,7 +156,10 @@ export function parseUrl(search, version) {
 export function toUrl(state, version) {
   const q = new URLSearchParams();
   if (state.preset) q.set('preset', state.preset);
-  else for (const k of MODEL_PARAMS) q.set(k, String(state[k]));
+  else {
+    for (const k of MODEL_PARAMS) q.set(k, String(state[k]));
+    if (state.size !== DEFAULT_SIZE) q.set('size', state.size);
+  }
   q.set('seed', String(state.seed));
   if (state.spf !== PARAMS.spf.def) q.set('spf', String(state.spf));
   if (state.field !== FieldKind.Tissue) q.set('field', fieldName(state.field));

@@ -125,6 +125,8 @@ function stats() {
     timeUnitSeconds: sim.time_unit_seconds(),
     msPerStep,
     startedFrom,
+    // The only engine so far: the core compiled to WebAssembly (see main.js, showEngine).
+    engine: 'cpu',
   };
 }
 
