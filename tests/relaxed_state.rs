@@ -56,7 +56,11 @@ fn page() -> Vec<(Params, u64, f64, PathBuf)> {
             (page_size(size), seed, gamma, path)
         })
         .collect::<Vec<_>>();
-    assert!(entries.len() >= 2, "state.js lists {} relaxed states, expected the reduced and the paper's", entries.len());
+    assert!(
+        entries.len() >= 2,
+        "state.js lists {} relaxed states, expected the reduced and the paper's",
+        entries.len()
+    );
     entries
 }
 

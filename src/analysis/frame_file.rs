@@ -98,7 +98,7 @@ pub fn frame_bytes(m: &mut Monolayer) -> Result<Vec<u8>, WriteNpzError> {
 /// Refuses NaN, infinities and absurd magnitudes (beyond 10¹⁰⁰, whose squares overflow): no file
 /// this program writes holds one, so a file that does is damaged, and the tables measured from it
 /// would fill with NaN.
-fn finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> Result<(), String> {
+pub fn finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> Result<(), String> {
     match values.enumerate().find(|(_, v)| !(v.is_finite() && v.abs() <= 1e100)) {
         Some((k, v)) => Err(format!("array `{name}` holds {v} at index {k}: a damaged file")),
         None => Ok(()),

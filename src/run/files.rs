@@ -312,14 +312,9 @@ fn npz_err(path: &Path) -> impl Fn(ndarray_npy::WriteNpzError) -> String + '_ {
     move |e| err(path, e)
 }
 
-/// Refuses NaN, infinities and absurd magnitudes (beyond 10¹⁰⁰, whose squares overflow): no file
-/// this program writes holds one, so a file that does is damaged, and the tables measured from it
-/// would fill with NaN.
+/// [`frame_file::finite`], the error naming the file.
 fn finite<'a>(path: &Path, name: &str, values: impl Iterator<Item = &'a f64>) -> IoResult<()> {
-    match values.enumerate().find(|(_, v)| !(v.is_finite() && v.abs() <= 1e100)) {
-        Some((k, v)) => Err(err(path, format!("array `{name}` holds {v} at index {k}: a damaged file"))),
-        None => Ok(()),
-    }
+    frame_file::finite(name, values).map_err(|e| err(path, e))
 }
 
 type Npz = NpzWriter<Cursor<Vec<u8>>>;
