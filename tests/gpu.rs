@@ -101,8 +101,8 @@ fn covering(patches: &[Patch], site: usize, l: usize) -> usize {
     patches.iter().filter(|p| (x + l - p.x0) % l < p.w && (y + l - p.y0) % l < p.h).count()
 }
 
-/// Roundings in a per-cell sum of n terms: invocation t adds ⌈n/64⌉ terms in sequence, then
-/// six halving levels add the 64 partial sums.
+/// Roundings in a per-cell sum of n terms: invocation t adds ⌈n/64⌉ terms in sequence (the
+/// first onto zero, exactly), then six halving levels add the 64 partial sums: one to spare.
 fn reduction_depth(n: usize) -> f64 {
     (n.div_ceil(64) + 6) as f64
 }
@@ -160,14 +160,14 @@ impl Case {
     }
 
     /// Roundings in the lattice sums at a site covered by n patches: each φ rounded once to
-    /// f32, squared once, then n − 1 additions in cell order.
+    /// f32 (which counts twice in φ²), squared once, then n − 1 additions in cell order.
     fn lattice_depth(&self, site: usize) -> f64 {
         covering(&self.patches, site, self.l()) as f64 + 2.0
     }
 
-    /// Roundings in A_i: its terms as in the lattice sums, then the per-cell reduction.
+    /// Roundings in A_i: its terms as in the lattice sums (3), then the per-cell reduction.
     fn area_depth(&self, i: usize) -> f64 {
-        2.0 + reduction_depth(self.patches[i].padded_len())
+        3.0 + reduction_depth(self.patches[i].padded_len())
     }
 }
 
@@ -196,7 +196,7 @@ fn check_lattice_sums(case: &Case) {
     s2.assert_within("Σφ²");
 }
 
-/// A_i = Σ φ² over the padded patch: positive terms, k = 2 + the reduction's depth.
+/// A_i = Σ φ² over the padded patch: positive terms, k = 3 + the reduction's depth.
 fn check_areas(case: &Case) {
     let mut area = Worst::default();
     for (i, c) in case.cpu.cells().iter().enumerate() {
