@@ -381,24 +381,28 @@ fn stages_match_the_cpu_under_the_other_readings() {
 #[test]
 fn two_runs_give_the_same_bits() {
     let Some(ctx) = context() else { return };
-    let m = reduced_tissue();
+    assert_repeats(&ctx, reduced_tissue());
+}
+
+fn assert_repeats(ctx: &GpuContext, m: &Monolayer) {
     let bits = |f: &GpuFields| -> Vec<u32> {
         [&f.sum_phi, &f.sum_phi2, &f.area, &f.mu, &f.shape, &f.q_hat, &f.fx, &f.fy]
             .iter()
             .flat_map(|v| v.iter().map(|x| x.to_bits()))
             .collect()
     };
-    let (_, first) = gpu_fields(&ctx, m);
-    let (gpu, second) = gpu_fields(&ctx, m);
+    let (_, first) = gpu_fields(ctx, m);
+    let (gpu, second) = gpu_fields(ctx, m);
     assert_eq!(bits(&first), bits(&second), "two GPU runs differ");
     // And a third evaluation of the same device state, after the second.
-    gpu.evaluate(&ctx);
-    assert_eq!(gpu.read(&ctx, Slot::Mu), second.mu);
-    assert_eq!(gpu.read(&ctx, Slot::QHat), second.q_hat);
+    gpu.evaluate(ctx);
+    assert_eq!(gpu.read(ctx, Slot::Mu), second.mu);
+    assert_eq!(gpu.read(ctx, Slot::QHat), second.q_hat);
 }
 
-/// The paper's size (100 cells on 140², relaxed, then 20 active steps), every stage against
-/// the CPU, and the time of each dispatch on this adapter (on lavapipe a CPU figure).
+/// The paper's size (100 cells on 140², relaxed, then 20 active steps): every stage against
+/// the CPU, two runs with the same bits, and the time of each dispatch on this adapter (on
+/// lavapipe a CPU figure).
 #[test]
 #[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
 fn stages_match_the_cpu_at_full_size() {
@@ -406,6 +410,7 @@ fn stages_match_the_cpu_at_full_size() {
     let mut m = common::relaxed_full_size().clone();
     m.advance(20).expect("the tissue steps");
     compare_stages(&ctx, &m);
+    assert_repeats(&ctx, &m);
     let gpu = GpuMonolayer::new(&ctx, &m);
     for k in Kernel::ALL {
         eprintln!("{k:?}: {:.3} ms per dispatch (median of 21)", median_ms(&ctx, &gpu, &[k]));
