@@ -6,8 +6,8 @@
 // same order). Every stage binds its buffers at the same binding numbers (`Slot` in
 // src/gpu/kernels.rs), so a buffer has one number in every file.
 
-// The coefficients of src/model/free_energy.rs (`FreeEnergy`) and the knobs of shape.rs and
-// forces.rs, in f32.
+// The coefficients of src/model/free_energy.rs (`FreeEnergy`) and the knobs of shape.rs,
+// forces.rs and the friction weights (motion.rs), in f32.
 struct Params {
     // L, the side of the periodic lattice.
     box_size: u32,
@@ -27,6 +27,12 @@ struct Params {
     q_epsilon: f32,
     // ζ of this phase (0 during relaxation).
     zeta: f32,
+    // 0: w = φ clamped, 1: presence, 2: the whole patch (`FrictionWeights`).
+    friction_weights: u32,
+    // φ above which a cell is present (`presence_threshold`).
+    presence_threshold: f32,
+    _pad0: u32,
+    _pad1: u32,
 };
 
 // One cell's patch (src/model/lattice.rs `Patch`) and where its padded storage starts in the

@@ -25,7 +25,8 @@ use std::time::Instant;
 use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Slot};
 use monolayer::model::free_energy::FreeEnergy;
 use monolayer::model::lattice::Patch;
-use monolayer::model::params::{Laplacian, PassiveForce};
+use monolayer::model::motion::friction_weight;
+use monolayer::model::params::{FrictionWeights, Laplacian, PassiveForce};
 use monolayer::{Monolayer, Params, Phase};
 
 /// The unit roundoff of f32.
@@ -97,8 +98,17 @@ impl Worst {
 
 /// Patches that cover lattice site `site` (how many terms its lattice sums add).
 fn covering(patches: &[Patch], site: usize, l: usize) -> usize {
+    covering_cells(patches, site, l).count()
+}
+
+/// The cells whose patch covers lattice site `site`, in cell order, each with the site's
+/// padded index in its patch.
+fn covering_cells(patches: &[Patch], site: usize, l: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
     let (x, y) = (site % l, site / l);
-    patches.iter().filter(|p| (x + l - p.x0) % l < p.w && (y + l - p.y0) % l < p.h).count()
+    patches.iter().enumerate().filter_map(move |(i, p)| {
+        let (a, b) = ((x + l - p.x0) % l, (y + l - p.y0) % l);
+        (a < p.w && b < p.h).then(|| (i, p.idx(a, b)))
+    })
 }
 
 /// Roundings in a per-cell sum of n terms: invocation t adds ⌈n/64⌉ terms in sequence (the
@@ -117,6 +127,8 @@ struct GpuFields {
     q_hat: Vec<f32>,
     fx: Vec<f32>,
     fy: Vec<f32>,
+    weight: Vec<f32>,
+    force: Vec<f32>,
 }
 
 fn gpu_fields(ctx: &GpuContext, m: &Monolayer) -> (GpuMonolayer, GpuFields) {
@@ -132,6 +144,8 @@ fn gpu_fields(ctx: &GpuContext, m: &Monolayer) -> (GpuMonolayer, GpuFields) {
         q_hat: read(Slot::QHat),
         fx: read(Slot::Fx),
         fy: read(Slot::Fy),
+        weight: read(Slot::Weight),
+        force: read(Slot::Force),
     };
     (gpu, fields)
 }
@@ -178,7 +192,12 @@ fn compare_stages(ctx: &GpuContext, m: &Monolayer) {
     check_areas(&case);
     let mu_bounds = check_chemical_potential(&case);
     let q_hat_bounds = check_shape(&case);
-    check_forces(&case, &mu_bounds, &q_hat_bounds);
+    let force_bounds = check_forces(&case, &mu_bounds, &q_hat_bounds);
+    let p = case.cpu.params();
+    // The CPU gathers n and F only where it solves Eq. 2: active, with cell–cell friction.
+    if case.cpu.phase() == Phase::Active && p.xi_cell > 0.0 {
+        check_friction_sums(&case, &force_bounds);
+    }
 }
 
 /// Σφ and Σφ²: positive terms, so p̃ is the sum itself; k = n + 2 (`Case::lattice_depth`).
@@ -305,15 +324,18 @@ fn check_shape(case: &Case) -> Vec<f64> {
 
 /// f_x = −w·½(μ₊ − μ₋) − ζ(Q̂_xx ∂_xφ + Q̂_xy ∂_yφ), f_y likewise: the GPU's μ and Q̂ carry their
 /// bounds in (weighted as they enter), and the expression's own roundings (input, difference,
-/// product, sum, product, difference: 6; 8 with room) apply to its p̃.
-fn check_forces(case: &Case, mu_bounds: &[Vec<f64>], q_hat_bounds: &[f64]) {
+/// product, sum, product, difference: 6; 8 with room) apply to its p̃. Returns the bounds on
+/// (f_x, f_y) at every padded site of every cell (zero on the halo).
+fn check_forces(case: &Case, mu_bounds: &[Vec<f64>], q_hat_bounds: &[f64]) -> Vec<Vec<(f64, f64)>> {
     let p = case.cpu.params();
     let zeta = if case.cpu.phase() == Phase::Active { p.zeta.abs() } else { 0.0 };
     let weighted = p.passive_force == PassiveForce::PhiGradMu;
     let layout = &case.gpu.state().layout;
     let mut force = Worst::default();
+    let mut all_bounds = Vec::new();
     for (i, c) in case.cpu.cells().iter().enumerate() {
         let (patch, phi, cmu) = (c.patch(), c.phi().data, c.chemical_potential().data);
+        let mut bounds = vec![(0.0, 0.0); patch.padded_len()];
         let (cfx, cfy) = c.force();
         let (gfx, gfy) = (layout.cell(i, &case.g.fx), layout.cell(i, &case.g.fy));
         let (mb, qb, qh) = (&mu_bounds[i], q_hat_bounds[i], c.q_hat());
@@ -331,10 +353,50 @@ fn check_forces(case: &Case, mu_bounds: &[Vec<f64>], q_hat_bounds: &[f64]) {
                 let at = || format!("cell {i} site ({a}, {b})");
                 force.check(gfx[j], cfx.data[j], bx, at);
                 force.check(gfy[j], cfy.data[j], by, at);
+                bounds[j] = (bx, by);
             }
         }
+        all_bounds.push(bounds);
     }
     force.assert_within("f_i");
+    all_bounds
+}
+
+/// n = Σ_j w_j and F = Σ_j w_j f_j, in cell order, with w_j of `motion::friction_weight`. w is
+/// φ clamped (rounded once), or exactly 0 or 1; a presence weight may flip where φ lies within
+/// rounding of the threshold, which adds the whole term (none did here). Each term of F carries
+/// the GPU's f bound times |w|; then the product and n − 1 additions: k = n + 2 on Σ|w f|.
+fn check_friction_sums(case: &Case, force_bounds: &[Vec<(f64, f64)>]) {
+    let p = case.cpu.params();
+    let (l, thr) = (p.box_size, p.presence_threshold);
+    let lattice = case.cpu.lattice();
+    let (mut weight, mut force) = (Worst::default(), Worst::default());
+    for site in 0..l * l {
+        let (mut w_sum, mut wf_sum, mut from_f, mut flips, mut n) = (0.0, 0.0, (0.0, 0.0), (0.0, 0.0, 0.0), 0.0);
+        for (i, j) in covering_cells(&case.patches, site, l) {
+            let c = &case.cpu.cells()[i];
+            let (v, fx, fy) = (c.phi().data[j], c.force().0.data[j], c.force().1.data[j]);
+            let w = friction_weight(p.friction_weights, v, thr);
+            let near = p.friction_weights == FrictionWeights::Presence && (v - thr).abs() <= 4.0 * U * thr;
+            if near {
+                flips = (flips.0 + 1.0, flips.1 + fx.abs(), flips.2 + fy.abs());
+            }
+            n += 1.0;
+            w_sum += w;
+            wf_sum += w * (fx.abs() + fy.abs());
+            let (bx, by) = force_bounds[i][j];
+            from_f = (from_f.0 + w * bx, from_f.1 + w * by);
+        }
+        let k = n + 2.0;
+        let at = || format!("site ({}, {})", site % l, site / l);
+        weight.check(case.g.weight[site], lattice.weight[site], k * U * w_sum + flips.0, at);
+        let (gx, gy) = (case.g.force[2 * site], case.g.force[2 * site + 1]);
+        let cpu = lattice.force[site];
+        force.check(gx, cpu.re, from_f.0 + k * U * wf_sum + flips.1, at);
+        force.check(gy, cpu.im, from_f.1 + k * U * wf_sum + flips.2, at);
+    }
+    weight.assert_within("n = Σ w_j");
+    force.assert_within("F = Σ w_j f_j");
 }
 
 #[test]
@@ -355,20 +417,27 @@ fn stages_match_the_cpu_on_a_reduced_tissue() {
     compare_stages(&ctx, m);
 }
 
-/// The other readings of the model (nine-point Laplacian, f^p = −φ∇μ, Q̂ magnitude 2) and the
-/// relaxation phase (ζ = 0 on the GPU too).
+/// The other readings of the model (nine-point Laplacian, f^p = −φ∇μ, Q̂ magnitude 2, the φ and
+/// presence friction weights) and the relaxation phase (ζ = 0 on the GPU too).
 #[test]
 fn stages_match_the_cpu_under_the_other_readings() {
     let Some(ctx) = context() else { return };
-    let mut m = reduced_tissue().clone();
-    let p = Params {
-        laplacian: Laplacian::NinePoint,
-        passive_force: PassiveForce::PhiGradMu,
-        q_magnitude: 2.0,
-        ..m.params().clone()
-    };
-    m.set_params(p).expect("valid parameters");
-    compare_stages(&ctx, &m);
+    let base = reduced_tissue().params().clone();
+    let readings = [
+        Params {
+            laplacian: Laplacian::NinePoint,
+            passive_force: PassiveForce::PhiGradMu,
+            q_magnitude: 2.0,
+            friction_weights: FrictionWeights::Phi,
+            ..base.clone()
+        },
+        Params { friction_weights: FrictionWeights::Presence, ..base },
+    ];
+    for p in readings {
+        let mut m = reduced_tissue().clone();
+        m.set_params(p).expect("valid parameters");
+        compare_stages(&ctx, &m);
+    }
     let relaxing = Params { box_size: 60, n_cells: 18, relax_steps: 1000, ..Params::default() };
     let mut r = Monolayer::new(relaxing, 5).expect("valid parameters");
     r.advance(200).expect("the tissue relaxes");
@@ -386,7 +455,7 @@ fn two_runs_give_the_same_bits() {
 
 fn assert_repeats(ctx: &GpuContext, m: &Monolayer) {
     let bits = |f: &GpuFields| -> Vec<u32> {
-        [&f.sum_phi, &f.sum_phi2, &f.area, &f.mu, &f.shape, &f.q_hat, &f.fx, &f.fy]
+        [&f.sum_phi, &f.sum_phi2, &f.area, &f.mu, &f.shape, &f.q_hat, &f.fx, &f.fy, &f.weight, &f.force]
             .iter()
             .flat_map(|v| v.iter().map(|x| x.to_bits()))
             .collect()
@@ -415,7 +484,11 @@ fn stages_match_the_cpu_at_full_size() {
     for k in Kernel::ALL {
         eprintln!("{k:?}: {:.3} ms per dispatch (median of 21)", median_ms(&ctx, &gpu, &[k]));
     }
-    eprintln!("all five: {:.3} ms per submission (median of 21)", median_ms(&ctx, &gpu, &Kernel::ALL));
+    eprintln!(
+        "all {} kernels: {:.3} ms per submission (median of 21)",
+        Kernel::ALL.len(),
+        median_ms(&ctx, &gpu, &Kernel::ALL)
+    );
 }
 
 /// The median wall time of submitting `kernels` and waiting for them, after one warm-up.

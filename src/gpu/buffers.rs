@@ -1,6 +1,6 @@
 //! The state the kernels read and write, on the device: the cells' φ on their patches, the
 //! patch geometry, the parameters as a uniform, and the fields the stages derive (Σφ, Σφ², A_i,
-//! μ_i, Q_i, Q̂_i, f_i). Uploaded from a CPU [`Monolayer`], in f32.
+//! μ_i, Q_i, Q̂_i, f_i, n and F). Uploaded from a CPU [`Monolayer`], in f32.
 //!
 //! The per-cell fields (φ, μ, f_x, f_y) are every cell's padded patch storage one after the
 //! other, in cell order, exactly as each [`crate::model::cell::Cell`] stores it; `GpuPatch::offset`
@@ -12,7 +12,7 @@ use wgpu::util::DeviceExt;
 use crate::gpu::context::GpuContext;
 use crate::model::free_energy::FreeEnergy;
 use crate::model::monolayer::{Monolayer, Phase};
-use crate::model::params::{Laplacian, Params, PassiveForce};
+use crate::model::params::{FrictionWeights, Laplacian, Params, PassiveForce};
 
 /// The buffers of the GPU state, each with the binding number every kernel gives it
 /// (`@binding(n)` in `shaders/*.wgsl`).
@@ -39,10 +39,14 @@ pub enum Slot {
     /// f_x and f_y of f_i = f^p_i + f^a_i, per cell on its padded patch.
     Fx = 9,
     Fy = 10,
+    /// n = Σ_j w_j on the lattice, the friction weights.
+    Weight = 11,
+    /// F = Σ_j w_j f_j on the lattice, (x, y) per site.
+    Force = 12,
 }
 
 impl Slot {
-    pub const ALL: [Slot; 11] = [
+    pub const ALL: [Slot; 13] = [
         Slot::Params,
         Slot::Patches,
         Slot::Phi,
@@ -54,6 +58,8 @@ impl Slot {
         Slot::QHat,
         Slot::Fx,
         Slot::Fy,
+        Slot::Weight,
+        Slot::Force,
     ];
 
     pub fn binding(self) -> u32 {
@@ -78,6 +84,9 @@ pub struct GpuParams {
     pub q_magnitude: f32,
     pub q_epsilon: f32,
     pub zeta: f32,
+    pub friction_weights: u32,
+    pub presence_threshold: f32,
+    pub pad: [u32; 2],
 }
 
 impl GpuParams {
@@ -104,6 +113,13 @@ impl GpuParams {
             q_magnitude: p.q_magnitude as f32,
             q_epsilon: p.q_epsilon as f32,
             zeta: if phase == Phase::Active { p.zeta as f32 } else { 0.0 },
+            friction_weights: match p.friction_weights {
+                FrictionWeights::Phi => 0,
+                FrictionWeights::Presence => 1,
+                FrictionWeights::Subdomain => 2,
+            },
+            presence_threshold: p.presence_threshold as f32,
+            pad: [0; 2],
         }
     }
 }
@@ -206,7 +222,8 @@ impl DeviceState {
                     Slot::Params => init(bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM),
                     Slot::Patches => init(bytemuck::cast_slice(&layout.patches), STORAGE),
                     Slot::Phi => init(bytemuck::cast_slice(&phi), STORAGE),
-                    Slot::SumPhi | Slot::SumPhi2 => zeros(l2),
+                    Slot::SumPhi | Slot::SumPhi2 | Slot::Weight => zeros(l2),
+                    Slot::Force => zeros(2 * l2),
                     Slot::Area => zeros(n),
                     Slot::Shape | Slot::QHat => zeros(2 * n),
                     Slot::Mu | Slot::Fx | Slot::Fy => zeros(total),
@@ -234,6 +251,8 @@ fn slot_label(slot: Slot) -> &'static str {
         Slot::QHat => "q_hat",
         Slot::Fx => "fx",
         Slot::Fy => "fy",
+        Slot::Weight => "weight",
+        Slot::Force => "force",
     }
 }
 
@@ -241,11 +260,11 @@ fn slot_label(slot: Slot) -> &'static str {
 mod tests {
     use super::*;
 
-    /// The WGSL structs `Params` (12 four-byte fields) and `Patch` (8) have these sizes; a
+    /// The WGSL structs `Params` (16 four-byte fields) and `Patch` (8) have these sizes; a
     /// field added on one side only changes them.
     #[test]
     fn structs_have_the_wgsl_sizes() {
-        assert_eq!(std::mem::size_of::<GpuParams>(), 48);
+        assert_eq!(std::mem::size_of::<GpuParams>(), 64);
         assert_eq!(std::mem::size_of::<GpuPatch>(), 32);
     }
 

@@ -32,6 +32,8 @@ pub enum Kernel {
     ShapeTensor,
     /// f_i (`shaders/forces.wgsl`); needs μ_i and Q̂_i.
     ForceDensity,
+    /// n = Σ w_j and F = Σ w_j f_j on the lattice (`shaders/gather.wgsl`); needs f_i.
+    FrictionSums,
 }
 
 /// How a kernel's invocations cover the state.
@@ -46,8 +48,14 @@ enum Grid {
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 5] =
-        [Kernel::LatticeSums, Kernel::CellArea, Kernel::ChemicalPotential, Kernel::ShapeTensor, Kernel::ForceDensity];
+    pub const ALL: [Kernel; 6] = [
+        Kernel::LatticeSums,
+        Kernel::CellArea,
+        Kernel::ChemicalPotential,
+        Kernel::ShapeTensor,
+        Kernel::ForceDensity,
+        Kernel::FrictionSums,
+    ];
 
     /// The stage's WGSL file and the kernel's entry point in it.
     fn source(self) -> (&'static str, &'static str) {
@@ -57,6 +65,7 @@ impl Kernel {
             Kernel::ChemicalPotential => (FREE_ENERGY_WGSL, "chemical_potential"),
             Kernel::ShapeTensor => (SHAPE_WGSL, "shape_tensor"),
             Kernel::ForceDensity => (FORCES_WGSL, "force_density"),
+            Kernel::FrictionSums => (GATHER_WGSL, "friction_sums"),
         }
     }
 
@@ -71,12 +80,13 @@ impl Kernel {
             Kernel::ChemicalPotential => &[Params, Patches, Phi, SumPhi2, Area, Mu],
             Kernel::ShapeTensor => &[Params, Patches, Phi, Shape, QHat],
             Kernel::ForceDensity => &[Params, Patches, Phi, Mu, QHat, Fx, Fy],
+            Kernel::FrictionSums => &[Params, Patches, Phi, Fx, Fy, Weight, Force],
         }
     }
 
     fn grid(self) -> Grid {
         match self {
-            Kernel::LatticeSums => Grid::Lattice,
+            Kernel::LatticeSums | Kernel::FrictionSums => Grid::Lattice,
             Kernel::CellArea | Kernel::ShapeTensor => Grid::Cells,
             Kernel::ChemicalPotential | Kernel::ForceDensity => Grid::Sites,
         }
@@ -178,7 +188,7 @@ impl GpuMonolayer {
         ctx.queue.submit([encoder.finish()])
     }
 
-    /// Every kernel of the first stages, in evaluation order: Σφ², A_i, μ_i, Q_i, f_i.
+    /// Every kernel of the first stages, in evaluation order: Σφ², A_i, μ_i, Q_i, f_i, n and F.
     pub fn evaluate(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
         self.run(ctx, &Kernel::ALL)
     }
