@@ -246,3 +246,32 @@ fn read_f32(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Vec<f32> {
     staging.unmap();
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Pipelines and bind groups are stored in the order of `Kernel::ALL` and found by
+    /// `kernel as usize`; buffers likewise by `slot as usize`.
+    #[test]
+    fn lists_follow_the_declaration_order() {
+        for (i, k) in Kernel::ALL.iter().enumerate() {
+            assert_eq!(*k as usize, i, "{k:?}");
+        }
+        for (i, s) in Slot::ALL.iter().enumerate() {
+            assert_eq!(s.binding() as usize, i, "{s:?}");
+        }
+    }
+
+    /// Every binding a kernel lists is declared in its stage's WGSL file with that number.
+    #[test]
+    fn every_listed_slot_is_declared_by_its_shader() {
+        for k in Kernel::ALL {
+            let (source, entry) = k.source();
+            for s in k.slots() {
+                let declared = format!("@binding({})", s.binding());
+                assert!(source.contains(&declared), "{entry}: {s:?} not declared as {declared}");
+            }
+        }
+    }
+}
