@@ -491,6 +491,23 @@ fn stages_match_the_cpu_at_full_size() {
     );
 }
 
+/// `monolayer bench --gpu` names the adapter, says when its times are CPU figures, and times
+/// every kernel with its bytes.
+#[test]
+fn bench_gpu_names_the_adapter_and_times_every_kernel() {
+    let Some(ctx) = context() else { return };
+    let small = ["--set", "box_size=60", "--set", "n_cells=18", "--relax-steps", "200", "--steps", "5"];
+    let out = common::monolayer(&[&["bench", "--gpu"][..], &small].concat());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    assert!(text.contains(&format!("adapter: {}", ctx.adapter_name())), "{text}");
+    assert_eq!(text.contains("CPU figure"), ctx.runs_on_cpu(), "{text}");
+    for k in Kernel::ALL {
+        assert!(text.contains(&format!("{k:?}")) && text.contains("ms/dispatch"), "{k:?} missing: {text}");
+    }
+    assert!(text.contains(&format!("{} dispatches", Kernel::ALL.len())), "{text}");
+}
+
 /// The median wall time of submitting `kernels` and waiting for them, after one warm-up.
 fn median_ms(ctx: &GpuContext, gpu: &GpuMonolayer, kernels: &[Kernel]) -> f64 {
     gpu.run(ctx, kernels);

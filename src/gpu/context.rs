@@ -78,4 +78,9 @@ impl GpuContext {
     pub fn device_type(&self) -> wgpu::DeviceType {
         self.info.device_type
     }
+
+    /// Whether the adapter is a CPU device (lavapipe, SwiftShader): its times are CPU figures.
+    pub fn runs_on_cpu(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
 }

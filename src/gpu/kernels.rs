@@ -107,6 +107,33 @@ impl Kernel {
     }
 }
 
+impl Kernel {
+    /// The bytes a dispatch must move at the least: every value it reads or writes, once (a
+    /// stencil's neighbours and the patch table come from cache). For projections: a GPU's
+    /// time for a dispatch is at least this over its memory bandwidth.
+    pub fn compulsory_bytes(self, state: &DeviceState) -> u64 {
+        let layout = &state.layout;
+        let padded = layout.total as u64;
+        let interior: u64 = layout.patches.iter().map(|p| p.w as u64 * p.h as u64).sum();
+        let (n, l2) = (layout.n_cells() as u64, (layout.box_size * layout.box_size) as u64);
+        let values = match self {
+            // φ at every covered site; Σφ and Σφ² written.
+            Kernel::LatticeSums => interior + 2 * l2,
+            // φ; A_i written.
+            Kernel::CellArea => padded + n,
+            // φ and Σφ² at each interior site; μ written, halo included.
+            Kernel::ChemicalPotential => padded + interior + padded,
+            // φ; Q_i and Q̂_i written.
+            Kernel::ShapeTensor => padded + 4 * n,
+            // φ and μ; f_x and f_y written.
+            Kernel::ForceDensity => 2 * padded + 2 * padded,
+            // φ, f_x and f_y at every covered site; n and F written.
+            Kernel::FrictionSums => 3 * interior + 3 * l2,
+        };
+        4 * values
+    }
+}
+
 /// The kernels' pipelines, compiled once per device.
 pub struct Pipelines {
     pipelines: Vec<wgpu::ComputePipeline>,
