@@ -207,6 +207,8 @@ impl DeviceState {
     /// derived field zero until a kernel writes it.
     pub fn upload(ctx: &GpuContext, m: &Monolayer) -> Self {
         let layout = Layout::of(m);
+        // The per-site kernels take one row of workgroups per cell (kernels.rs, `Grid::Sites`).
+        assert!(layout.n_cells() <= 65_535, "{} cells: the GPU stages take at most 65,535", layout.n_cells());
         let params = GpuParams::new(m.params(), m.phase());
         let phi = layout.flatten(m.cells().iter().map(|c| c.phi().data));
         let (l2, n, total) = (layout.box_size * layout.box_size, layout.n_cells(), layout.total);

@@ -14,7 +14,7 @@ const FREE_ENERGY_WGSL: &str = include_str!("../../shaders/free_energy.wgsl");
 const SHAPE_WGSL: &str = include_str!("../../shaders/shape.wgsl");
 const FORCES_WGSL: &str = include_str!("../../shaders/forces.wgsl");
 
-/// The per-site kernels' workgroup width (`@workgroup_size(64)`); the lattice kernel's
+/// The per-site kernels' workgroup width (`@workgroup_size(64)`); the lattice kernels'
 /// workgroups are 8 × 8 sites.
 const SITES_PER_GROUP: usize = 64;
 const LATTICE_TILE: usize = 8;
@@ -42,7 +42,8 @@ enum Grid {
     Lattice,
     /// One workgroup per cell.
     Cells,
-    /// One invocation per padded site of each cell: x the site, y the cell.
+    /// One invocation per padded site of each cell: x the site, y the cell (so at most 65,535
+    /// cells, WebGPU's workgroups per dimension; `DeviceState::upload` checks it).
     Sites,
 }
 
@@ -92,22 +93,6 @@ impl Kernel {
         }
     }
 
-    /// Workgroups to dispatch over the state's layout.
-    fn workgroups(self, state: &DeviceState) -> [u32; 3] {
-        let layout = &state.layout;
-        let n = layout.n_cells() as u32;
-        match self.grid() {
-            Grid::Lattice => {
-                let tiles = layout.box_size.div_ceil(LATTICE_TILE) as u32;
-                [tiles, tiles, 1]
-            }
-            Grid::Cells => [n, 1, 1],
-            Grid::Sites => [layout.max_padded.div_ceil(SITES_PER_GROUP) as u32, n, 1],
-        }
-    }
-}
-
-impl Kernel {
     /// The bytes a dispatch must move at the least: every value it reads or writes, once (a
     /// stencil's neighbours and the patch table come from cache). For projections: a GPU's
     /// time for a dispatch is at least this over its memory bandwidth.
@@ -131,6 +116,20 @@ impl Kernel {
             Kernel::FrictionSums => 3 * interior + 3 * l2,
         };
         4 * values
+    }
+
+    /// Workgroups to dispatch over the state's layout.
+    fn workgroups(self, state: &DeviceState) -> [u32; 3] {
+        let layout = &state.layout;
+        let n = layout.n_cells() as u32;
+        match self.grid() {
+            Grid::Lattice => {
+                let tiles = layout.box_size.div_ceil(LATTICE_TILE) as u32;
+                [tiles, tiles, 1]
+            }
+            Grid::Cells => [n, 1, 1],
+            Grid::Sites => [layout.max_padded.div_ceil(SITES_PER_GROUP) as u32, n, 1],
+        }
     }
 }
 
