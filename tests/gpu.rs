@@ -11,9 +11,11 @@
 //! input, coefficient and operation replaced by its absolute value (so cancellation does not
 //! shrink the scale). Each check below computes p̃ per site or per cell from the CPU's f64
 //! values, and k from the kernel's expression; inputs that are themselves GPU results (Σφ², A_i,
-//! μ_i, Q̂_i) carry their own bound into the next stage. The bounds are tight enough that a sign
-//! or a weight wrong anywhere in a kernel fails them by orders of magnitude (tried: a flipped
-//! sign of the repulsion term in free_energy.wgsl fails `stages_match_the_cpu_on_a_reduced_tissue`).
+//! μ_i, Q̂_i, f_i) carry their own bound into the next stage. The bounds are tight enough that a
+//! sign or a weight wrong in a kernel fails them by orders of magnitude (tried, one at a time,
+//! then reverted: the repulsion term's sign in free_energy.wgsl, Q_xy's in shape.wgsl, the
+//! active f_y's in forces.wgsl, F_y's and the presence test in gather.wgsl; docs/gpu.md has the
+//! figures).
 
 #![cfg(feature = "gpu")]
 
