@@ -10,16 +10,22 @@
 //! seed: no threads, files or clocks inside it. Native extras (threads, files, the CLI) sit
 //! behind the `parallel` and `cli` features.
 //!
-//! Four layers, each a folder; imports go downwards only (model ← analysis ← run, web), which
+//! Five layers, each a folder; imports go downwards only (model ← analysis, gpu ← run, web), which
 //! `tests/layers.rs` checks:
 //!
 //! - [`model`]: the physics core, one module per concept of the paper;
 //! - [`analysis`]: the paper's measurements, pure, for both faces (live and offline);
+//! - `gpu` (feature `gpu`): the model's stages as wgpu compute kernels, f32, beside `analysis`
+//!   (imports only `model`);
 //! - `run` (native, feature `cli`): files, runs, sweeps, the offline analysis, plots;
 //! - [`web`]: the browser demo's view (native and wasm32), its binding and wgpu renderer (wasm32).
 
 pub mod analysis;
 pub mod model;
+
+/// The GPU stepper's stages on wgpu compute (feature `gpu`; issue 26).
+#[cfg(feature = "gpu")]
+pub mod gpu;
 
 #[cfg(feature = "cli")]
 pub mod run;

@@ -295,6 +295,11 @@ struct BenchArgs {
     /// Any other parameter, e.g. --set friction_weights=subdomain (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Time the GPU kernels instead (those that exist so far, on the adapter found; needs a
+    /// build with --features gpu). Uses --relax-steps, --seed, --set and ζ; --steps is the
+    /// number of timed dispatches per kernel.
+    #[arg(long)]
+    gpu: bool,
 }
 
 fn main() -> ExitCode {
@@ -609,6 +614,9 @@ fn bench(a: &BenchArgs) -> Result<(), String> {
     let mut overrides = vec![format!("zeta={}", a.zeta)];
     overrides.extend(a.set.iter().cloned());
     let params = load_params(None, &overrides)?;
+    if a.gpu {
+        return bench_gpu(&params, a);
+    }
     let options = BenchOptions {
         params,
         chis: a.chi.clone(),
@@ -619,6 +627,16 @@ fn bench(a: &BenchArgs) -> Result<(), String> {
         seed: a.seed,
     };
     monolayer::run::bench::bench(&options)
+}
+
+#[cfg(feature = "gpu")]
+fn bench_gpu(params: &Params, a: &BenchArgs) -> Result<(), String> {
+    monolayer::run::bench::bench_gpu(params, a.relax_steps, a.seed, a.steps as usize)
+}
+
+#[cfg(not(feature = "gpu"))]
+fn bench_gpu(_: &Params, _: &BenchArgs) -> Result<(), String> {
+    Err("--gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into())
 }
 
 /// `analyze DIR`, or with --bench the timings of the measurements at full size.

@@ -1,5 +1,5 @@
-//! The architecture in one test: `src/` has four layers and imports go downwards only,
-//! model ← analysis ← run, web. A `use` of a higher layer from a lower one fails here with the
+//! The architecture in one test: `src/` has five layers and imports go downwards only,
+//! model ← analysis, gpu ← run, web (gpu, the GPU stages, sits beside analysis). A `use` of a higher layer from a lower one fails here with the
 //! file and the line, before it can tangle the physics core with files or the browser.
 
 use std::fs;
@@ -44,14 +44,22 @@ fn upward_references_in(root: &Path, forbidden: &[&str]) -> Vec<String> {
 
 #[test]
 fn model_uses_no_higher_layer() {
-    let found = upward_references("model", &["analysis", "run", "web"]);
-    assert!(found.is_empty(), "model/ must not import analysis/, run/ or web/:\n{}", found.join("\n"));
+    let found = upward_references("model", &["analysis", "gpu", "run", "web"]);
+    assert!(found.is_empty(), "model/ must not import analysis/, gpu/, run/ or web/:\n{}", found.join("\n"));
 }
 
 #[test]
-fn analysis_uses_neither_run_nor_web() {
-    let found = upward_references("analysis", &["run", "web"]);
-    assert!(found.is_empty(), "analysis/ must not import run/ or web/:\n{}", found.join("\n"));
+fn analysis_uses_neither_gpu_nor_run_nor_web() {
+    let found = upward_references("analysis", &["gpu", "run", "web"]);
+    assert!(found.is_empty(), "analysis/ must not import gpu/, run/ or web/:\n{}", found.join("\n"));
+}
+
+/// The GPU stages read the model (its parameters, cells and patches) and nothing else: they are
+/// a second engine for the same physics, below the layers that would drive them.
+#[test]
+fn gpu_uses_only_the_model() {
+    let found = upward_references("gpu", &["analysis", "run", "web"]);
+    assert!(found.is_empty(), "gpu/ may import only model/:\n{}", found.join("\n"));
 }
 
 #[test]
@@ -71,7 +79,7 @@ fn the_layers_are_the_folders_of_src() {
         .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
         .collect();
     dirs.sort();
-    assert_eq!(dirs, ["analysis", "model", "run", "web"]);
+    assert_eq!(dirs, ["analysis", "gpu", "model", "run", "web"]);
     let loose: Vec<String> = fs::read_dir(&src)
         .unwrap()
         .map(|e| e.unwrap().path())

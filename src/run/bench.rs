@@ -250,6 +250,55 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), S
     Ok(())
 }
 
+/// `monolayer bench --gpu`: the GPU kernels that exist so far (issue 26; no GPU step yet), timed
+/// one by one at the given size from a relaxed tissue a few active steps on: the adapter, ms
+/// per dispatch (the median of `repeats` submissions, each waited for), the dispatches of one
+/// evaluation and the bytes they must move at the least.
+#[cfg(feature = "gpu")]
+pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -> Result<(), String> {
+    use crate::gpu::{GpuContext, GpuMonolayer, Kernel};
+    let ctx = GpuContext::new().map_err(|e| e.to_string())?;
+    println!("adapter: {}", ctx.describe());
+    if ctx.runs_on_cpu() {
+        println!("a CPU device: every time below is a CPU figure, not a GPU's");
+    }
+    let p = Params { relax_steps, ..params.clone() };
+    let mut m = Monolayer::new(p.clone(), seed).map_err(|e| e.to_string())?;
+    m.advance(relax_steps + 5).map_err(|e| e.to_string())?;
+    let gpu = GpuMonolayer::new(&ctx, &m);
+    let time = |kernels: &[Kernel]| -> f64 {
+        gpu.run(&ctx, kernels);
+        ctx.wait();
+        let times: Vec<f64> = (0..repeats.max(1))
+            .map(|_| {
+                let t = Instant::now();
+                gpu.run(&ctx, kernels);
+                ctx.wait();
+                1e3 * t.elapsed().as_secs_f64()
+            })
+            .collect();
+        median(&times)
+    };
+    println!(
+        "N = {}, L = {}, {relax_steps} relaxation steps and 5 active on the CPU, then the median of {repeats} dispatches:",
+        p.n_cells, p.box_size
+    );
+    let mut bytes = 0;
+    for k in Kernel::ALL {
+        let b = k.compulsory_bytes(gpu.state());
+        bytes += b;
+        println!("  {:<18} {:>8.3} ms/dispatch  {:>6.2} MB", format!("{k:?}"), time(&[k]), b as f64 / 1e6);
+    }
+    println!(
+        "one evaluation's kernels so far: {} dispatches, {:.3} ms in one submission, {:.2} MB at the least",
+        Kernel::ALL.len(),
+        time(&Kernel::ALL),
+        bytes as f64 / 1e6
+    );
+    println!("not yet on the GPU: the friction solve, the velocities, Heun and the patches (docs/gpu.md)");
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,0 +1,75 @@
+// What every compute stage of the GPU stepper shares (src/gpu/; issue 26): the parameters and
+// the cells' patches. src/gpu/kernels.rs prepends this file to each stage's file, as the
+// renderer does with common.wgsl.
+//
+// Layouts are written by src/gpu/buffers.rs (`GpuParams`, `GpuPatch`: the same fields in the
+// same order). Every stage binds its buffers at the same binding numbers (`Slot` in
+// src/gpu/kernels.rs), so a buffer has one number in every file.
+
+// The coefficients of src/model/free_energy.rs (`FreeEnergy`) and the knobs of shape.rs,
+// forces.rs and the friction weights (motion.rs), in f32.
+struct Params {
+    // L, the side of the periodic lattice.
+    box_size: u32,
+    n_cells: u32,
+    // 0: five-point Laplacian, 1: nine-point (`Laplacian`).
+    laplacian: u32,
+    // 0: f^p = -∇μ, 1: f^p = -φ∇μ (`PassiveForce`).
+    passive: u32,
+    // 8γ/λ, 2γλ, 4μ/πR², πR², cκ/λ.
+    bulk: f32,
+    gradient: f32,
+    area: f32,
+    target_area: f32,
+    repulsion: f32,
+    // m and ε of Q̂ = m Q / √(|Q|² + ε²).
+    q_magnitude: f32,
+    q_epsilon: f32,
+    // ζ of this phase (0 during relaxation).
+    zeta: f32,
+    // 0: w = φ clamped, 1: presence, 2: the whole patch (`FrictionWeights`).
+    friction_weights: u32,
+    // φ above which a cell is present (`presence_threshold`).
+    presence_threshold: f32,
+    _pad0: u32,
+    _pad1: u32,
+};
+
+// One cell's patch (src/model/lattice.rs `Patch`) and where its padded storage starts in the
+// per-cell arrays (φ, μ, f): (w + 2) × (h + 2) values, row-major, a one-site ring of zeros.
+struct Patch {
+    x0: u32,
+    y0: u32,
+    w: u32,
+    h: u32,
+    offset: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+};
+
+// Row stride of a patch's padded storage (`Patch::stride`).
+fn stride(p: Patch) -> u32 {
+    return p.w + 2u;
+}
+
+// The padded index k of a patch as (column, row) of the padded storage, or none (x = w + 2)
+// past its end. Interior sites have column and row in 1..=w, 1..=h.
+fn padded_site(p: Patch, k: u32) -> vec2<u32> {
+    let s = stride(p);
+    if k >= s * (p.h + 2u) {
+        return vec2<u32>(s, 0u);
+    }
+    return vec2<u32>(k % s, k / s);
+}
+
+fn is_interior(p: Patch, site: vec2<u32>) -> bool {
+    return site.x >= 1u && site.x <= p.w && site.y >= 1u && site.y <= p.h;
+}
+
+// Lattice index gy·L + gx of interior padded site (column, row) (`Patch::global_xy`).
+fn lattice_index(p: Patch, site: vec2<u32>, l: u32) -> u32 {
+    let gx = (p.x0 + site.x - 1u) % l;
+    let gy = (p.y0 + site.y - 1u) % l;
+    return gy * l + gx;
+}

@@ -1,0 +1,290 @@
+//! The state the kernels read and write, on the device: the cells' φ on their patches, the
+//! patch geometry, the parameters as a uniform, and the fields the stages derive (Σφ, Σφ², A_i,
+//! μ_i, Q_i, Q̂_i, f_i, n and F). Uploaded from a CPU [`Monolayer`], in f32.
+//!
+//! The per-cell fields (φ, μ, f_x, f_y) are every cell's padded patch storage one after the
+//! other, in cell order, exactly as each [`crate::model::cell::Cell`] stores it; `GpuPatch::offset`
+//! says where each cell's starts.
+
+use bytemuck::{Pod, Zeroable};
+use wgpu::util::DeviceExt;
+
+use crate::gpu::context::GpuContext;
+use crate::model::free_energy::FreeEnergy;
+use crate::model::monolayer::{Monolayer, Phase};
+use crate::model::params::{FrictionWeights, Laplacian, Params, PassiveForce};
+
+/// The buffers of the GPU state, each with the binding number every kernel gives it
+/// (`@binding(n)` in `shaders/*.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Slot {
+    /// `GpuParams`, a uniform.
+    Params = 0,
+    /// `GpuPatch` per cell.
+    Patches = 1,
+    /// φ_i, per cell on its padded patch.
+    Phi = 2,
+    /// Σ_i φ_i on the lattice.
+    SumPhi = 3,
+    /// Σ_i φ_i² on the lattice.
+    SumPhi2 = 4,
+    /// A_i, one per cell.
+    Area = 5,
+    /// μ_i, per cell on its padded patch.
+    Mu = 6,
+    /// Q_i = (Q_xx, Q_xy), one pair per cell.
+    Shape = 7,
+    /// Q̂_i, one pair per cell.
+    QHat = 8,
+    /// f_x and f_y of f_i = f^p_i + f^a_i, per cell on its padded patch.
+    Fx = 9,
+    Fy = 10,
+    /// n = Σ_j w_j on the lattice, the friction weights.
+    Weight = 11,
+    /// F = Σ_j w_j f_j on the lattice, (x, y) per site.
+    Force = 12,
+}
+
+impl Slot {
+    pub const ALL: [Slot; 13] = [
+        Slot::Params,
+        Slot::Patches,
+        Slot::Phi,
+        Slot::SumPhi,
+        Slot::SumPhi2,
+        Slot::Area,
+        Slot::Mu,
+        Slot::Shape,
+        Slot::QHat,
+        Slot::Fx,
+        Slot::Fy,
+        Slot::Weight,
+        Slot::Force,
+    ];
+
+    pub fn binding(self) -> u32 {
+        self as u32
+    }
+}
+
+/// The parameters of the stages, as `Params` in `shaders/model.wgsl` (same fields, same
+/// order): the coefficients of [`FreeEnergy`] and the knobs of shape and forces, in f32.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct GpuParams {
+    pub box_size: u32,
+    pub n_cells: u32,
+    pub laplacian: u32,
+    pub passive: u32,
+    pub bulk: f32,
+    pub gradient: f32,
+    pub area: f32,
+    pub target_area: f32,
+    pub repulsion: f32,
+    pub q_magnitude: f32,
+    pub q_epsilon: f32,
+    pub zeta: f32,
+    pub friction_weights: u32,
+    pub presence_threshold: f32,
+    pub pad: [u32; 2],
+}
+
+impl GpuParams {
+    /// The same coefficients as the CPU derives (`FreeEnergy::new`), rounded once to f32; ζ is
+    /// zero during relaxation, as in `Monolayer::evaluate`.
+    pub fn new(p: &Params, phase: Phase) -> Self {
+        let fe = FreeEnergy::new(p);
+        GpuParams {
+            box_size: p.box_size as u32,
+            n_cells: p.n_cells as u32,
+            laplacian: match p.laplacian {
+                Laplacian::FivePoint => 0,
+                Laplacian::NinePoint => 1,
+            },
+            passive: match p.passive_force {
+                PassiveForce::GradMu => 0,
+                PassiveForce::PhiGradMu => 1,
+            },
+            bulk: fe.bulk as f32,
+            gradient: fe.gradient as f32,
+            area: fe.area as f32,
+            target_area: fe.target_area as f32,
+            repulsion: fe.repulsion as f32,
+            q_magnitude: p.q_magnitude as f32,
+            q_epsilon: p.q_epsilon as f32,
+            zeta: if phase == Phase::Active { p.zeta as f32 } else { 0.0 },
+            friction_weights: match p.friction_weights {
+                FrictionWeights::Phi => 0,
+                FrictionWeights::Presence => 1,
+                FrictionWeights::Subdomain => 2,
+            },
+            presence_threshold: p.presence_threshold as f32,
+            pad: [0; 2],
+        }
+    }
+}
+
+/// One cell's patch and where its padded storage starts, as `Patch` in `shaders/model.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct GpuPatch {
+    pub x0: u32,
+    pub y0: u32,
+    pub w: u32,
+    pub h: u32,
+    pub offset: u32,
+    pub pad: [u32; 3],
+}
+
+/// Where each cell's padded storage sits in the per-cell arrays.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Layout {
+    pub patches: Vec<GpuPatch>,
+    /// Sum of the padded lengths: the length of φ, μ, f_x, f_y.
+    pub total: usize,
+    /// The longest padded patch: the per-site kernels' width.
+    pub max_padded: usize,
+    pub box_size: usize,
+}
+
+impl Layout {
+    pub fn of(m: &Monolayer) -> Self {
+        let mut patches = Vec::with_capacity(m.cells().len());
+        let (mut total, mut max_padded) = (0, 0);
+        for c in m.cells() {
+            let p = c.patch();
+            let offset = total as u32;
+            patches.push(GpuPatch {
+                x0: p.x0 as u32,
+                y0: p.y0 as u32,
+                w: p.w as u32,
+                h: p.h as u32,
+                offset,
+                pad: [0; 3],
+            });
+            total += p.padded_len();
+            max_padded = max_padded.max(p.padded_len());
+        }
+        Layout { patches, total, max_padded, box_size: m.params().box_size }
+    }
+
+    pub fn n_cells(&self) -> usize {
+        self.patches.len()
+    }
+
+    /// A per-cell field of the CPU (one padded vector per cell) as one f32 array in this layout.
+    pub fn flatten<'a>(&self, fields: impl Iterator<Item = &'a [f64]>) -> Vec<f32> {
+        let mut out = Vec::with_capacity(self.total);
+        for f in fields {
+            out.extend(f.iter().map(|&v| v as f32));
+        }
+        assert_eq!(out.len(), self.total, "fields must follow the layout's patches");
+        out
+    }
+
+    /// Cell i's padded storage within a per-cell array of this layout.
+    pub fn cell<'a, T>(&self, i: usize, data: &'a [T]) -> &'a [T] {
+        let p = self.patches[i];
+        let len = (p.w as usize + 2) * (p.h as usize + 2);
+        &data[p.offset as usize..][..len]
+    }
+}
+
+/// The device buffers of one state, indexed by [`Slot`].
+pub struct DeviceState {
+    pub layout: Layout,
+    pub params: GpuParams,
+    buffers: Vec<wgpu::Buffer>,
+}
+
+/// Storage buffers are written by the kernels, copied out by a readback, and overwritten by
+/// uploads.
+const STORAGE: wgpu::BufferUsages =
+    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
+
+impl DeviceState {
+    /// φ of every cell, the patches and the parameters of the monolayer's current phase; every
+    /// derived field zero until a kernel writes it.
+    pub fn upload(ctx: &GpuContext, m: &Monolayer) -> Self {
+        let layout = Layout::of(m);
+        // The per-site kernels take one row of workgroups per cell (kernels.rs, `Grid::Sites`).
+        assert!(layout.n_cells() <= 65_535, "{} cells: the GPU stages take at most 65,535", layout.n_cells());
+        let params = GpuParams::new(m.params(), m.phase());
+        let phi = layout.flatten(m.cells().iter().map(|c| c.phi().data));
+        let (l2, n, total) = (layout.box_size * layout.box_size, layout.n_cells(), layout.total);
+        let buffers = Slot::ALL
+            .iter()
+            .map(|&slot| {
+                let init = |contents: &[u8], usage| {
+                    let label = Some(slot_label(slot));
+                    ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label, contents, usage })
+                };
+                let zeros = |floats: usize| init(&vec![0u8; 4 * floats], STORAGE);
+                match slot {
+                    Slot::Params => init(bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM),
+                    Slot::Patches => init(bytemuck::cast_slice(&layout.patches), STORAGE),
+                    Slot::Phi => init(bytemuck::cast_slice(&phi), STORAGE),
+                    Slot::SumPhi | Slot::SumPhi2 | Slot::Weight => zeros(l2),
+                    Slot::Force => zeros(2 * l2),
+                    Slot::Area => zeros(n),
+                    Slot::Shape | Slot::QHat => zeros(2 * n),
+                    Slot::Mu | Slot::Fx | Slot::Fy => zeros(total),
+                }
+            })
+            .collect();
+        DeviceState { layout, params, buffers }
+    }
+
+    pub fn buffer(&self, slot: Slot) -> &wgpu::Buffer {
+        &self.buffers[slot as usize]
+    }
+}
+
+fn slot_label(slot: Slot) -> &'static str {
+    match slot {
+        Slot::Params => "params",
+        Slot::Patches => "patches",
+        Slot::Phi => "phi",
+        Slot::SumPhi => "sum_phi",
+        Slot::SumPhi2 => "sum_phi2",
+        Slot::Area => "area",
+        Slot::Mu => "mu",
+        Slot::Shape => "shape",
+        Slot::QHat => "q_hat",
+        Slot::Fx => "fx",
+        Slot::Fy => "fy",
+        Slot::Weight => "weight",
+        Slot::Force => "force",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The WGSL structs `Params` (16 four-byte fields) and `Patch` (8) have these sizes; a
+    /// field added on one side only changes them.
+    #[test]
+    fn structs_have_the_wgsl_sizes() {
+        assert_eq!(std::mem::size_of::<GpuParams>(), 64);
+        assert_eq!(std::mem::size_of::<GpuPatch>(), 32);
+    }
+
+    /// Each cell's padded storage follows the previous one, and `cell` finds it again.
+    #[test]
+    fn layout_packs_the_patches_in_cell_order() {
+        let p = Params { box_size: 40, n_cells: 4, ..Params::default() };
+        let m = Monolayer::new(p, 1).unwrap();
+        let layout = Layout::of(&m);
+        let flat = layout.flatten(m.cells().iter().map(|c| c.phi().data));
+        let mut offset = 0;
+        for (i, c) in m.cells().iter().enumerate() {
+            assert_eq!(layout.patches[i].offset as usize, offset);
+            let back: Vec<f64> = layout.cell(i, &flat).iter().map(|&v| v as f64).collect();
+            let rounded: Vec<f64> = c.phi().data.iter().map(|&v| v as f32 as f64).collect();
+            assert_eq!(back, rounded, "cell {i}");
+            offset += c.patch().padded_len();
+        }
+        assert_eq!((layout.total, flat.len()), (offset, offset));
+    }
+}

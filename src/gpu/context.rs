@@ -1,0 +1,86 @@
+//! The wgpu device the kernels run on: natively Vulkan (on a machine without a GPU, Mesa's
+//! lavapipe, whose adapter is named "llvmpipe"), in the browser WebGPU.
+
+use thiserror::Error;
+
+/// Why no device could be had.
+#[derive(Debug, Error)]
+pub enum GpuError {
+    #[error("no GPU adapter ({0}); natively wgpu needs a Vulkan driver, e.g. Debian's mesa-vulkan-drivers (lavapipe)")]
+    NoAdapter(String),
+    #[error("the adapter {adapter} refused a device: {reason}")]
+    NoDevice { adapter: String, reason: String },
+}
+
+/// An adapter's device and queue, and what the adapter is.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    info: wgpu::AdapterInfo,
+}
+
+/// The backends the GPU stepper uses: Vulkan natively (the only native backend compiled in),
+/// WebGPU in the browser (WebGL2 has no compute).
+fn backends() -> wgpu::Backends {
+    if cfg!(target_arch = "wasm32") {
+        wgpu::Backends::BROWSER_WEBGPU
+    } else {
+        wgpu::Backends::VULKAN
+    }
+}
+
+impl GpuContext {
+    /// The first adapter wgpu offers for compute, and a device with the default limits (what
+    /// every WebGPU implementation guarantees, so that what passes here runs in the page).
+    pub async fn request() -> Result<Self, GpuError> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = backends();
+        let instance = wgpu::Instance::new(desc);
+        let options = wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        };
+        let adapter = instance.request_adapter(&options).await.map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let descriptor = wgpu::DeviceDescriptor { label: Some("monolayer gpu"), ..Default::default() };
+        let (device, queue) = adapter
+            .request_device(&descriptor)
+            .await
+            .map_err(|e| GpuError::NoDevice { adapter: info.name.clone(), reason: e.to_string() })?;
+        Ok(GpuContext { device, queue, info })
+    }
+
+    /// [`GpuContext::request`], blocking (native only: a browser cannot block).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn new() -> Result<Self, GpuError> {
+        pollster::block_on(Self::request())
+    }
+
+    /// Blocks until every submitted dispatch has finished (native only; for tests, diagnostics
+    /// and timing: the stepper itself never waits inside a step).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn wait(&self) {
+        self.device.poll(wgpu::PollType::wait_indefinitely()).expect("the device finishes its work");
+    }
+
+    /// The adapter's name ("llvmpipe (LLVM 15.0.6, 256 bits)" on lavapipe).
+    pub fn adapter_name(&self) -> &str {
+        &self.info.name
+    }
+
+    /// Name, backend, device type and driver, for logs and benchmarks: on lavapipe the device
+    /// type is `Cpu`, so every time measured there is a CPU figure.
+    pub fn describe(&self) -> String {
+        let i = &self.info;
+        format!("{} ({:?}, {:?}, driver {} {})", i.name, i.backend, i.device_type, i.driver, i.driver_info)
+    }
+
+    pub fn device_type(&self) -> wgpu::DeviceType {
+        self.info.device_type
+    }
+
+    /// Whether the adapter is a CPU device (lavapipe, SwiftShader): its times are CPU figures.
+    pub fn runs_on_cpu(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+}

@@ -1,0 +1,28 @@
+//! The GPU stepper's stages on wgpu compute (issue 26), f32, beside the CPU core that stays the
+//! reference. This is its foundation: a device ([`context`]), the state the kernels read and
+//! write on it ([`buffers`]), and the kernels of the first stages of one evaluation
+//! ([`kernels`]), each mirroring its CPU module one to one:
+//!
+//! | kernel (`shaders/`)                  | CPU                                   | paper           |
+//! |--------------------------------------|---------------------------------------|-----------------|
+//! | `gather.wgsl` `lattice_sums`         | `model::monolayer` `gather` (Σφ, Σφ²) | Eq. S2, S4      |
+//! | `free_energy.wgsl` `cell_area`       | `model::free_energy::area`            | Eq. S3 (A_i)    |
+//! | `free_energy.wgsl` `chemical_potential` | `FreeEnergy::chemical_potential`   | Eqs. S1–S3 (μ_i)|
+//! | `shape.wgsl` `shape_tensor`          | `model::shape` (Q_i, Q̂_i)            | Eq. 5           |
+//! | `forces.wgsl` `force_density`        | `model::forces::force_density`        | Eqs. 3, 4       |
+//! | `gather.wgsl` `friction_sums`        | `model::monolayer` gathers of n and F | Eq. 2 (Σ_j)     |
+//!
+//! Every sum runs in a fixed order (no float atomics), so two runs on the same adapter and
+//! driver give the same bits. Nothing is read back inside a step: [`GpuMonolayer::read`] is for
+//! tests and diagnostics. The friction solve itself, the velocities, Heun and the patches are the
+//! next stages (docs/gpu.md).
+//!
+//! A layer beside `analysis`: it imports only `model` (tested by `tests/layers.rs`).
+
+pub mod buffers;
+pub mod context;
+pub mod kernels;
+
+pub use buffers::{DeviceState, Slot};
+pub use context::{GpuContext, GpuError};
+pub use kernels::{GpuMonolayer, Kernel};

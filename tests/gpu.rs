@@ -1,0 +1,527 @@
+//! The GPU stages (src/gpu/, shaders/) against the CPU core, from the same state, on a real
+//! Vulkan driver: natively wgpu's Vulkan backend, which on a machine without a GPU is Mesa's
+//! lavapipe ("llvmpipe", a CPU device). Without an adapter the tests say so and pass; with
+//! CI=true they fail instead (.ci/run installs mesa-vulkan-drivers).
+//!
+//! Tolerances. The GPU works in f32, the CPU in f64, so the CPU's value is the exact one to
+//! within 2⁻⁵³ and the GPU's error is f32 rounding. The standard bound for an expression
+//! evaluated in floating point is |computed − exact| ≤ k·u·p̃, with u = 2⁻²⁴ the unit roundoff of
+//! f32, k the number of roundings along the longest path of the expression (its depth, the
+//! rounding of each input to f32 included) and p̃ the same expression evaluated with every
+//! input, coefficient and operation replaced by its absolute value (so cancellation does not
+//! shrink the scale). Each check below computes p̃ per site or per cell from the CPU's f64
+//! values, and k from the kernel's expression; inputs that are themselves GPU results (Σφ², A_i,
+//! μ_i, Q̂_i, f_i) carry their own bound into the next stage. The bounds are tight enough that a
+//! sign or a weight wrong in a kernel fails them by orders of magnitude (tried, one at a time,
+//! then reverted: the repulsion term's sign in free_energy.wgsl, Q_xy's in shape.wgsl, the
+//! active f_y's in forces.wgsl, F_y's and the presence test in gather.wgsl; docs/gpu.md has the
+//! figures).
+
+#![cfg(feature = "gpu")]
+
+mod common;
+
+use std::sync::OnceLock;
+use std::time::Instant;
+
+use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Slot};
+use monolayer::model::free_energy::FreeEnergy;
+use monolayer::model::lattice::Patch;
+use monolayer::model::motion::friction_weight;
+use monolayer::model::params::{FrictionWeights, Laplacian, PassiveForce};
+use monolayer::{Monolayer, Params, Phase};
+
+/// The unit roundoff of f32.
+const U: f64 = f32::EPSILON as f64 / 2.0;
+
+/// Values the GPU may flush to zero (f32 subnormals): an absolute floor under every bound.
+const FLUSHED: f64 = f32::MIN_POSITIVE as f64;
+
+/// The adapter, or None (and a note) where there is none; with CI=true its absence fails.
+fn context() -> Option<GpuContext> {
+    match GpuContext::new() {
+        Ok(ctx) => {
+            eprintln!("GPU adapter: {}", ctx.describe());
+            Some(ctx)
+        }
+        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+            panic!("CI=true: the GPU tests need an adapter: {e}")
+        }
+        Err(e) => {
+            eprintln!("skipping the GPU test: {e}");
+            None
+        }
+    }
+}
+
+/// A reduced tissue (18 cells on 60²), relaxed and 40 steps into the active phase: adaptive
+/// patches of different sizes, some across the periodic edges, activity on.
+fn reduced_tissue() -> &'static Monolayer {
+    static TISSUE: OnceLock<Monolayer> = OnceLock::new();
+    TISSUE.get_or_init(|| {
+        let p = Params { box_size: 60, n_cells: 18, relax_steps: 400, xi_substrate: 0.01, ..Params::default() };
+        let mut m = Monolayer::new(p, 3).expect("valid parameters");
+        m.advance(440).expect("the reduced tissue steps");
+        m
+    })
+}
+
+/// The CPU's evaluation of the stages at the monolayer's current state, on a copy.
+fn evaluated(m: &Monolayer) -> Monolayer {
+    let mut m = m.clone();
+    m.evaluate_now().expect("the CPU evaluates");
+    m
+}
+
+/// A per-site or per-cell comparison: the worst ratio |gpu − cpu| / bound, and where.
+#[derive(Default)]
+struct Worst {
+    ratio: f64,
+    at: String,
+    checked: usize,
+}
+
+impl Worst {
+    fn check(&mut self, gpu: f32, cpu: f64, bound: f64, at: impl FnOnce() -> String) {
+        let ratio = (gpu as f64 - cpu).abs() / (bound + FLUSHED);
+        self.checked += 1;
+        if ratio > self.ratio || ratio.is_nan() {
+            self.ratio = if ratio.is_nan() { f64::INFINITY } else { ratio };
+            self.at = format!("{}: GPU {gpu}, CPU {cpu}, bound {bound:e}", at());
+        }
+    }
+
+    fn assert_within(&self, what: &str) {
+        eprintln!("{what}: {} values, worst error {:.3} of its bound ({})", self.checked, self.ratio, self.at);
+        assert!(self.checked > 0, "{what}: nothing compared");
+        assert!(self.ratio <= 1.0, "{what}: beyond its f32 bound at {}", self.at);
+    }
+}
+
+/// Patches that cover lattice site `site` (how many terms its lattice sums add).
+fn covering(patches: &[Patch], site: usize, l: usize) -> usize {
+    covering_cells(patches, site, l).count()
+}
+
+/// The cells whose patch covers lattice site `site`, in cell order, each with the site's
+/// padded index in its patch.
+fn covering_cells(patches: &[Patch], site: usize, l: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
+    let (x, y) = (site % l, site / l);
+    patches.iter().enumerate().filter_map(move |(i, p)| {
+        let (a, b) = ((x + l - p.x0) % l, (y + l - p.y0) % l);
+        (a < p.w && b < p.h).then(|| (i, p.idx(a, b)))
+    })
+}
+
+/// Roundings in a per-cell sum of n terms: invocation t adds ⌈n/64⌉ terms in sequence (the
+/// first onto zero, exactly), then six halving levels add the 64 partial sums: one to spare.
+fn reduction_depth(n: usize) -> f64 {
+    (n.div_ceil(64) + 6) as f64
+}
+
+/// What the GPU computed, read back.
+struct GpuFields {
+    sum_phi: Vec<f32>,
+    sum_phi2: Vec<f32>,
+    area: Vec<f32>,
+    mu: Vec<f32>,
+    shape: Vec<f32>,
+    q_hat: Vec<f32>,
+    fx: Vec<f32>,
+    fy: Vec<f32>,
+    weight: Vec<f32>,
+    force: Vec<f32>,
+}
+
+fn gpu_fields(ctx: &GpuContext, m: &Monolayer) -> (GpuMonolayer, GpuFields) {
+    let gpu = GpuMonolayer::new(ctx, m);
+    gpu.evaluate(ctx);
+    let read = |s| gpu.read(ctx, s);
+    let fields = GpuFields {
+        sum_phi: read(Slot::SumPhi),
+        sum_phi2: read(Slot::SumPhi2),
+        area: read(Slot::Area),
+        mu: read(Slot::Mu),
+        shape: read(Slot::Shape),
+        q_hat: read(Slot::QHat),
+        fx: read(Slot::Fx),
+        fy: read(Slot::Fy),
+        weight: read(Slot::Weight),
+        force: read(Slot::Force),
+    };
+    (gpu, fields)
+}
+
+/// One state evaluated by both engines: the CPU's f64 fields and the GPU's f32 ones.
+struct Case {
+    cpu: Monolayer,
+    gpu: GpuMonolayer,
+    g: GpuFields,
+    patches: Vec<Patch>,
+    /// Σφ as the CPU gathers it.
+    sum_phi: Vec<f64>,
+}
+
+impl Case {
+    fn new(ctx: &GpuContext, m: &Monolayer) -> Self {
+        let mut cpu = evaluated(m);
+        let (gpu, g) = gpu_fields(ctx, &cpu);
+        let patches = cpu.cells().iter().map(|c| c.patch()).collect();
+        let sum_phi = cpu.phi_sum().to_vec();
+        Case { cpu, gpu, g, patches, sum_phi }
+    }
+
+    fn l(&self) -> usize {
+        self.cpu.params().box_size
+    }
+
+    /// Roundings in the lattice sums at a site covered by n patches: each φ rounded once to
+    /// f32 (which counts twice in φ²), squared once, then n − 1 additions in cell order.
+    fn lattice_depth(&self, site: usize) -> f64 {
+        covering(&self.patches, site, self.l()) as f64 + 2.0
+    }
+
+    /// Roundings in A_i: its terms as in the lattice sums (3), then the per-cell reduction.
+    fn area_depth(&self, i: usize) -> f64 {
+        3.0 + reduction_depth(self.patches[i].padded_len())
+    }
+}
+
+/// Every stage's GPU result against the CPU's, each within its f32 bound.
+fn compare_stages(ctx: &GpuContext, m: &Monolayer) {
+    let case = Case::new(ctx, m);
+    check_lattice_sums(&case);
+    check_areas(&case);
+    let mu_bounds = check_chemical_potential(&case);
+    let q_hat_bounds = check_shape(&case);
+    let force_bounds = check_forces(&case, &mu_bounds, &q_hat_bounds);
+    let p = case.cpu.params();
+    // The CPU gathers n and F only where it solves Eq. 2: active, with cell–cell friction.
+    if case.cpu.phase() == Phase::Active && p.xi_cell > 0.0 {
+        check_friction_sums(&case, &force_bounds);
+    }
+}
+
+/// Σφ and Σφ²: positive terms, so p̃ is the sum itself; k = n + 2 (`Case::lattice_depth`).
+fn check_lattice_sums(case: &Case) {
+    let l = case.l();
+    let (mut s1, mut s2) = (Worst::default(), Worst::default());
+    let cpu2 = &case.cpu.lattice().sum_phi2;
+    for (site, (&cpu1, &cpu2)) in case.sum_phi.iter().zip(cpu2).enumerate() {
+        let k = case.lattice_depth(site);
+        let at = || format!("site ({}, {})", site % l, site / l);
+        s1.check(case.g.sum_phi[site], cpu1, k * U * cpu1.abs(), at);
+        s2.check(case.g.sum_phi2[site], cpu2, k * U * cpu2, at);
+    }
+    s1.assert_within("Σφ");
+    s2.assert_within("Σφ²");
+}
+
+/// A_i = Σ φ² over the padded patch: positive terms, k = 3 + the reduction's depth.
+fn check_areas(case: &Case) {
+    let mut area = Worst::default();
+    for (i, c) in case.cpu.cells().iter().enumerate() {
+        area.check(case.g.area[i], c.area(), case.area_depth(i) * U * c.area(), || format!("cell {i}"));
+    }
+    area.assert_within("A_i");
+}
+
+/// μ_i = bulk·c(1−c)(1−2c) − gradient·∇²c − area·(1 − A/πR²)·c + repulsion·c·(Σφ² − c²), with
+/// p̃ = bulk·|c|(1+|c|)(1+2|c|) + gradient·|∇²|~ + area·(1 + A/πR²)|c| + repulsion·|c|(Σφ² + c²)
+/// (|∇²|~: the stencil with absolute weights). The longest path has 9 roundings (input, three
+/// products and a subtraction in the bulk term, then four additions); 16 leaves room for the
+/// compiler's order of the four terms. The GPU's own A_i and Σφ² come in with their bounds
+/// through the area and repulsion terms. Returns the bound at every padded site of every cell
+/// (zero on the halo, where both are zero).
+fn check_chemical_potential(case: &Case) -> Vec<Vec<f64>> {
+    let p = case.cpu.params();
+    let fe = FreeEnergy::new(p);
+    let l = p.box_size;
+    let mut mu = Worst::default();
+    let mut all_bounds = Vec::new();
+    for (i, c) in case.cpu.cells().iter().enumerate() {
+        let (patch, cpu_mu) = (c.patch(), c.chemical_potential().data);
+        let gpu_mu = case.gpu.state().layout.cell(i, &case.g.mu);
+        let a_ratio = c.area() / fe.target_area;
+        let mut bounds = vec![0.0; patch.padded_len()];
+        for b in 0..patch.h {
+            for a in 0..patch.w {
+                let j = patch.idx(a, b);
+                let v = c.phi().data[j].abs();
+                let (gx, gy) = patch.global_xy(a, b, l);
+                let site = gy * l + gx;
+                let sum2 = case.cpu.lattice().sum_phi2[site];
+                let scale = fe.bulk * v * (1.0 + v) * (1.0 + 2.0 * v)
+                    + fe.gradient * abs_laplacian(p.laplacian, patch, c.phi().data, j)
+                    + fe.area * (1.0 + a_ratio) * v
+                    + fe.repulsion * v * (sum2 + v * v);
+                let inherited =
+                    fe.area * a_ratio * v * case.area_depth(i) + fe.repulsion * v * sum2 * case.lattice_depth(site);
+                bounds[j] = U * (16.0 * scale + inherited);
+            }
+        }
+        for (j, (&gm, &cm)) in gpu_mu.iter().zip(cpu_mu).enumerate() {
+            mu.check(gm, cm, bounds[j], || format!("cell {i} padded index {j}"));
+        }
+        all_bounds.push(bounds);
+    }
+    mu.assert_within("μ_i");
+    all_bounds
+}
+
+/// The Laplacian's stencil at padded index j with every weight and value made positive.
+fn abs_laplacian(kind: Laplacian, patch: Patch, phi: &[f64], j: usize) -> f64 {
+    let s = patch.stride();
+    let v = phi[j].abs();
+    let nn = phi[j - 1].abs() + phi[j + 1].abs() + phi[j - s].abs() + phi[j + s].abs();
+    match kind {
+        Laplacian::FivePoint => nn + 4.0 * v,
+        Laplacian::NinePoint => {
+            let diag = phi[j - s - 1].abs() + phi[j - s + 1].abs() + phi[j + s - 1].abs() + phi[j + s + 1].abs();
+            (4.0 * nn + diag + 20.0 * v) / 6.0
+        }
+    }
+}
+
+/// ½(|f₊| + |f₋|) along x and along y at padded index j: p̃ of a central difference.
+fn abs_gradient(f: &[f64], j: usize, s: usize) -> (f64, f64) {
+    (0.5 * (f[j + 1].abs() + f[j - 1].abs()), 0.5 * (f[j + s].abs() + f[j - s].abs()))
+}
+
+/// Q_xx = −Σ ½(g_x² − g_y²), Q_xy = −Σ g_x g_y, g = ½ (φ₊ − φ₋): p̃ puts m = ½(|φ₊| + |φ₋|) in
+/// place of each g. Roundings: input, difference, product, the ±, then the reduction.
+/// Q̂ = m Q / √(|Q|² + ε²): a change δQ moves it by at most 2m|δQ|/√(|Q|² + ε²); its own
+/// arithmetic (squares, sum, root, product, quotient) adds 8 roundings of m. Returns each
+/// cell's bound on Q̂.
+fn check_shape(case: &Case) -> Vec<f64> {
+    let p = case.cpu.params();
+    let (mut shape, mut q_hat) = (Worst::default(), Worst::default());
+    let mut q_hat_bounds = Vec::new();
+    for (i, c) in case.cpu.cells().iter().enumerate() {
+        let patch = c.patch();
+        let (mut sxx, mut sxy) = (0.0, 0.0);
+        for b in 0..patch.h {
+            for a in 0..patch.w {
+                let (mx, my) = abs_gradient(c.phi().data, patch.idx(a, b), patch.stride());
+                sxx += 0.5 * (mx * mx + my * my);
+                sxy += mx * my;
+            }
+        }
+        let k = 4.0 + reduction_depth(patch.w * patch.h);
+        let (bxx, bxy) = (k * U * sxx, k * U * sxy);
+        let (q, g) = (c.shape_tensor(), &case.g.shape);
+        shape.check(g[2 * i], q[0], bxx, || format!("cell {i} Q_xx"));
+        shape.check(g[2 * i + 1], q[1], bxy, || format!("cell {i} Q_xy"));
+        let norm = (q[0] * q[0] + q[1] * q[1] + p.q_epsilon * p.q_epsilon).sqrt();
+        let bound = 2.0 * p.q_magnitude * (bxx + bxy) / norm + 8.0 * U * p.q_magnitude;
+        let (qh, g) = (c.q_hat(), &case.g.q_hat);
+        q_hat.check(g[2 * i], qh[0], bound, || format!("cell {i} Q̂_xx"));
+        q_hat.check(g[2 * i + 1], qh[1], bound, || format!("cell {i} Q̂_xy"));
+        q_hat_bounds.push(bound);
+    }
+    shape.assert_within("Q_i");
+    q_hat.assert_within("Q̂_i");
+    q_hat_bounds
+}
+
+/// f_x = −w·½(μ₊ − μ₋) − ζ(Q̂_xx ∂_xφ + Q̂_xy ∂_yφ), f_y likewise: the GPU's μ and Q̂ carry their
+/// bounds in (weighted as they enter), and the expression's own roundings (input, difference,
+/// product, sum, product, difference: 6; 8 with room) apply to its p̃. Returns the bounds on
+/// (f_x, f_y) at every padded site of every cell (zero on the halo).
+fn check_forces(case: &Case, mu_bounds: &[Vec<f64>], q_hat_bounds: &[f64]) -> Vec<Vec<(f64, f64)>> {
+    let p = case.cpu.params();
+    let zeta = if case.cpu.phase() == Phase::Active { p.zeta.abs() } else { 0.0 };
+    let weighted = p.passive_force == PassiveForce::PhiGradMu;
+    let layout = &case.gpu.state().layout;
+    let mut force = Worst::default();
+    let mut all_bounds = Vec::new();
+    for (i, c) in case.cpu.cells().iter().enumerate() {
+        let (patch, phi, cmu) = (c.patch(), c.phi().data, c.chemical_potential().data);
+        let mut bounds = vec![(0.0, 0.0); patch.padded_len()];
+        let (cfx, cfy) = c.force();
+        let (gfx, gfy) = (layout.cell(i, &case.g.fx), layout.cell(i, &case.g.fy));
+        let (mb, qb, qh) = (&mu_bounds[i], q_hat_bounds[i], c.q_hat());
+        let s = patch.stride();
+        for b in 0..patch.h {
+            for a in 0..patch.w {
+                let j = patch.idx(a, b);
+                let w = if weighted { phi[j].abs() } else { 1.0 };
+                let (px, py) = abs_gradient(phi, j, s);
+                let (ux, uy) = abs_gradient(cmu, j, s);
+                let active = zeta * (qh[0].abs() + qh[1].abs()) * (px + py);
+                let from_q_hat = zeta * qb * (px + py);
+                let bx = w * 0.5 * (mb[j + 1] + mb[j - 1]) + from_q_hat + 8.0 * U * (w * ux + active);
+                let by = w * 0.5 * (mb[j + s] + mb[j - s]) + from_q_hat + 8.0 * U * (w * uy + active);
+                let at = || format!("cell {i} site ({a}, {b})");
+                force.check(gfx[j], cfx.data[j], bx, at);
+                force.check(gfy[j], cfy.data[j], by, at);
+                bounds[j] = (bx, by);
+            }
+        }
+        all_bounds.push(bounds);
+    }
+    force.assert_within("f_i");
+    all_bounds
+}
+
+/// n = Σ_j w_j and F = Σ_j w_j f_j, in cell order, with w_j of `motion::friction_weight`. w is
+/// φ clamped (rounded once), or exactly 0 or 1; a presence weight may flip where φ lies within
+/// rounding of the threshold, which adds the whole term (none did here). Each term of F carries
+/// the GPU's f bound times |w|; then the product and n − 1 additions: k = n + 2 on Σ|w f|.
+fn check_friction_sums(case: &Case, force_bounds: &[Vec<(f64, f64)>]) {
+    let p = case.cpu.params();
+    let (l, thr) = (p.box_size, p.presence_threshold);
+    let lattice = case.cpu.lattice();
+    let (mut weight, mut force) = (Worst::default(), Worst::default());
+    for site in 0..l * l {
+        let (mut w_sum, mut wf_sum, mut from_f, mut flips, mut n) = (0.0, 0.0, (0.0, 0.0), (0.0, 0.0, 0.0), 0.0);
+        for (i, j) in covering_cells(&case.patches, site, l) {
+            let c = &case.cpu.cells()[i];
+            let (v, fx, fy) = (c.phi().data[j], c.force().0.data[j], c.force().1.data[j]);
+            let w = friction_weight(p.friction_weights, v, thr);
+            let near = p.friction_weights == FrictionWeights::Presence && (v - thr).abs() <= 4.0 * U * thr;
+            if near {
+                flips = (flips.0 + 1.0, flips.1 + fx.abs(), flips.2 + fy.abs());
+            }
+            n += 1.0;
+            w_sum += w;
+            wf_sum += w * (fx.abs() + fy.abs());
+            let (bx, by) = force_bounds[i][j];
+            from_f = (from_f.0 + w * bx, from_f.1 + w * by);
+        }
+        let k = n + 2.0;
+        let at = || format!("site ({}, {})", site % l, site / l);
+        weight.check(case.g.weight[site], lattice.weight[site], k * U * w_sum + flips.0, at);
+        let (gx, gy) = (case.g.force[2 * site], case.g.force[2 * site + 1]);
+        let cpu = lattice.force[site];
+        force.check(gx, cpu.re, from_f.0 + k * U * wf_sum + flips.1, at);
+        force.check(gy, cpu.im, from_f.1 + k * U * wf_sum + flips.2, at);
+    }
+    weight.assert_within("n = Σ w_j");
+    force.assert_within("F = Σ w_j f_j");
+}
+
+#[test]
+fn the_adapter_is_found_and_named() {
+    let Some(ctx) = context() else { return };
+    assert!(!ctx.adapter_name().is_empty());
+}
+
+#[test]
+fn stages_match_the_cpu_on_a_reduced_tissue() {
+    let Some(ctx) = context() else { return };
+    let m = reduced_tissue();
+    let l = m.params().box_size;
+    assert_eq!(m.phase(), Phase::Active);
+    // The case the lattice index must get right: a patch across the periodic edge.
+    let wraps = m.cells().iter().filter(|c| c.patch().x0 + c.patch().w > l || c.patch().y0 + c.patch().h > l).count();
+    assert!(wraps > 0, "no patch crosses the periodic edge: the fixture does not test the wrap");
+    compare_stages(&ctx, m);
+}
+
+/// The other readings of the model (nine-point Laplacian, f^p = −φ∇μ, Q̂ magnitude 2, the φ and
+/// presence friction weights) and the relaxation phase (ζ = 0 on the GPU too).
+#[test]
+fn stages_match_the_cpu_under_the_other_readings() {
+    let Some(ctx) = context() else { return };
+    let base = reduced_tissue().params().clone();
+    let readings = [
+        Params {
+            laplacian: Laplacian::NinePoint,
+            passive_force: PassiveForce::PhiGradMu,
+            q_magnitude: 2.0,
+            friction_weights: FrictionWeights::Phi,
+            ..base.clone()
+        },
+        Params { friction_weights: FrictionWeights::Presence, ..base },
+    ];
+    for p in readings {
+        let mut m = reduced_tissue().clone();
+        m.set_params(p).expect("valid parameters");
+        compare_stages(&ctx, &m);
+    }
+    let relaxing = Params { box_size: 60, n_cells: 18, relax_steps: 1000, ..Params::default() };
+    let mut r = Monolayer::new(relaxing, 5).expect("valid parameters");
+    r.advance(200).expect("the tissue relaxes");
+    assert_eq!(r.phase(), Phase::Relaxation);
+    compare_stages(&ctx, &r);
+}
+
+/// Fixed summation orders: two uploads of the same state, evaluated apart, give the same bits
+/// in every buffer.
+#[test]
+fn two_runs_give_the_same_bits() {
+    let Some(ctx) = context() else { return };
+    assert_repeats(&ctx, reduced_tissue());
+}
+
+fn assert_repeats(ctx: &GpuContext, m: &Monolayer) {
+    let bits = |f: &GpuFields| -> Vec<u32> {
+        [&f.sum_phi, &f.sum_phi2, &f.area, &f.mu, &f.shape, &f.q_hat, &f.fx, &f.fy, &f.weight, &f.force]
+            .iter()
+            .flat_map(|v| v.iter().map(|x| x.to_bits()))
+            .collect()
+    };
+    let (_, first) = gpu_fields(ctx, m);
+    let (gpu, second) = gpu_fields(ctx, m);
+    assert_eq!(bits(&first), bits(&second), "two GPU runs differ");
+    // And a third evaluation of the same device state, after the second.
+    gpu.evaluate(ctx);
+    assert_eq!(gpu.read(ctx, Slot::Mu), second.mu);
+    assert_eq!(gpu.read(ctx, Slot::QHat), second.q_hat);
+}
+
+/// The paper's size (100 cells on 140², relaxed, then 20 active steps): every stage against
+/// the CPU, two runs with the same bits, and the time of each dispatch on this adapter (on
+/// lavapipe a CPU figure).
+#[test]
+#[ignore = "full size, minutes: scripts/test.sh runs it (cargo test --release -- --include-ignored)"]
+fn stages_match_the_cpu_at_full_size() {
+    let Some(ctx) = context() else { return };
+    let mut m = common::relaxed_full_size().clone();
+    m.advance(20).expect("the tissue steps");
+    compare_stages(&ctx, &m);
+    assert_repeats(&ctx, &m);
+    let gpu = GpuMonolayer::new(&ctx, &m);
+    for k in Kernel::ALL {
+        eprintln!("{k:?}: {:.3} ms per dispatch (median of 21)", median_ms(&ctx, &gpu, &[k]));
+    }
+    eprintln!(
+        "all {} kernels: {:.3} ms per submission (median of 21)",
+        Kernel::ALL.len(),
+        median_ms(&ctx, &gpu, &Kernel::ALL)
+    );
+}
+
+/// `monolayer bench --gpu` names the adapter, says when its times are CPU figures, and times
+/// every kernel with its bytes.
+#[test]
+fn bench_gpu_names_the_adapter_and_times_every_kernel() {
+    let Some(ctx) = context() else { return };
+    let small = ["--set", "box_size=60", "--set", "n_cells=18", "--relax-steps", "200", "--steps", "5"];
+    let out = common::monolayer(&[&["bench", "--gpu"][..], &small].concat());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    assert!(text.contains(&format!("adapter: {}", ctx.adapter_name())), "{text}");
+    assert_eq!(text.contains("CPU figure"), ctx.runs_on_cpu(), "{text}");
+    for k in Kernel::ALL {
+        assert!(text.contains(&format!("{k:?}")) && text.contains("ms/dispatch"), "{k:?} missing: {text}");
+    }
+    assert!(text.contains(&format!("{} dispatches", Kernel::ALL.len())), "{text}");
+}
+
+/// The median wall time of submitting `kernels` and waiting for them, after one warm-up.
+fn median_ms(ctx: &GpuContext, gpu: &GpuMonolayer, kernels: &[Kernel]) -> f64 {
+    gpu.run(ctx, kernels);
+    ctx.wait();
+    let mut times: Vec<f64> = (0..21)
+        .map(|_| {
+            let t = Instant::now();
+            gpu.run(ctx, kernels);
+            ctx.wait();
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
