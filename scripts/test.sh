@@ -38,5 +38,5 @@ if [ ! -x /usr/bin/chromium ]; then
 fi
 bash scripts/serve.sh --build-only
 (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
-cargo build --release --bin monolayer
+cargo build --release --bin monolayer --features gpu
 node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/demo.test.mjs tests/browser/viewer.test.mjs
