@@ -23,6 +23,6 @@ pub mod buffers;
 pub mod context;
 pub mod kernels;
 
-pub use buffers::{DeviceState, Slot};
+pub use buffers::{DeviceState, Slot, NO_FAULT};
 pub use context::{GpuContext, GpuError};
 pub use kernels::{GpuMonolayer, Kernel};
