@@ -14,8 +14,10 @@
 //! μ_i, Q̂_i, f_i) carry their own bound into the next stage. The bounds are tight enough that a
 //! sign or a weight wrong in a kernel fails them by orders of magnitude (tried, one at a time,
 //! then reverted: the repulsion term's sign in free_energy.wgsl, Q_xy's in shape.wgsl, the
-//! active f_y's in forces.wgsl, F_y's and the presence test in gather.wgsl; docs/gpu.md has the
-//! figures).
+//! active f_y's in forces.wgsl, F_y's and the presence test in gather.wgsl; the J₀μ term's sign
+//! in motion.wgsl, 5.8 × 10⁵ times its bound; R(φ*)'s sign in the corrector of monolayer.wgsl,
+//! which passes every stage and the predictor and fails the step by 461 times; docs/gpu.md has
+//! the figures).
 
 #![cfg(feature = "gpu")]
 
