@@ -6,8 +6,8 @@
 // same order). Every stage binds its buffers at the same binding numbers (`Slot` in
 // src/gpu/kernels.rs), so a buffer has one number in every file.
 
-// The coefficients of src/model/free_energy.rs (`FreeEnergy`) and the knobs of shape.rs,
-// forces.rs and the friction weights (motion.rs), in f32.
+// The coefficients of src/model/free_energy.rs (`FreeEnergy`), the knobs of shape.rs,
+// forces.rs and motion.rs, and Heun's Δt and range check (monolayer.rs), in f32.
 struct Params {
     // L, the side of the periodic lattice.
     box_size: u32,
@@ -31,8 +31,15 @@ struct Params {
     friction_weights: u32,
     // φ above which a cell is present (`presence_threshold`).
     presence_threshold: f32,
+    // 0: central differences in −v·∇φ, 1: upwind (`Advection`).
+    advection: u32,
+    // J₀ of Eq. 1.
+    j0: f32,
+    // Δt, and the range [φ_min, φ_max] Heun's corrector checks φ against.
+    dt: f32,
+    phi_min: f32,
+    phi_max: f32,
     _pad0: u32,
-    _pad1: u32,
 };
 
 // One cell's patch (src/model/lattice.rs `Patch`) and where its padded storage starts in the

@@ -14,8 +14,10 @@
 //! μ_i, Q̂_i, f_i) carry their own bound into the next stage. The bounds are tight enough that a
 //! sign or a weight wrong in a kernel fails them by orders of magnitude (tried, one at a time,
 //! then reverted: the repulsion term's sign in free_energy.wgsl, Q_xy's in shape.wgsl, the
-//! active f_y's in forces.wgsl, F_y's and the presence test in gather.wgsl; docs/gpu.md has the
-//! figures).
+//! active f_y's in forces.wgsl, F_y's and the presence test in gather.wgsl; the J₀μ term's sign
+//! in motion.wgsl, 5.8 × 10⁵ times its bound; R(φ*)'s sign in the corrector of monolayer.wgsl,
+//! which passes every stage and the predictor and fails the step by 461 times; docs/gpu.md has
+//! the figures).
 
 #![cfg(feature = "gpu")]
 
@@ -24,11 +26,11 @@ mod common;
 use std::sync::OnceLock;
 use std::time::Instant;
 
-use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Slot};
+use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Slot, NO_FAULT};
 use monolayer::model::free_energy::FreeEnergy;
 use monolayer::model::lattice::Patch;
 use monolayer::model::motion::friction_weight;
-use monolayer::model::params::{FrictionWeights, Laplacian, PassiveForce};
+use monolayer::model::params::{Advection, FrictionWeights, Laplacian, PassiveForce};
 use monolayer::{Monolayer, Params, Phase};
 
 /// The unit roundoff of f32.
@@ -131,11 +133,16 @@ struct GpuFields {
     fy: Vec<f32>,
     weight: Vec<f32>,
     force: Vec<f32>,
+    /// v_i, (x, y) per padded site.
+    velocity: Vec<f32>,
+    rate: Vec<f32>,
 }
 
 fn gpu_fields(ctx: &GpuContext, m: &Monolayer) -> (GpuMonolayer, GpuFields) {
     let gpu = GpuMonolayer::new(ctx, m);
-    gpu.evaluate(ctx);
+    // The stages up to n and F, then v and the rate (which are the CPU's only where it has no
+    // friction solve; `compare_stages` checks them there).
+    gpu.run(ctx, &[&Kernel::FRICTION_SUMS[..], &[Kernel::VelocityAndRate]].concat());
     let read = |s| gpu.read(ctx, s);
     let fields = GpuFields {
         sum_phi: read(Slot::SumPhi),
@@ -148,6 +155,8 @@ fn gpu_fields(ctx: &GpuContext, m: &Monolayer) -> (GpuMonolayer, GpuFields) {
         fy: read(Slot::Fy),
         weight: read(Slot::Weight),
         force: read(Slot::Force),
+        velocity: read(Slot::Velocity),
+        rate: read(Slot::Rate),
     };
     (gpu, fields)
 }
@@ -187,8 +196,9 @@ impl Case {
     }
 }
 
-/// Every stage's GPU result against the CPU's, each within its f32 bound.
-fn compare_stages(ctx: &GpuContext, m: &Monolayer) {
+/// Every stage's GPU result against the CPU's, each within its f32 bound. Where the CPU has no
+/// friction solve, v_i and the rate too, whose bounds it returns (else None).
+fn compare_stages(ctx: &GpuContext, m: &Monolayer) -> Option<Vec<Vec<f64>>> {
     let case = Case::new(ctx, m);
     check_lattice_sums(&case);
     check_areas(&case);
@@ -199,7 +209,82 @@ fn compare_stages(ctx: &GpuContext, m: &Monolayer) {
     // The CPU gathers n and F only where it solves Eq. 2: active, with cell–cell friction.
     if case.cpu.phase() == Phase::Active && p.xi_cell > 0.0 {
         check_friction_sums(&case, &force_bounds);
+        None
+    } else {
+        Some(check_motion(&case, &mu_bounds, &force_bounds))
     }
+}
+
+/// The mobility the CPU uses without a friction solve: 1/ξ_relax, or 1/ξ_s(x) when active.
+fn mobility(m: &Monolayer, site: usize) -> f64 {
+    match m.phase() {
+        Phase::Relaxation => 1.0 / m.params().xi_relax,
+        Phase::Active => 1.0 / m.lattice().xi_s[site],
+    }
+}
+
+/// v = m f and R = −(v_x g_x + v_y g_y) − J₀ μ (g the gradient of φ, central or upwind), where
+/// there is no friction solve. v carries m times f's bound, plus two roundings of |v| (m's to
+/// f32, the product's). The rate carries v's bounds times |g|~ (the gradient's p̃: ½(|φ₊| + |φ₋|)
+/// central, |φ| + the larger neighbour upwind) and J₀ times μ's bound, plus 8 roundings of its
+/// own p̃ |v_x| |g_x|~ + |v_y| |g_y|~ + J₀|μ| (input, difference, half, two products, sum, J₀μ,
+/// difference: 8). Upwind, a v within its bound of 0 may take the other side on the GPU: then
+/// 2 × v's bound × |the two one-sided differences| more. Returns the rate's bound at every padded
+/// site of every cell (zero on the halo).
+fn check_motion(case: &Case, mu_bounds: &[Vec<f64>], force_bounds: &[Vec<(f64, f64)>]) -> Vec<Vec<f64>> {
+    let p = case.cpu.params();
+    let (l, j0, upwind) = (p.box_size, p.j0.abs(), p.advection == Advection::Upwind);
+    let layout = &case.gpu.state().layout;
+    let (mut velocity, mut rate) = (Worst::default(), Worst::default());
+    let mut all_bounds = Vec::new();
+    for (i, c) in case.cpu.cells().iter().enumerate() {
+        let (patch, phi, cmu, crate_) = (c.patch(), c.phi().data, c.chemical_potential().data, c.rate().data);
+        let (cvx, cvy) = c.velocity();
+        // v is (x, y) per padded site, from the cell's offset.
+        let gv = &case.g.velocity[2 * layout.patches[i].offset as usize..];
+        let grate = layout.cell(i, &case.g.rate);
+        let s = patch.stride();
+        let mut bounds = vec![0.0; patch.padded_len()];
+        for b in 0..patch.h {
+            for a in 0..patch.w {
+                let j = patch.idx(a, b);
+                let (gx, gy) = patch.global_xy(a, b, l);
+                let m = mobility(&case.cpu, gy * l + gx);
+                let (vx, vy) = (cvx.data[j], cvy.data[j]);
+                let (fbx, fby) = force_bounds[i][j];
+                let (bvx, bvy) = (m * fbx + 2.0 * U * vx.abs(), m * fby + 2.0 * U * vy.abs());
+                let (mut ax, mut ay) = abs_gradient(phi, j, s);
+                let mut flips = 0.0;
+                if upwind {
+                    let v = phi[j].abs();
+                    ax = v + phi[j - 1].abs().max(phi[j + 1].abs());
+                    ay = v + phi[j - s].abs().max(phi[j + s].abs());
+                    let (dx, dy) = (
+                        (phi[j + 1] - 2.0 * phi[j] + phi[j - 1]).abs(),
+                        (phi[j + s] - 2.0 * phi[j] + phi[j - s]).abs(),
+                    );
+                    flips += if vx.abs() <= bvx { 2.0 * bvx * dx } else { 0.0 };
+                    flips += if vy.abs() <= bvy { 2.0 * bvy * dy } else { 0.0 };
+                }
+                let own = vx.abs() * ax + vy.abs() * ay + j0 * cmu[j].abs();
+                let bound = bvx * ax + bvy * ay + j0 * mu_bounds[i][j] + 8.0 * U * own + flips;
+                let at = || format!("cell {i} site ({a}, {b})");
+                velocity.check(gv[2 * j], vx, bvx, at);
+                velocity.check(gv[2 * j + 1], vy, bvy, at);
+                rate.check(grate[j], crate_[j], bound, at);
+                bounds[j] = bound;
+            }
+        }
+        for (j, (&g, &c)) in grate.iter().zip(crate_).enumerate() {
+            if bounds[j] == 0.0 {
+                assert_eq!((g as f64, c), (0.0, 0.0), "cell {i}: the rate's halo at padded index {j}");
+            }
+        }
+        all_bounds.push(bounds);
+    }
+    velocity.assert_within("v_i");
+    rate.assert_within("∂_t φ_i");
+    all_bounds
 }
 
 /// Σφ and Σφ²: positive terms, so p̃ is the sum itself; k = n + 2 (`Case::lattice_depth`).
@@ -433,18 +518,186 @@ fn stages_match_the_cpu_under_the_other_readings() {
             friction_weights: FrictionWeights::Phi,
             ..base.clone()
         },
-        Params { friction_weights: FrictionWeights::Presence, ..base },
+        Params { friction_weights: FrictionWeights::Presence, ..base.clone() },
+        // Active without cell–cell friction: no friction solve, v = f/ξ_s(x) (and upwind).
+        Params { xi_cell: 0.0, ..base.clone() },
+        Params { xi_cell: 0.0, advection: Advection::Upwind, ..base },
     ];
     for p in readings {
         let mut m = reduced_tissue().clone();
         m.set_params(p).expect("valid parameters");
         compare_stages(&ctx, &m);
     }
-    let relaxing = Params { box_size: 60, n_cells: 18, relax_steps: 1000, ..Params::default() };
-    let mut r = Monolayer::new(relaxing, 5).expect("valid parameters");
-    r.advance(200).expect("the tissue relaxes");
+    let r = relaxing_tissue();
     assert_eq!(r.phase(), Phase::Relaxation);
-    compare_stages(&ctx, &r);
+    compare_stages(&ctx, r).expect("relaxation has no friction solve");
+    let mut upwind = r.clone();
+    upwind.set_params(Params { advection: Advection::Upwind, ..r.params().clone() }).expect("valid parameters");
+    compare_stages(&ctx, &upwind);
+}
+
+/// A reduced tissue in relaxation (18 cells on 60², 200 of its 1,000 relaxation steps on).
+fn relaxing_tissue() -> &'static Monolayer {
+    static TISSUE: OnceLock<Monolayer> = OnceLock::new();
+    TISSUE.get_or_init(|| {
+        let relaxing = Params { box_size: 60, n_cells: 18, relax_steps: 1000, ..Params::default() };
+        let mut r = Monolayer::new(relaxing, 5).expect("valid parameters");
+        r.advance(200).expect("the tissue relaxes");
+        r
+    })
+}
+
+/// Whether padded index j of a patch is an interior site (not the halo).
+fn interior(patch: Patch, j: usize) -> bool {
+    let (col, row) = (j % patch.stride(), j / patch.stride());
+    (1..=patch.w).contains(&col) && (1..=patch.h).contains(&row)
+}
+
+/// Every cell's padded φ as one f64 vector per cell.
+fn phis(m: &Monolayer) -> Vec<Vec<f64>> {
+    m.cells().iter().map(|c| c.phi().data.to_vec()).collect()
+}
+
+/// One Heun step in relaxation, all on the GPU in one submission (`GpuMonolayer::step`: 14
+/// dispatches, nothing read back), against the CPU's step on the same fixed patches
+/// (`Monolayer::step_on_fixed_patches`), in three checks:
+///
+/// 1. The predictor φ* = φ + Δt R(φ): Δt × the rate's bound (`check_motion`, from the stage
+///    bounds) + 3 roundings of |φ| + Δt|R| (input, product, sum).
+/// 2. The stages at the CPU's φ*, from which the GPU's R(φ*) would differ by its stage bounds
+///    if its φ* were the CPU's; it is not, by up to δ (the worst bound of check 1), and R moves
+///    by at most C·δ, C the linearised sensitivity of R to a change of φ of size δ everywhere:
+///    C = J₀ C_μ + max(|v_x| + |v_y|) + m C_μ max(|g_x|~ + |g_y|~), with C_μ bounding |δμ|/δ
+///    (bulk·max|1 − 6φ + 6φ²| + 8·2γλ (the five-point stencil's absolute weights) + the area
+///    term with δA_i ≤ 2δΣ|φ_i| + the repulsion with δΣφ² ≤ 2δΣ_j|φ_j|); second order in δ
+///    (10⁻¹⁴) is left out.
+/// 3. The corrector φ' = φ_n + ½Δt (R(φ_n) + R(φ*)): ½Δt × (both rates' bounds + C·δ) + 4
+///    roundings of |φ_n| + ½Δt(|R(φ_n)| + |R(φ*)|). No cell leaves φ's range on either.
+///
+/// Then the same step again from a second upload, bit for bit.
+#[test]
+fn one_relaxation_step_matches_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let r = relaxing_tissue();
+    let p = r.params().clone();
+    let (l, dt) = (p.box_size, p.dt);
+    let k1_bounds = compare_stages(&ctx, r).expect("relaxation has no friction solve");
+    let start = evaluated(r);
+
+    // 1. The predictor.
+    let mut gpu = GpuMonolayer::new(&ctx, r);
+    gpu.run(&ctx, &[&Kernel::RATE[..], &[Kernel::Predict]].concat());
+    let g_pred = gpu.read(&ctx, Slot::Phi);
+    let layout = gpu.state().layout.clone();
+    let mut predicted = Worst::default();
+    let mut cpu_pred = Vec::new();
+    let mut delta: f64 = 0.0;
+    for (i, c) in start.cells().iter().enumerate() {
+        let (phi, k1) = (c.phi().data, c.rate().data);
+        // As `Then::Predict` computes it, so these are the CPU's bits.
+        let star: Vec<f64> = phi.iter().zip(k1).map(|(&p0, &k)| p0 + dt * k).collect();
+        for (j, (&g, &want)) in layout.cell(i, &g_pred).iter().zip(&star).enumerate() {
+            let bound = dt * k1_bounds[i][j] + 3.0 * U * (phi[j].abs() + dt * k1[j].abs());
+            predicted.check(g, want, bound, || format!("cell {i} padded index {j}"));
+            delta = delta.max(bound);
+        }
+        cpu_pred.push(star);
+    }
+    predicted.assert_within("Heun's predictor φ*");
+
+    // 2. The stages at the CPU's φ*, and R's sensitivity to the GPU's φ* being off by δ.
+    let mut state = r.state();
+    for ((_, phi), star) in state.cells.iter_mut().zip(&cpu_pred) {
+        phi.copy_from_slice(star);
+    }
+    let at_star = Monolayer::from_state(p.clone(), r.seed(), state).expect("the predicted state loads");
+    let k2_bounds = compare_stages(&ctx, &at_star).expect("relaxation has no friction solve");
+    let star = evaluated(&at_star);
+    let c = sensitivity(&start).max(sensitivity(&star));
+    eprintln!("δ = {delta:e} on φ*, C = {c:.2}: R(φ*) off by up to {:e} from it", c * delta);
+
+    // 3. The whole step.
+    let mut cpu = r.clone();
+    cpu.step_on_fixed_patches().expect("the CPU steps");
+    gpu.upload(&ctx, r);
+    gpu.step(&ctx);
+    let (g_phi, faults) = (gpu.read(&ctx, Slot::Phi), gpu.read_u32(&ctx, Slot::Fault));
+    let mut stepped = Worst::default();
+    for (i, cell) in cpu.cells().iter().enumerate() {
+        assert_eq!((cell.fault(), faults[i]), (None, NO_FAULT), "cell {i}: φ out of range");
+        let (phi0, k1, k2) = (start.cells()[i].phi().data, start.cells()[i].rate().data, star.cells()[i].rate().data);
+        for (j, (&g, &want)) in layout.cell(i, &g_phi).iter().zip(cell.phi().data).enumerate() {
+            let own = phi0[j].abs() + 0.5 * dt * (k1[j].abs() + k2[j].abs());
+            // On the halo both keep φ = 0 exactly: R is written zero there.
+            let from_delta = if interior(cell.patch(), j) { c * delta } else { 0.0 };
+            let bound = 0.5 * dt * (k1_bounds[i][j] + k2_bounds[i][j] + from_delta) + 4.0 * U * own;
+            stepped.check(g, want, bound, || format!("cell {i} padded index {j}"));
+        }
+    }
+    stepped.assert_within("one Heun step, φ'");
+    let moved = phis(&cpu)
+        .iter()
+        .zip(phis(r))
+        .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max))
+        .fold(0.0, f64::max);
+    eprintln!("the step moved φ by up to {moved:e} (L = {l})");
+    assert!(moved > 1e3 * delta, "the step must move φ by far more than the tolerance");
+
+    // The same step from a second upload: the same bits, and the ms of a step on this adapter.
+    let again = GpuMonolayer::new(&ctx, r);
+    again.step(&ctx);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&again.read(&ctx, Slot::Phi)), bits(&g_phi), "two GPU steps differ");
+    eprintln!(
+        "one step: {:.3} ms in one submission of {} dispatches (median of 21)",
+        median_ms(&ctx, &again, &Kernel::STEP),
+        Kernel::STEP.len()
+    );
+}
+
+/// C of `one_relaxation_step_matches_the_cpu`: how much R(φ) can move, per unit, when every φ_i
+/// moves by at most one unit (linearised; relaxation's readings: five-point Laplacian, f = −∇μ,
+/// ζ = 0), from an evaluated state's maxima.
+fn sensitivity(m: &Monolayer) -> f64 {
+    let p = m.params();
+    assert_eq!(
+        (p.laplacian, p.passive_force, m.phase()),
+        (Laplacian::FivePoint, PassiveForce::GradMu, Phase::Relaxation)
+    );
+    let fe = FreeEnergy::new(p);
+    let (mut phi_max, mut v_max, mut g_max, mut sum_abs_max, mut area_max): (f64, f64, f64, f64, f64) =
+        (0.0, 0.0, 0.0, 0.0, 0.0);
+    let l = p.box_size;
+    let mut sum_abs = vec![0.0; l * l];
+    for c in m.cells() {
+        let (patch, phi) = (c.patch(), c.phi().data);
+        let (vx, vy) = c.velocity();
+        sum_abs_max = sum_abs_max.max(phi.iter().map(|v| v.abs()).sum());
+        area_max = area_max.max(c.area());
+        for b in 0..patch.h {
+            for a in 0..patch.w {
+                let j = patch.idx(a, b);
+                let (ax, ay) = abs_gradient(phi, j, patch.stride());
+                phi_max = phi_max.max(phi[j].abs());
+                v_max = v_max.max(vx.data[j].abs() + vy.data[j].abs());
+                g_max = g_max.max(ax + ay);
+                let (gx, gy) = patch.global_xy(a, b, l);
+                sum_abs[gy * l + gx] += phi[j].abs();
+            }
+        }
+    }
+    let lattice_abs = sum_abs.iter().cloned().fold(0.0, f64::max);
+    let sum2_max = m.lattice().sum_phi2.iter().cloned().fold(0.0, f64::max);
+    let f = phi_max;
+    let bulk_slope = 1.0 + 6.0 * f + 6.0 * f * f;
+    let c_mu = fe.bulk * bulk_slope
+        + 8.0 * fe.gradient
+        + fe.area * (1.0 + area_max / fe.target_area)
+        + fe.area / fe.target_area * f * 2.0 * sum_abs_max
+        + fe.repulsion * (sum2_max + 3.0 * f * f)
+        + fe.repulsion * f * 2.0 * lattice_abs;
+    let mobility = 1.0 / p.xi_relax;
+    p.j0.abs() * c_mu + v_max + mobility * c_mu * g_max
 }
 
 /// Fixed summation orders: two uploads of the same state, evaluated apart, give the same bits
@@ -507,7 +760,11 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
     for k in Kernel::ALL {
         assert!(text.contains(&format!("{k:?}")) && text.contains("ms/dispatch"), "{k:?} missing: {text}");
     }
-    assert!(text.contains(&format!("{} dispatches", Kernel::ALL.len())), "{text}");
+    assert!(text.contains(&format!("{} dispatches", Kernel::FRICTION_SUMS.len())), "{text}");
+    assert!(
+        text.contains(&format!("one Heun step without a friction solve: {} dispatches", Kernel::STEP.len())),
+        "{text}"
+    );
 }
 
 /// The median wall time of submitting `kernels` and waiting for them, after one warm-up.
@@ -524,4 +781,30 @@ fn median_ms(ctx: &GpuContext, gpu: &GpuMonolayer, kernels: &[Kernel]) -> f64 {
         .collect();
     times.sort_by(f64::total_cmp);
     times[times.len() / 2]
+}
+
+/// The corrector's range check: φ pushed far out of [φ_min, φ_max] at the centre of three
+/// patches (above in two, below in one) stays out after the step on both engines, and the GPU's
+/// per-cell fault names the same first site as the CPU's, and no fault in the other cells.
+#[test]
+fn the_range_check_flags_the_cpus_sites() {
+    let Some(ctx) = context() else { return };
+    let r = relaxing_tissue();
+    let mut state = r.state();
+    let bad = [(2, 3.0), (7, 2.5), (11, -2.0)];
+    for &(i, v) in &bad {
+        let (patch, phi) = &mut state.cells[i];
+        phi[patch.idx(patch.w / 2, patch.h / 2)] = v;
+    }
+    let mut cpu = Monolayer::from_state(r.params().clone(), r.seed(), state).expect("the state loads");
+    let gpu = GpuMonolayer::new(&ctx, &cpu);
+    let err = cpu.step_on_fixed_patches().expect_err("φ leaves its range");
+    assert!(err.to_string().contains("phi"), "{err}");
+    gpu.step(&ctx);
+    let faults = gpu.read_u32(&ctx, Slot::Fault);
+    for (i, c) in cpu.cells().iter().enumerate() {
+        let want = c.fault().map_or(NO_FAULT, |(a, b, _)| c.patch().idx(a, b) as u32);
+        assert_eq!(faults[i], want, "cell {i}: GPU fault at padded index {}, CPU {:?}", faults[i], c.fault());
+        assert_eq!(want != NO_FAULT, bad.iter().any(|&(k, _)| k == i), "cell {i}: {:?}", c.fault());
+    }
 }

@@ -1,6 +1,7 @@
 //! The state the kernels read and write, on the device: the cells' φ on their patches, the
 //! patch geometry, the parameters as a uniform, and the fields the stages derive (Σφ, Σφ², A_i,
-//! μ_i, Q_i, Q̂_i, f_i, n and F). Uploaded from a CPU [`Monolayer`], in f32.
+//! μ_i, Q_i, Q̂_i, f_i, n and F, v_i and ∂_t φ_i, and Heun's φ_n, R(φ_n) and range faults).
+//! Uploaded from a CPU [`Monolayer`], in f32.
 //!
 //! The per-cell fields (φ, μ, f_x, f_y) are every cell's padded patch storage one after the
 //! other, in cell order, exactly as each [`crate::model::cell::Cell`] stores it; `GpuPatch::offset`
@@ -12,7 +13,7 @@ use wgpu::util::DeviceExt;
 use crate::gpu::context::GpuContext;
 use crate::model::free_energy::FreeEnergy;
 use crate::model::monolayer::{Monolayer, Phase};
-use crate::model::params::{FrictionWeights, Laplacian, Params, PassiveForce};
+use crate::model::params::{Advection, FrictionWeights, Laplacian, Params, PassiveForce};
 
 /// The buffers of the GPU state, each with the binding number every kernel gives it
 /// (`@binding(n)` in `shaders/*.wgsl`).
@@ -43,10 +44,27 @@ pub enum Slot {
     Weight = 11,
     /// F = Σ_j w_j f_j on the lattice, (x, y) per site.
     Force = 12,
+    /// The mobility on the lattice: 1/ξ_relax in relaxation, 1/ξ_s(x) when active (the
+    /// friction solve's 1/[ξ_s + ξ_c N] is still to come).
+    Mobility = 13,
+    /// v_i, (x, y) per padded site of each cell (one buffer for both, as F: a kernel may bind
+    /// at most 8 storage buffers, WebGPU's default, and the motion kernel needs them all).
+    Velocity = 14,
+    /// ∂_t φ_i = R(φ_i) of the latest evaluation, per cell on its padded patch.
+    Rate = 15,
+    /// Heun's φ_n (the start of the step) and R(φ_n), per cell on its padded patch.
+    Phi0 = 16,
+    K1 = 17,
+    /// Per cell, the padded index of the first site (in storage order, which is the CPU's row
+    /// by row) where the corrector's φ left [φ_min, φ_max], or `NO_FAULT`.
+    Fault = 18,
 }
 
+/// `Slot::Fault` of a cell whose φ stayed in range.
+pub const NO_FAULT: u32 = u32::MAX;
+
 impl Slot {
-    pub const ALL: [Slot; 13] = [
+    pub const ALL: [Slot; 19] = [
         Slot::Params,
         Slot::Patches,
         Slot::Phi,
@@ -60,6 +78,12 @@ impl Slot {
         Slot::Fy,
         Slot::Weight,
         Slot::Force,
+        Slot::Mobility,
+        Slot::Velocity,
+        Slot::Rate,
+        Slot::Phi0,
+        Slot::K1,
+        Slot::Fault,
     ];
 
     pub fn binding(self) -> u32 {
@@ -68,7 +92,8 @@ impl Slot {
 }
 
 /// The parameters of the stages, as `Params` in `shaders/model.wgsl` (same fields, same
-/// order): the coefficients of [`FreeEnergy`] and the knobs of shape and forces, in f32.
+/// order): the coefficients of [`FreeEnergy`], the knobs of shape, forces and motion, and the
+/// time step with φ's allowed range, in f32.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct GpuParams {
@@ -86,7 +111,12 @@ pub struct GpuParams {
     pub zeta: f32,
     pub friction_weights: u32,
     pub presence_threshold: f32,
-    pub pad: [u32; 2],
+    pub advection: u32,
+    pub j0: f32,
+    pub dt: f32,
+    pub phi_min: f32,
+    pub phi_max: f32,
+    pub pad: u32,
 }
 
 impl GpuParams {
@@ -119,7 +149,15 @@ impl GpuParams {
                 FrictionWeights::Subdomain => 2,
             },
             presence_threshold: p.presence_threshold as f32,
-            pad: [0; 2],
+            advection: match p.advection {
+                Advection::Central => 0,
+                Advection::Upwind => 1,
+            },
+            j0: p.j0 as f32,
+            dt: p.dt as f32,
+            phi_min: p.phi_min as f32,
+            phi_max: p.phi_max as f32,
+            pad: 0,
         }
     }
 }
@@ -194,6 +232,9 @@ impl Layout {
 pub struct DeviceState {
     pub layout: Layout,
     pub params: GpuParams,
+    /// Whether the CPU solves Eq. 2 in this phase (active, ξ_cell > 0): then the mobility
+    /// uploaded is not the one it uses, and the GPU cannot step.
+    pub solves_friction: bool,
     buffers: Vec<wgpu::Buffer>,
 }
 
@@ -212,6 +253,7 @@ impl DeviceState {
         let params = GpuParams::new(m.params(), m.phase());
         let phi = layout.flatten(m.cells().iter().map(|c| c.phi().data));
         let (l2, n, total) = (layout.box_size * layout.box_size, layout.n_cells(), layout.total);
+        let mobility = mobility(m);
         let buffers = Slot::ALL
             .iter()
             .map(|&slot| {
@@ -229,14 +271,30 @@ impl DeviceState {
                     Slot::Area => zeros(n),
                     Slot::Shape | Slot::QHat => zeros(2 * n),
                     Slot::Mu | Slot::Fx | Slot::Fy => zeros(total),
+                    Slot::Mobility => init(bytemuck::cast_slice(&mobility), STORAGE),
+                    Slot::Velocity => zeros(2 * total),
+                    Slot::Rate | Slot::Phi0 | Slot::K1 => zeros(total),
+                    Slot::Fault => init(bytemuck::cast_slice(&vec![NO_FAULT; n]), STORAGE),
                 }
             })
             .collect();
-        DeviceState { layout, params, buffers }
+        let solves_friction = m.phase() == Phase::Active && m.params().xi_cell > 0.0;
+        DeviceState { layout, params, solves_friction, buffers }
     }
 
     pub fn buffer(&self, slot: Slot) -> &wgpu::Buffer {
         &self.buffers[slot as usize]
+    }
+}
+
+/// The mobility of `Monolayer::evaluate` without a friction solve, computed in f64 as the CPU
+/// does and rounded once: 1/ξ_relax during relaxation, 1/ξ_s(x) when active. (When active with
+/// ξ_cell > 0 the CPU takes the friction solver's instead; the GPU has none yet.)
+fn mobility(m: &Monolayer) -> Vec<f32> {
+    let p = m.params();
+    match m.phase() {
+        Phase::Relaxation => vec![(1.0 / p.xi_relax) as f32; p.box_size * p.box_size],
+        Phase::Active => m.lattice().xi_s.iter().map(|&xs| (1.0 / xs) as f32).collect(),
     }
 }
 
@@ -255,6 +313,12 @@ fn slot_label(slot: Slot) -> &'static str {
         Slot::Fy => "fy",
         Slot::Weight => "weight",
         Slot::Force => "force",
+        Slot::Mobility => "mobility",
+        Slot::Velocity => "velocity",
+        Slot::Rate => "rate",
+        Slot::Phi0 => "phi0",
+        Slot::K1 => "k1",
+        Slot::Fault => "fault",
     }
 }
 
@@ -262,11 +326,11 @@ fn slot_label(slot: Slot) -> &'static str {
 mod tests {
     use super::*;
 
-    /// The WGSL structs `Params` (16 four-byte fields) and `Patch` (8) have these sizes; a
+    /// The WGSL structs `Params` (20 four-byte fields) and `Patch` (8) have these sizes; a
     /// field added on one side only changes them.
     #[test]
     fn structs_have_the_wgsl_sizes() {
-        assert_eq!(std::mem::size_of::<GpuParams>(), 64);
+        assert_eq!(std::mem::size_of::<GpuParams>(), 80);
         assert_eq!(std::mem::size_of::<GpuPatch>(), 32);
     }
 

@@ -1,5 +1,5 @@
-//! The compute kernels of the first stages, their pipelines and dispatches, and the object that
-//! ties them to a device state: [`GpuMonolayer`].
+//! The compute kernels, their pipelines and dispatches, and the object that ties them to a device
+//! state: [`GpuMonolayer`], which can take a whole Heun step where there is no friction solve.
 //!
 //! Each kernel's WGSL sits in `shaders/`, one file per stage, named like its CPU module; every
 //! file is compiled with `shaders/model.wgsl` (the shared parameters and patches) in front.
@@ -13,6 +13,8 @@ const GATHER_WGSL: &str = include_str!("../../shaders/gather.wgsl");
 const FREE_ENERGY_WGSL: &str = include_str!("../../shaders/free_energy.wgsl");
 const SHAPE_WGSL: &str = include_str!("../../shaders/shape.wgsl");
 const FORCES_WGSL: &str = include_str!("../../shaders/forces.wgsl");
+const MOTION_WGSL: &str = include_str!("../../shaders/motion.wgsl");
+const MONOLAYER_WGSL: &str = include_str!("../../shaders/monolayer.wgsl");
 
 /// The per-site kernels' workgroup width (`@workgroup_size(64)`); the lattice kernels'
 /// workgroups are 8 × 8 sites.
@@ -34,6 +36,13 @@ pub enum Kernel {
     ForceDensity,
     /// n = Σ w_j and F = Σ w_j f_j on the lattice (`shaders/gather.wgsl`); needs f_i.
     FrictionSums,
+    /// v_i and ∂_t φ_i without a friction solve (`shaders/motion.wgsl`); needs μ_i and f_i.
+    VelocityAndRate,
+    /// Heun's predictor (`shaders/monolayer.wgsl`); needs the rate.
+    Predict,
+    /// Heun's corrector and the range check (`shaders/monolayer.wgsl`); needs the predictor's
+    /// φ_n and R(φ_n), and the rate at φ*.
+    Correct,
 }
 
 /// How a kernel's invocations cover the state.
@@ -49,13 +58,56 @@ enum Grid {
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 6] = [
+    pub const ALL: [Kernel; 9] = [
         Kernel::LatticeSums,
         Kernel::CellArea,
         Kernel::ChemicalPotential,
         Kernel::ShapeTensor,
         Kernel::ForceDensity,
         Kernel::FrictionSums,
+        Kernel::VelocityAndRate,
+        Kernel::Predict,
+        Kernel::Correct,
+    ];
+
+    /// The stages up to the friction solve's right-hand side (n and F).
+    pub const FRICTION_SUMS: [Kernel; 6] = [
+        Kernel::LatticeSums,
+        Kernel::CellArea,
+        Kernel::ChemicalPotential,
+        Kernel::ShapeTensor,
+        Kernel::ForceDensity,
+        Kernel::FrictionSums,
+    ];
+
+    /// One evaluation of the rate R(φ) where there is no friction solve: Σφ², A_i, μ_i, Q̂_i, f_i,
+    /// then v_i and ∂_t φ_i. (In relaxation ζ = 0 and Q̂_i is not needed; its dispatch stays so
+    /// that one list serves both phases, as the CPU computes Q_i in both.)
+    pub const RATE: [Kernel; 6] = [
+        Kernel::LatticeSums,
+        Kernel::CellArea,
+        Kernel::ChemicalPotential,
+        Kernel::ShapeTensor,
+        Kernel::ForceDensity,
+        Kernel::VelocityAndRate,
+    ];
+
+    /// One Heun step without a friction solve: R(φ), the predictor, R(φ*), the corrector.
+    pub const STEP: [Kernel; 14] = [
+        Kernel::LatticeSums,
+        Kernel::CellArea,
+        Kernel::ChemicalPotential,
+        Kernel::ShapeTensor,
+        Kernel::ForceDensity,
+        Kernel::VelocityAndRate,
+        Kernel::Predict,
+        Kernel::LatticeSums,
+        Kernel::CellArea,
+        Kernel::ChemicalPotential,
+        Kernel::ShapeTensor,
+        Kernel::ForceDensity,
+        Kernel::VelocityAndRate,
+        Kernel::Correct,
     ];
 
     /// The stage's WGSL file and the kernel's entry point in it.
@@ -67,6 +119,9 @@ impl Kernel {
             Kernel::ShapeTensor => (SHAPE_WGSL, "shape_tensor"),
             Kernel::ForceDensity => (FORCES_WGSL, "force_density"),
             Kernel::FrictionSums => (GATHER_WGSL, "friction_sums"),
+            Kernel::VelocityAndRate => (MOTION_WGSL, "velocity_and_rate"),
+            Kernel::Predict => (MONOLAYER_WGSL, "predict"),
+            Kernel::Correct => (MONOLAYER_WGSL, "correct"),
         }
     }
 
@@ -82,6 +137,9 @@ impl Kernel {
             Kernel::ShapeTensor => &[Params, Patches, Phi, Shape, QHat],
             Kernel::ForceDensity => &[Params, Patches, Phi, Mu, QHat, Fx, Fy],
             Kernel::FrictionSums => &[Params, Patches, Phi, Fx, Fy, Weight, Force],
+            Kernel::VelocityAndRate => &[Params, Patches, Phi, Mu, Fx, Fy, Mobility, Velocity, Rate],
+            Kernel::Predict => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
+            Kernel::Correct => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
         }
     }
 
@@ -89,7 +147,11 @@ impl Kernel {
         match self {
             Kernel::LatticeSums | Kernel::FrictionSums => Grid::Lattice,
             Kernel::CellArea | Kernel::ShapeTensor => Grid::Cells,
-            Kernel::ChemicalPotential | Kernel::ForceDensity => Grid::Sites,
+            Kernel::ChemicalPotential
+            | Kernel::ForceDensity
+            | Kernel::VelocityAndRate
+            | Kernel::Predict
+            | Kernel::Correct => Grid::Sites,
         }
     }
 
@@ -114,6 +176,12 @@ impl Kernel {
             Kernel::ForceDensity => 2 * padded + 2 * padded,
             // φ, f_x and f_y at every covered site; n and F written.
             Kernel::FrictionSums => 3 * interior + 3 * l2,
+            // φ, μ, f_x, f_y and the mobility at each site; v and the rate written.
+            Kernel::VelocityAndRate => 4 * padded + interior + 3 * padded,
+            // φ and the rate read; φ_n, R(φ_n) and φ written.
+            Kernel::Predict => 2 * padded + 3 * padded + n,
+            // φ_n, R(φ_n) and the rate read; φ written.
+            Kernel::Correct => 3 * padded + padded + n,
         };
         4 * values
     }
@@ -214,9 +282,29 @@ impl GpuMonolayer {
         ctx.queue.submit([encoder.finish()])
     }
 
-    /// Every kernel of the first stages, in evaluation order: Σφ², A_i, μ_i, Q_i, f_i, n and F.
+    /// The stages up to the friction solve's right-hand side, in evaluation order: Σφ², A_i,
+    /// μ_i, Q_i, f_i, n and F.
     pub fn evaluate(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
-        self.run(ctx, &Kernel::ALL)
+        self.run(ctx, &Kernel::FRICTION_SUMS)
+    }
+
+    /// One Heun step on the patches as they are (they do not follow the cells on the GPU yet),
+    /// all in one submission with nothing read back: [`Kernel::STEP`]. Only where the CPU has no
+    /// friction solve (relaxation, or ξ_cell = 0), which the state was uploaded in: the GPU has
+    /// no friction solve yet. Whether φ left its range is in [`Slot::Fault`], per cell.
+    pub fn step(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
+        assert!(
+            !self.state.solves_friction,
+            "the GPU step needs a phase without a friction solve (relaxation, or xi_cell = 0)"
+        );
+        self.run(ctx, &Kernel::STEP)
+    }
+
+    /// A buffer's contents as u32 (`Slot::Fault`), after every submitted kernel has finished. For
+    /// tests and diagnostics only.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn read_u32(&self, ctx: &GpuContext, slot: Slot) -> Vec<u32> {
+        read_f32(ctx, self.state.buffer(slot)).iter().map(|v| v.to_bits()).collect()
     }
 
     /// A buffer's contents as f32, after every submitted kernel has finished. For tests and

@@ -11,11 +11,14 @@
 //! | `shape.wgsl` `shape_tensor`          | `model::shape` (Q_i, Q̂_i)            | Eq. 5           |
 //! | `forces.wgsl` `force_density`        | `model::forces::force_density`        | Eqs. 3, 4       |
 //! | `gather.wgsl` `friction_sums`        | `model::monolayer` gathers of n and F | Eq. 2 (Σ_j)     |
+//! | `motion.wgsl` `velocity_and_rate`    | `model::motion::velocity_and_rate`    | Eq. 1           |
+//! | `monolayer.wgsl` `predict`, `correct`| `model::monolayer` `Then` (Heun)      | —               |
 //!
 //! Every sum runs in a fixed order (no float atomics), so two runs on the same adapter and
 //! driver give the same bits. Nothing is read back inside a step: [`GpuMonolayer::read`] is for
-//! tests and diagnostics. The friction solve itself, the velocities, Heun and the patches are the
-//! next stages (docs/gpu.md).
+//! tests and diagnostics. Where there is no friction solve (relaxation, or ξ_cell = 0),
+//! [`GpuMonolayer::step`] takes a whole Heun step on fixed patches in one submission. The
+//! friction solve and the moving patches are the next stages (docs/gpu.md).
 //!
 //! A layer beside `analysis`: it imports only `model` (tested by `tests/layers.rs`).
 
@@ -23,6 +26,6 @@ pub mod buffers;
 pub mod context;
 pub mod kernels;
 
-pub use buffers::{DeviceState, Slot};
+pub use buffers::{DeviceState, Slot, NO_FAULT};
 pub use context::{GpuContext, GpuError};
 pub use kernels::{GpuMonolayer, Kernel};

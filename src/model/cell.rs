@@ -115,6 +115,17 @@ impl Cell {
         (self.view(&self.vx), self.view(&self.vy))
     }
 
+    /// ∂_t φ_i of the last evaluation (Eq. 1).
+    pub fn rate(&self) -> PatchField<'_> {
+        self.view(&self.rate)
+    }
+
+    /// The first patch site (a, b) and value where φ_i left its allowed range in the last step's
+    /// corrector, if any.
+    pub fn fault(&self) -> Option<(usize, usize, f64)> {
+        self.fault
+    }
+
     /// A_i = ∫ φ_i² as of the last evaluation.
     pub fn area(&self) -> f64 {
         self.area

@@ -418,6 +418,28 @@ impl Monolayer {
     /// One Heun step of the protocol.
     pub fn step(&mut self) -> Result<(), SimError> {
         let phase = self.phase();
+        self.heun(phase)?;
+        self.step += 1;
+        self.counters.steps += 1;
+        let mut counters = std::mem::take(&mut self.counters);
+        let r = counters.time(Stage::Patches, || self.update_patches(phase));
+        self.counters = counters;
+        if r.is_err() {
+            // No patch has moved yet: the state is put back to the start of the step, which the
+            // error names, so that what is saved as the last good state is a state the
+            // simulation passed through. (The friction solver's warm start, a first guess, is
+            // the failed step's.)
+            self.restore();
+            self.step -= 1;
+            self.counters.steps -= 1;
+        }
+        r
+    }
+
+    /// Heun's predictor and corrector with the range check, on the patches as they are: the
+    /// part of [`Monolayer::step`] before the patches follow the cells. On an error every φ is
+    /// back at the start of the step.
+    fn heun(&mut self, phase: Phase) -> Result<(), SimError> {
         let dt = self.params.dt;
         let (lo, hi) = (self.params.phi_min, self.params.phi_max);
         self.evaluate(phase, Then::Predict { dt })?;
@@ -440,21 +462,17 @@ impl Monolayer {
                 max: hi,
             });
         }
-        self.step += 1;
-        self.counters.steps += 1;
-        let mut counters = std::mem::take(&mut self.counters);
-        let r = counters.time(Stage::Patches, || self.update_patches(phase));
-        self.counters = counters;
-        if r.is_err() {
-            // No patch has moved yet: the state is put back to the start of the step, which the
-            // error names, so that what is saved as the last good state is a state the
-            // simulation passed through. (The friction solver's warm start, a first guess, is
-            // the failed step's.)
-            self.restore();
-            self.step -= 1;
-            self.counters.steps -= 1;
-        }
-        r
+        Ok(())
+    }
+
+    /// A test hook, not part of the protocol: one Heun step (predictor, corrector, range check)
+    /// exactly as [`Monolayer::step`] takes it, but with the patches left where they are and the
+    /// step count unchanged. The GPU stepper's patches do not move yet; this is the CPU step to
+    /// compare it with (tests/gpu.rs). The state it leaves is one `step` never reaches.
+    #[doc(hidden)]
+    pub fn step_on_fixed_patches(&mut self) -> Result<(), SimError> {
+        let phase = self.phase();
+        self.heun(phase)
     }
 
     /// Puts every φ back to the start of the failed step.

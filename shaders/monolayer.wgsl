@@ -1,0 +1,59 @@
+// Heun's predictor and corrector of src/model/monolayer.rs (`Then::Predict`, `Then::Correct`) on
+// the GPU, over every padded site of every cell (the halo too, where φ, φ_n and the rates are
+// zero, so it stays zero):
+//
+//   predictor: φ_n ← φ,  R(φ_n) ← R,  φ* = φ_n + Δt R(φ_n);
+//   corrector: φ' = φ_n + ½Δt [R(φ_n) + R(φ*)], then the check that φ' lies in [φ_min, φ_max].
+//
+// The CPU swaps buffers where this copies them; a copy keeps every kernel's bindings fixed.
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> patches: array<Patch>;
+@group(0) @binding(2) var<storage, read_write> phi: array<f32>;
+@group(0) @binding(15) var<storage, read> rate: array<f32>;
+@group(0) @binding(16) var<storage, read_write> phi0: array<f32>;
+@group(0) @binding(17) var<storage, read_write> k1: array<f32>;
+// Per cell, the smallest padded index with φ' out of range, or NO_FAULT. An atomic minimum on
+// integers: its result does not depend on the order the invocations arrive in, so the flag is
+// as deterministic as the rest (no float atomics anywhere).
+@group(0) @binding(18) var<storage, read_write> fault: array<atomic<u32>>;
+
+const NO_FAULT: u32 = 0xffffffffu;
+
+@compute @workgroup_size(64)
+fn predict(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let p = patches[gid.y];
+    let site = padded_site(p, gid.x);
+    if site.x >= stride(p) {
+        return;
+    }
+    // The corrector's check starts from no fault; the predictor runs in an earlier dispatch.
+    if gid.x == 0u {
+        atomicStore(&fault[gid.y], NO_FAULT);
+    }
+    let i = p.offset + gid.x;
+    let p0 = phi[i];
+    let k = rate[i];
+    phi0[i] = p0;
+    k1[i] = k;
+    phi[i] = p0 + params.dt * k;
+}
+
+@compute @workgroup_size(64)
+fn correct(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let p = patches[gid.y];
+    let site = padded_site(p, gid.x);
+    if site.x >= stride(p) {
+        return;
+    }
+    let i = p.offset + gid.x;
+    let half = 0.5 * params.dt;
+    let v = phi0[i] + half * (k1[i] + rate[i]);
+    phi[i] = v;
+    // `first_out_of_range` looks at the interior only, row by row; the padded index orders the
+    // sites the same way. Written as !(in range) so that a NaN would count, as on the CPU,
+    // though a WGSL compiler may assume there are none.
+    if is_interior(p, site) && !(v >= params.phi_min && v <= params.phi_max) {
+        atomicMin(&fault[gid.y], gid.x);
+    }
+}
