@@ -167,10 +167,10 @@ fn the_analysis_active_force_is_the_dynamics_one() {
     // Σ_i φ_i f^a_i from forces.rs.
     let (mut fx, mut fy) = (vec![0.0; l * l], vec![0.0; l * l]);
     for c in m.cells() {
-        let (pt, phi) = (c.patch(), c.phi().data);
+        let (pt, phi) = (c.patch(), c.phi().padded());
         let mu = vec![0.0; phi.len()];
         let (mut ax, mut ay) = (vec![0.0; phi.len()], vec![0.0; phi.len()]);
-        force_density(pt, phi, &mu, c.q_hat(), p.zeta, PassiveForce::GradMu, &mut ax, &mut ay);
+        force_density(pt, &phi, &mu, c.q_hat(), p.zeta, PassiveForce::GradMu, &mut ax, &mut ay);
         for b in 0..pt.h {
             for k in 0..pt.w {
                 let (i, g) = (pt.idx(k, b), (pt.y0 + b) * l + pt.x0 + k);

@@ -238,7 +238,8 @@ fn check_motion(case: &Case, mu_bounds: &[Vec<f64>], force_bounds: &[Vec<(f64, f
     let (mut velocity, mut rate) = (Worst::default(), Worst::default());
     let mut all_bounds = Vec::new();
     for (i, c) in case.cpu.cells().iter().enumerate() {
-        let (patch, phi, cmu, crate_) = (c.patch(), c.phi().data, c.chemical_potential().data, c.rate().data);
+        let (patch, phi, cmu, crate_) =
+            (c.patch(), c.phi().padded(), c.chemical_potential().padded(), c.rate().padded());
         let (cvx, cvy) = c.velocity();
         // v is (x, y) per padded site, from the cell's offset.
         let gv = &case.g.velocity[2 * layout.patches[i].offset as usize..];
@@ -250,10 +251,10 @@ fn check_motion(case: &Case, mu_bounds: &[Vec<f64>], force_bounds: &[Vec<(f64, f
                 let j = patch.idx(a, b);
                 let (gx, gy) = patch.global_xy(a, b, l);
                 let m = mobility(&case.cpu, gy * l + gx);
-                let (vx, vy) = (cvx.data[j], cvy.data[j]);
+                let (vx, vy) = (cvx.get(j), cvy.get(j));
                 let (fbx, fby) = force_bounds[i][j];
                 let (bvx, bvy) = (m * fbx + 2.0 * U * vx.abs(), m * fby + 2.0 * U * vy.abs());
-                let (mut ax, mut ay) = abs_gradient(phi, j, s);
+                let (mut ax, mut ay) = abs_gradient(&phi, j, s);
                 let mut flips = 0.0;
                 if upwind {
                     let v = phi[j].abs();
@@ -275,7 +276,7 @@ fn check_motion(case: &Case, mu_bounds: &[Vec<f64>], force_bounds: &[Vec<(f64, f
                 bounds[j] = bound;
             }
         }
-        for (j, (&g, &c)) in grate.iter().zip(crate_).enumerate() {
+        for (j, (&g, &c)) in grate.iter().zip(&crate_).enumerate() {
             if bounds[j] == 0.0 {
                 assert_eq!((g as f64, c), (0.0, 0.0), "cell {i}: the rate's halo at padded index {j}");
             }
@@ -325,19 +326,19 @@ fn check_chemical_potential(case: &Case) -> Vec<Vec<f64>> {
     let mut mu = Worst::default();
     let mut all_bounds = Vec::new();
     for (i, c) in case.cpu.cells().iter().enumerate() {
-        let (patch, cpu_mu) = (c.patch(), c.chemical_potential().data);
+        let (patch, cpu_mu) = (c.patch(), c.chemical_potential().padded());
         let gpu_mu = case.gpu.state().layout.cell(i, &case.g.mu);
         let a_ratio = c.area() / fe.target_area;
         let mut bounds = vec![0.0; patch.padded_len()];
         for b in 0..patch.h {
             for a in 0..patch.w {
                 let j = patch.idx(a, b);
-                let v = c.phi().data[j].abs();
+                let v = c.phi().get(j).abs();
                 let (gx, gy) = patch.global_xy(a, b, l);
                 let site = gy * l + gx;
                 let sum2 = case.cpu.lattice().sum_phi2[site];
                 let scale = fe.bulk * v * (1.0 + v) * (1.0 + 2.0 * v)
-                    + fe.gradient * abs_laplacian(p.laplacian, patch, c.phi().data, j)
+                    + fe.gradient * abs_laplacian(p.laplacian, patch, &c.phi().padded(), j)
                     + fe.area * (1.0 + a_ratio) * v
                     + fe.repulsion * v * (sum2 + v * v);
                 let inherited =
@@ -345,7 +346,7 @@ fn check_chemical_potential(case: &Case) -> Vec<Vec<f64>> {
                 bounds[j] = U * (16.0 * scale + inherited);
             }
         }
-        for (j, (&gm, &cm)) in gpu_mu.iter().zip(cpu_mu).enumerate() {
+        for (j, (&gm, &cm)) in gpu_mu.iter().zip(&cpu_mu).enumerate() {
             mu.check(gm, cm, bounds[j], || format!("cell {i} padded index {j}"));
         }
         all_bounds.push(bounds);
@@ -387,7 +388,7 @@ fn check_shape(case: &Case) -> Vec<f64> {
         let (mut sxx, mut sxy) = (0.0, 0.0);
         for b in 0..patch.h {
             for a in 0..patch.w {
-                let (mx, my) = abs_gradient(c.phi().data, patch.idx(a, b), patch.stride());
+                let (mx, my) = abs_gradient(&c.phi().padded(), patch.idx(a, b), patch.stride());
                 sxx += 0.5 * (mx * mx + my * my);
                 sxy += mx * my;
             }
@@ -421,7 +422,7 @@ fn check_forces(case: &Case, mu_bounds: &[Vec<f64>], q_hat_bounds: &[f64]) -> Ve
     let mut force = Worst::default();
     let mut all_bounds = Vec::new();
     for (i, c) in case.cpu.cells().iter().enumerate() {
-        let (patch, phi, cmu) = (c.patch(), c.phi().data, c.chemical_potential().data);
+        let (patch, phi, cmu) = (c.patch(), c.phi().padded(), c.chemical_potential().padded());
         let mut bounds = vec![(0.0, 0.0); patch.padded_len()];
         let (cfx, cfy) = c.force();
         let (gfx, gfy) = (layout.cell(i, &case.g.fx), layout.cell(i, &case.g.fy));
@@ -431,15 +432,15 @@ fn check_forces(case: &Case, mu_bounds: &[Vec<f64>], q_hat_bounds: &[f64]) -> Ve
             for a in 0..patch.w {
                 let j = patch.idx(a, b);
                 let w = if weighted { phi[j].abs() } else { 1.0 };
-                let (px, py) = abs_gradient(phi, j, s);
-                let (ux, uy) = abs_gradient(cmu, j, s);
+                let (px, py) = abs_gradient(&phi, j, s);
+                let (ux, uy) = abs_gradient(&cmu, j, s);
                 let active = zeta * (qh[0].abs() + qh[1].abs()) * (px + py);
                 let from_q_hat = zeta * qb * (px + py);
                 let bx = w * 0.5 * (mb[j + 1] + mb[j - 1]) + from_q_hat + 8.0 * U * (w * ux + active);
                 let by = w * 0.5 * (mb[j + s] + mb[j - s]) + from_q_hat + 8.0 * U * (w * uy + active);
                 let at = || format!("cell {i} site ({a}, {b})");
-                force.check(gfx[j], cfx.data[j], bx, at);
-                force.check(gfy[j], cfy.data[j], by, at);
+                force.check(gfx[j], cfx.get(j), bx, at);
+                force.check(gfy[j], cfy.get(j), by, at);
                 bounds[j] = (bx, by);
             }
         }
@@ -462,7 +463,7 @@ fn check_friction_sums(case: &Case, force_bounds: &[Vec<(f64, f64)>]) {
         let (mut w_sum, mut wf_sum, mut from_f, mut flips, mut n) = (0.0, 0.0, (0.0, 0.0), (0.0, 0.0, 0.0), 0.0);
         for (i, j) in covering_cells(&case.patches, site, l) {
             let c = &case.cpu.cells()[i];
-            let (v, fx, fy) = (c.phi().data[j], c.force().0.data[j], c.force().1.data[j]);
+            let (v, fx, fy) = (c.phi().get(j), c.force().0.get(j), c.force().1.get(j));
             let w = friction_weight(p.friction_weights, v, thr);
             let near = p.friction_weights == FrictionWeights::Presence && (v - thr).abs() <= 4.0 * U * thr;
             if near {
@@ -555,7 +556,7 @@ fn interior(patch: Patch, j: usize) -> bool {
 
 /// Every cell's padded φ as one f64 vector per cell.
 fn phis(m: &Monolayer) -> Vec<Vec<f64>> {
-    m.cells().iter().map(|c| c.phi().data.to_vec()).collect()
+    m.cells().iter().map(|c| c.phi().padded()).collect()
 }
 
 /// One Heun step in relaxation, all on the GPU in one submission (`GpuMonolayer::step`: 14
@@ -593,9 +594,9 @@ fn one_relaxation_step_matches_the_cpu() {
     let mut cpu_pred = Vec::new();
     let mut delta: f64 = 0.0;
     for (i, c) in start.cells().iter().enumerate() {
-        let (phi, k1) = (c.phi().data, c.rate().data);
+        let (phi, k1) = (c.phi().padded(), c.rate().padded());
         // As `Then::Predict` computes it, so these are the CPU's bits.
-        let star: Vec<f64> = phi.iter().zip(k1).map(|(&p0, &k)| p0 + dt * k).collect();
+        let star: Vec<f64> = phi.iter().zip(&k1).map(|(&p0, &k)| p0 + dt * k).collect();
         for (j, (&g, &want)) in layout.cell(i, &g_pred).iter().zip(&star).enumerate() {
             let bound = dt * k1_bounds[i][j] + 3.0 * U * (phi[j].abs() + dt * k1[j].abs());
             predicted.check(g, want, bound, || format!("cell {i} padded index {j}"));
@@ -625,8 +626,9 @@ fn one_relaxation_step_matches_the_cpu() {
     let mut stepped = Worst::default();
     for (i, cell) in cpu.cells().iter().enumerate() {
         assert_eq!((cell.fault(), faults[i]), (None, NO_FAULT), "cell {i}: φ out of range");
-        let (phi0, k1, k2) = (start.cells()[i].phi().data, start.cells()[i].rate().data, star.cells()[i].rate().data);
-        for (j, (&g, &want)) in layout.cell(i, &g_phi).iter().zip(cell.phi().data).enumerate() {
+        let (phi0, k1, k2) =
+            (start.cells()[i].phi().padded(), start.cells()[i].rate().padded(), star.cells()[i].rate().padded());
+        for (j, (&g, &want)) in layout.cell(i, &g_phi).iter().zip(&cell.phi().padded()).enumerate() {
             let own = phi0[j].abs() + 0.5 * dt * (k1[j].abs() + k2[j].abs());
             // On the halo both keep φ = 0 exactly: R is written zero there.
             let from_delta = if interior(cell.patch(), j) { c * delta } else { 0.0 };
@@ -670,16 +672,16 @@ fn sensitivity(m: &Monolayer) -> f64 {
     let l = p.box_size;
     let mut sum_abs = vec![0.0; l * l];
     for c in m.cells() {
-        let (patch, phi) = (c.patch(), c.phi().data);
+        let (patch, phi) = (c.patch(), c.phi().padded());
         let (vx, vy) = c.velocity();
         sum_abs_max = sum_abs_max.max(phi.iter().map(|v| v.abs()).sum());
         area_max = area_max.max(c.area());
         for b in 0..patch.h {
             for a in 0..patch.w {
                 let j = patch.idx(a, b);
-                let (ax, ay) = abs_gradient(phi, j, patch.stride());
+                let (ax, ay) = abs_gradient(&phi, j, patch.stride());
                 phi_max = phi_max.max(phi[j].abs());
-                v_max = v_max.max(vx.data[j].abs() + vy.data[j].abs());
+                v_max = v_max.max(vx.get(j).abs() + vy.get(j).abs());
                 g_max = g_max.max(ax + ay);
                 let (gx, gy) = patch.global_xy(a, b, l);
                 sum_abs[gy * l + gx] += phi[j].abs();

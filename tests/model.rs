@@ -122,10 +122,10 @@ fn one_step_follows_eq_1_with_its_j0_and_advection_scheme() {
         m.evaluate_now().unwrap();
         let c = &m.cells()[0];
         let (phi, mu, (vx, vy)) = (c.phi(), c.chemical_potential(), c.velocity());
-        let (phi0, mu, vx, vy) = (phi.data.to_vec(), mu.data.to_vec(), vx.data.to_vec(), vy.data.to_vec());
+        let (phi0, mu, vx, vy) = (phi.padded(), mu.padded(), vx.padded(), vy.padded());
         m.step().unwrap();
         assert_eq!(m.cells()[0].patch(), patch, "the patch moved");
-        let phi1 = m.cells()[0].phi().data.to_vec();
+        let phi1 = m.cells()[0].phi().padded();
         let s = patch.stride();
         // Rate with J₀ = `j`, and ∇φ from `side`: 0 central, 1 upwind, −1 downwind.
         let rate = |i: usize, j: f64, side: i32| {

@@ -19,6 +19,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 
 use super::holes::periodic_distance;
 use crate::model::lattice::Patch;
+use crate::model::precision::{load, Real};
 
 /// A cell borders a hole when its centroid lies within this many R of the hole's boundary (a
 /// cell's centroid sits about R from its own edge).
@@ -39,11 +40,11 @@ pub fn axis_angle_between(a: f64, b: f64) -> f64 {
 }
 
 /// The φ-weighted centroid of a cell on the periodic L×L box (None if φ is zero everywhere).
-pub fn cell_centroid(patch: Patch, phi: &[f64], l: usize) -> Option<(f64, f64)> {
+pub fn cell_centroid<T: Real>(patch: Patch, phi: &[T], l: usize) -> Option<(f64, f64)> {
     let (mut m, mut sx, mut sy) = (0.0, 0.0, 0.0);
     for b in 0..patch.h {
         for a in 0..patch.w {
-            let f = phi[patch.idx(a, b)];
+            let f = load(phi[patch.idx(a, b)]);
             m += f;
             sx += f * a as f64;
             sy += f * b as f64;

@@ -11,13 +11,14 @@
 //! whose ratio rises from 1 (a circle) like (a/b)²/ln(a/b) for long rods.
 
 use crate::model::lattice::{row_neighbourhood, Patch};
+use crate::model::precision::Real;
 use crate::model::shape::shape_tensor;
 
 /// Largest aspect ratio reported: beyond it g+/g− is too flat to resolve on a lattice.
 pub const MAX_ASPECT_RATIO: f64 = 50.0;
 
 /// T = ∫ |∇φ|² over the patch, with the central differences of [`shape_tensor`].
-pub fn gradient_trace(patch: Patch, phi: &[f64]) -> f64 {
+pub fn gradient_trace<T: Real>(patch: Patch, phi: &[T]) -> f64 {
     let mut t = 0.0;
     for b in 0..patch.h {
         t += row_neighbourhood(phi, patch, b).gradients().map(|(gx, gy)| gx * gx + gy * gy).sum::<f64>();
@@ -120,7 +121,7 @@ pub fn aspect_ratio(trace: f64, q: [f64; 2]) -> Option<f64> {
 }
 
 /// The aspect ratio of one cell given as its patch and φ.
-pub fn cell_aspect_ratio(patch: Patch, phi: &[f64]) -> Option<f64> {
+pub fn cell_aspect_ratio<T: Real>(patch: Patch, phi: &[T]) -> Option<f64> {
     aspect_ratio(gradient_trace(patch, phi), shape_tensor(patch, phi))
 }
 

@@ -10,6 +10,8 @@
 use num_complex::Complex64 as C64;
 
 use crate::model::lattice::Patch;
+use crate::model::precision::{load, Real};
+use crate::model::shape::gradient;
 
 /// The lattice fields of Eq. S4, one array per component.
 #[derive(Clone, Debug)]
@@ -51,7 +53,7 @@ impl CoarseFields {
     /// (padded like φ). Frames store only Σ_i φ_i v_i; they set it with [`Self::set_velocity`].
     /// The active force is recomputed from φ_i and Q̂_i exactly as [`crate::model::forces`] does, so
     /// live and offline analyses agree.
-    pub fn add_cell(&mut self, patch: Patch, phi: &[f64], q_hat: [f64; 2], zeta: f64, v: Option<(&[f64], &[f64])>) {
+    pub fn add_cell<T: Real>(&mut self, patch: Patch, phi: &[T], q_hat: [f64; 2], zeta: f64, v: Option<(&[T], &[T])>) {
         let l = self.l;
         let s = patch.stride();
         let [qxx, qxy] = q_hat;
@@ -59,17 +61,17 @@ impl CoarseFields {
             for run in patch.row_runs(b, l).into_iter().flatten() {
                 for k in 0..run.len {
                     let (i, g) = (run.padded + k, run.global + k);
-                    let p = phi[i];
+                    let p = load(phi[i]);
                     // Central differences, as the dynamics takes ∇φ_i (the halo is φ = 0).
-                    let (px, py) = (0.5 * (phi[i + 1] - phi[i - 1]), 0.5 * (phi[i + s] - phi[i - s]));
+                    let (px, py) = gradient(phi, i, s);
                     self.phi_sum[g] += p;
                     self.fx[g] -= p * zeta * (qxx * px + qxy * py);
                     self.fy[g] -= p * zeta * (qxy * px - qxx * py);
                     self.qxx[g] += p * qxx;
                     self.qxy[g] += p * qxy;
                     if let Some((vx, vy)) = v {
-                        self.vx[g] += p * vx[i];
-                        self.vy[g] += p * vy[i];
+                        self.vx[g] += p * load(vx[i]);
+                        self.vy[g] += p * load(vy[i]);
                     }
                 }
             }

@@ -39,6 +39,7 @@ use num_complex::Complex64 as C64;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
+use crate::model::precision::Real;
 use alignment::cell_centroid;
 use correlations::{correlation_length, Correlator};
 use defects::{Defect, DefectFinder};
@@ -186,7 +187,7 @@ impl Analysis {
         self.derive();
     }
 
-    fn push_axis(&mut self, patch: Patch, phi: &[f64]) {
+    fn push_axis<T: Real>(&mut self, patch: Patch, phi: &[T]) {
         if let Some((x, y)) = cell_centroid(patch, phi, self.l) {
             self.cell_axes.push((x, y, axis_angle(shape_tensor(patch, phi))));
         }

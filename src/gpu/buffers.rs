@@ -14,6 +14,7 @@ use crate::gpu::context::GpuContext;
 use crate::model::free_energy::FreeEnergy;
 use crate::model::monolayer::{Monolayer, Phase};
 use crate::model::params::{Advection, FrictionWeights, Laplacian, Params, PassiveForce};
+use crate::model::precision::{load, Real};
 
 /// The buffers of the GPU state, each with the binding number every kernel gives it
 /// (`@binding(n)` in `shaders/*.wgsl`).
@@ -211,10 +212,10 @@ impl Layout {
     }
 
     /// A per-cell field of the CPU (one padded vector per cell) as one f32 array in this layout.
-    pub fn flatten<'a>(&self, fields: impl Iterator<Item = &'a [f64]>) -> Vec<f32> {
+    pub fn flatten<'a, T: Real>(&self, fields: impl Iterator<Item = &'a [T]>) -> Vec<f32> {
         let mut out = Vec::with_capacity(self.total);
         for f in fields {
-            out.extend(f.iter().map(|&v| v as f32));
+            out.extend(f.iter().map(|&v| load(v) as f32));
         }
         assert_eq!(out.len(), self.total, "fields must follow the layout's patches");
         out
@@ -345,7 +346,7 @@ mod tests {
         for (i, c) in m.cells().iter().enumerate() {
             assert_eq!(layout.patches[i].offset as usize, offset);
             let back: Vec<f64> = layout.cell(i, &flat).iter().map(|&v| v as f64).collect();
-            let rounded: Vec<f64> = c.phi().data.iter().map(|&v| v as f32 as f64).collect();
+            let rounded: Vec<f64> = c.phi().padded().iter().map(|&v| v as f32 as f64).collect();
             assert_eq!(back, rounded, "cell {i}");
             offset += c.patch().padded_len();
         }

@@ -2,20 +2,32 @@
 //! dynamics computes on that patch (μ_i, f_i, v_i, dφ_i/dt).
 
 use crate::model::lattice::Patch;
+use crate::model::precision::{load, Real, Store};
 
 /// A read-only view of one per-cell field on its patch (no copy).
 #[derive(Clone, Copy, Debug)]
-pub struct PatchField<'a> {
+pub struct PatchField<'a, T = Store> {
     pub patch: Patch,
     /// Padded storage: (w + 2) × (h + 2), row-major, one-site ring of zeros.
-    pub data: &'a [f64],
+    pub data: &'a [T],
 }
 
-impl PatchField<'_> {
+impl<T: Real> PatchField<'_, T> {
     /// Value at patch site (a, b).
     #[inline]
     pub fn at(&self, a: usize, b: usize) -> f64 {
-        self.data[self.patch.idx(a, b)]
+        load(self.data[self.patch.idx(a, b)])
+    }
+
+    /// Value at padded index i (as [`Patch::idx`] gives it).
+    #[inline]
+    pub fn get(&self, i: usize) -> f64 {
+        load(self.data[i])
+    }
+
+    /// The whole padded storage as f64 (exact).
+    pub fn padded(&self) -> Vec<f64> {
+        self.data.iter().map(|&v| load(v)).collect()
     }
 
     /// The w×h interior, row by row, without the halo.
@@ -30,22 +42,22 @@ impl PatchField<'_> {
 pub struct Cell {
     pub(crate) patch: Patch,
     /// φ_i.
-    pub(crate) phi: Vec<f64>,
+    pub(crate) phi: Vec<Store>,
     /// φ_i at the start of the step (Heun), and the last good state if a step fails.
-    pub(crate) phi0: Vec<f64>,
+    pub(crate) phi0: Vec<Store>,
     /// dφ_i/dt of the predictor evaluation.
-    pub(crate) k1: Vec<f64>,
+    pub(crate) k1: Vec<Store>,
     /// dφ_i/dt of the latest evaluation.
-    pub(crate) rate: Vec<f64>,
+    pub(crate) rate: Vec<Store>,
     /// μ_i = δF/δφ_i.
-    pub(crate) mu: Vec<f64>,
+    pub(crate) mu: Vec<Store>,
     /// f_i = f^p_i + f^a_i.
-    pub(crate) fx: Vec<f64>,
-    pub(crate) fy: Vec<f64>,
+    pub(crate) fx: Vec<Store>,
+    pub(crate) fy: Vec<Store>,
     /// v_i.
-    pub(crate) vx: Vec<f64>,
-    pub(crate) vy: Vec<f64>,
-    scratch: Vec<f64>,
+    pub(crate) vx: Vec<Store>,
+    pub(crate) vy: Vec<Store>,
+    scratch: Vec<Store>,
     /// A_i = ∫ φ_i².
     pub(crate) area: f64,
     /// Q_i = (Q_xx, Q_xy) of Eq. 5, unnormalised.
@@ -65,10 +77,10 @@ impl Cell {
     pub fn new(patch: Patch, phi: Vec<f64>) -> Self {
         let n = patch.padded_len();
         assert_eq!(phi.len(), n, "phi must fill the padded patch");
-        let z = || vec![0.0; n];
+        let z = || vec![Store::default(); n];
         Cell {
             patch,
-            phi,
+            phi: phi.into_iter().map(Store::from_f64).collect(),
             phi0: z(),
             k1: z(),
             rate: z(),
@@ -91,7 +103,7 @@ impl Cell {
         self.patch
     }
 
-    fn view<'a>(&'a self, data: &'a [f64]) -> PatchField<'a> {
+    fn view<'a>(&'a self, data: &'a [Store]) -> PatchField<'a> {
         PatchField { patch: self.patch, data }
     }
 
@@ -163,7 +175,7 @@ impl Cell {
         let (mut s, mut sa, mut sb) = (0.0, 0.0, 0.0);
         for b in 0..p.h {
             for a in 0..p.w {
-                let v = self.phi[p.idx(a, b)].max(0.0);
+                let v = load(self.phi[p.idx(a, b)]).max(0.0);
                 s += v;
                 sa += v * a as f64;
                 sb += v * b as f64;
@@ -182,9 +194,9 @@ impl Cell {
         let mut bb: Option<(usize, usize, usize, usize)> = None;
         for b in 0..p.h {
             let row = &self.phi[p.idx(0, b)..][..p.w];
-            let first = row.iter().position(|&v| v > threshold);
+            let first = row.iter().position(|&v| load(v) > threshold);
             if let Some(a0) = first {
-                let a1 = row.iter().rposition(|&v| v > threshold).unwrap_or(a0);
+                let a1 = row.iter().rposition(|&v| load(v) > threshold).unwrap_or(a0);
                 bb = Some(match bb {
                     None => (a0, a1, b, b),
                     Some((x0, x1, y0, _)) => (x0.min(a0), x1.max(a1), y0, b),
@@ -203,7 +215,7 @@ impl Cell {
         }
         let old = self.patch;
         self.scratch.clear();
-        self.scratch.resize(new.padded_len(), 0.0);
+        self.scratch.resize(new.padded_len(), Store::default());
         for b in 0..new.h {
             let gy = (new.y0 + b) % l;
             let Some(ob) = old.row_of(gy, l) else { continue };
@@ -229,7 +241,7 @@ impl Cell {
             &mut self.vy,
         ] {
             buf.clear();
-            buf.resize(n, 0.0);
+            buf.resize(n, Store::default());
         }
     }
 }
@@ -263,10 +275,10 @@ mod tests {
     fn relayout_keeps_phi_on_the_lattice() {
         let l = 20;
         let mut c = square_cell(l);
-        let before: f64 = c.phi.iter().sum();
+        let before: f64 = c.phi.iter().map(|&v| load(v)).sum();
         let moved = Patch { x0: 18, y0: 0, w: 10, h: 9 };
         c.relayout(moved, l);
-        assert_eq!(c.phi.iter().sum::<f64>(), before);
+        assert_eq!(c.phi.iter().map(|&v| load(v)).sum::<f64>(), before);
         assert_eq!(c.centre(l), [0.5, 3.5]);
         // Lattice x = 19, 0, 1, 2 are patch columns 1..=4; rows y = 2..=5.
         assert_eq!(c.support(0.5), Some((1, 4, 2, 5)));

@@ -9,19 +9,20 @@
 
 use crate::model::lattice::{row_mut, row_neighbourhood, Patch};
 use crate::model::params::PassiveForce;
+use crate::model::precision::{load, Real};
 
 /// f_i = f^p_i + f^a_i at every site of the patch. μ is read with zero outside the patch (its
 /// halo), where φ_i is below the presence threshold by the patch margin.
 #[allow(clippy::too_many_arguments)]
-pub fn force_density(
+pub fn force_density<T: Real>(
     patch: Patch,
-    phi: &[f64],
-    mu: &[f64],
+    phi: &[T],
+    mu: &[T],
     q_hat: [f64; 2],
     zeta: f64,
     passive: PassiveForce,
-    fx: &mut [f64],
-    fy: &mut [f64],
+    fx: &mut [T],
+    fy: &mut [T],
 ) {
     let (qxx, qxy) = (q_hat[0], q_hat[1]);
     let phi_weighted = passive == PassiveForce::PhiGradMu;
@@ -30,9 +31,9 @@ pub fn force_density(
         let out = row_mut(fx, patch, b).iter_mut().zip(row_mut(fy, patch, b).iter_mut());
         let grads = m.gradients().zip(p.gradients()).zip(p.c);
         for ((ox, oy), (((mx, my), (px, py)), &c)) in out.zip(grads) {
-            let weight = if phi_weighted { c } else { 1.0 };
-            *ox = -weight * mx - zeta * (qxx * px + qxy * py);
-            *oy = -weight * my - zeta * (qxy * px - qxx * py);
+            let weight = if phi_weighted { load(c) } else { 1.0 };
+            *ox = T::from_f64(-weight * mx - zeta * (qxx * px + qxy * py));
+            *oy = T::from_f64(-weight * my - zeta * (qxy * px - qxx * py));
         }
     }
 }

@@ -8,6 +8,7 @@
 
 use crate::model::lattice::{Neighbourhood, Patch};
 use crate::model::params::{Laplacian, Params};
+use crate::model::precision::{load, Real};
 
 /// The coefficients of μ_i, derived once from the parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -40,7 +41,15 @@ impl FreeEnergy {
     /// μ_i at every site of the patch. `others_phi2(i)` is Σ_j φ_j² on the lattice at the
     /// lattice index of padded site i, all cells included (this cell's own φ_i² is taken out
     /// here); `area` is A_i.
-    pub fn chemical_potential(&self, patch: Patch, phi: &[f64], area: f64, sum_phi2: &[f64], l: usize, mu: &mut [f64]) {
+    pub fn chemical_potential<T: Real>(
+        &self,
+        patch: Patch,
+        phi: &[T],
+        area: f64,
+        sum_phi2: &[f64],
+        l: usize,
+        mu: &mut [T],
+    ) {
         let area_term = self.area * (1.0 - area / self.target_area);
         let (bulk, gradient, repulsion, kind) = (self.bulk, self.gradient, self.repulsion, self.laplacian);
         for run in patch.runs(l) {
@@ -49,10 +58,12 @@ impl FreeEnergy {
             let g = &sum_phi2[run.global..][..len];
             let out = &mut mu[run.padded..][..len];
             for k in 0..len {
-                let c = f.c[k];
+                let c = load(f.c[k]);
                 let lap = laplacian(kind, &f, k);
-                out[k] = bulk * c * (1.0 - c) * (1.0 - 2.0 * c) - gradient * lap - area_term * c
-                    + repulsion * c * (g[k] - c * c);
+                out[k] = T::from_f64(
+                    bulk * c * (1.0 - c) * (1.0 - 2.0 * c) - gradient * lap - area_term * c
+                        + repulsion * c * (g[k] - c * c),
+                );
             }
         }
     }
@@ -60,20 +71,20 @@ impl FreeEnergy {
 
 /// The discrete Laplacian at site k of a run.
 #[inline(always)]
-pub fn laplacian(kind: Laplacian, f: &Neighbourhood, k: usize) -> f64 {
-    let nn = f.xm[k] + f.xp[k] + f.ym[k] + f.yp[k];
+pub fn laplacian<T: Real>(kind: Laplacian, f: &Neighbourhood<T>, k: usize) -> f64 {
+    let nn = load(f.xm[k]) + load(f.xp[k]) + load(f.ym[k]) + load(f.yp[k]);
     match kind {
-        Laplacian::FivePoint => nn - 4.0 * f.c[k],
+        Laplacian::FivePoint => nn - 4.0 * load(f.c[k]),
         Laplacian::NinePoint => {
-            let diag = f.xm_ym[k] + f.xp_ym[k] + f.xm_yp[k] + f.xp_yp[k];
-            (4.0 * nn + diag - 20.0 * f.c[k]) / 6.0
+            let diag = load(f.xm_ym[k]) + load(f.xp_ym[k]) + load(f.xm_yp[k]) + load(f.xp_yp[k]);
+            (4.0 * nn + diag - 20.0 * load(f.c[k])) / 6.0
         }
     }
 }
 
 /// A_i = Σ φ_i² over the patch.
-pub fn area(phi: &[f64]) -> f64 {
-    phi.iter().map(|v| v * v).sum()
+pub fn area<T: Real>(phi: &[T]) -> f64 {
+    phi.iter().map(|&v| load(v) * load(v)).sum()
 }
 
 /// The free energy of one cell alone (F_CH + F_area, no repulsion), with the gradient squared
@@ -162,7 +173,7 @@ mod tests {
         let fe = FreeEnergy::new(&p);
         let patch = Patch { x0: 0, y0: 0, w: 3, h: 3 };
         let l = 16;
-        let mut phi = vec![0.0; patch.padded_len()];
+        let mut phi = vec![0.0_f64; patch.padded_len()];
         let i = patch.idx(1, 1);
         phi[i] = 0.5;
         let mut sum_phi2 = vec![0.0; l * l];

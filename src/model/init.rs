@@ -93,7 +93,7 @@ mod tests {
         assert!(a.iter().zip(&b).all(|(x, y)| x.patch == y.patch && x.phi == y.phi));
         assert!(a.iter().zip(&c).any(|(x, y)| x.patch != y.patch));
         for cell in &a {
-            let area: f64 = cell.phi.iter().sum();
+            let area: f64 = cell.phi.iter().map(|&v| crate::model::precision::load(v)).sum();
             // π (R/2)² = 50.3 sites, give or take the lattice.
             assert!((area - 50.3).abs() < 8.0, "{area}");
         }

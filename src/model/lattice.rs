@@ -4,6 +4,7 @@
 //! periodic edges. Its storage has a one-site ring of zeros around it (the halo), so that every
 //! stencil in the kernels reads φ ≡ 0 outside the patch without a bounds test.
 
+use crate::model::precision::{load, Real};
 use std::ops::Add;
 
 /// A w×h window of the periodic L×L lattice, with origin (x0, y0) ∈ [0, L)².
@@ -89,22 +90,22 @@ impl Patch {
 
 /// A run of `len` sites of a padded patch field and their eight neighbours, each an exact-length
 /// slice: loops over them carry no bounds checks and vectorise. `ym` is the row at y − 1.
-pub struct Neighbourhood<'a> {
-    pub c: &'a [f64],
-    pub xm: &'a [f64],
-    pub xp: &'a [f64],
-    pub ym: &'a [f64],
-    pub yp: &'a [f64],
-    pub xm_ym: &'a [f64],
-    pub xp_ym: &'a [f64],
-    pub xm_yp: &'a [f64],
-    pub xp_yp: &'a [f64],
+pub struct Neighbourhood<'a, T = f64> {
+    pub c: &'a [T],
+    pub xm: &'a [T],
+    pub xp: &'a [T],
+    pub ym: &'a [T],
+    pub yp: &'a [T],
+    pub xm_ym: &'a [T],
+    pub xp_ym: &'a [T],
+    pub xm_yp: &'a [T],
+    pub xp_yp: &'a [T],
 }
 
-impl<'a> Neighbourhood<'a> {
+impl<'a, T: Real> Neighbourhood<'a, T> {
     /// Sites (a0 .. a0 + len, b) of the patch, in the padded storage `f`.
     #[inline(always)]
-    pub fn new(f: &'a [f64], patch: Patch, b: usize, a0: usize, len: usize) -> Self {
+    pub fn new(f: &'a [T], patch: Patch, b: usize, a0: usize, len: usize) -> Self {
         let s = patch.stride();
         // Patch row b is padded row b + 1; patch column a is padded column a + 1.
         let at = |row: usize, col: usize| &f[row * s + a0 + col..][..len];
@@ -124,7 +125,7 @@ impl<'a> Neighbourhood<'a> {
     /// Central-difference gradient at site k of the run.
     #[inline(always)]
     pub fn gradient(&self, k: usize) -> (f64, f64) {
-        (0.5 * (self.xp[k] - self.xm[k]), 0.5 * (self.yp[k] - self.ym[k]))
+        (0.5 * (load(self.xp[k]) - load(self.xm[k])), 0.5 * (load(self.yp[k]) - load(self.ym[k])))
     }
 
     /// The same at every site of the run, in order: zipped slices, so a loop over them carries
@@ -133,19 +134,19 @@ impl<'a> Neighbourhood<'a> {
     pub fn gradients(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
         let x = self.xp.iter().zip(self.xm);
         let y = self.yp.iter().zip(self.ym);
-        x.zip(y).map(|((xp, xm), (yp, ym))| (0.5 * (xp - xm), 0.5 * (yp - ym)))
+        x.zip(y).map(|((&xp, &xm), (&yp, &ym))| (0.5 * (load(xp) - load(xm)), 0.5 * (load(yp) - load(ym))))
     }
 }
 
 /// A whole patch row (the `w` interior sites of row b) as a [`Neighbourhood`].
 #[inline]
-pub fn row_neighbourhood(f: &[f64], patch: Patch, b: usize) -> Neighbourhood<'_> {
+pub fn row_neighbourhood<T: Real>(f: &[T], patch: Patch, b: usize) -> Neighbourhood<'_, T> {
     Neighbourhood::new(f, patch, b, 0, patch.w)
 }
 
 /// The interior sites of patch row b in the padded storage `f`, mutably.
 #[inline]
-pub fn row_mut(f: &mut [f64], patch: Patch, b: usize) -> &mut [f64] {
+pub fn row_mut<T>(f: &mut [T], patch: Patch, b: usize) -> &mut [T] {
     let i = patch.idx(0, b);
     &mut f[i..i + patch.w]
 }

@@ -26,5 +26,6 @@ pub mod motion;
 pub mod multigrid;
 pub mod par;
 pub mod params;
+pub mod precision;
 pub mod shape;
 pub mod snapshot;

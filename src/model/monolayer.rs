@@ -32,6 +32,7 @@ use crate::model::lattice::{wrap, Patch};
 use crate::model::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
 use crate::model::par;
 use crate::model::params::{FrictionWeights, Params};
+use crate::model::precision::{load, Real, Store};
 use crate::model::shape::{normalise, shape_tensor};
 use crate::model::snapshot::{fnv1a_continue, FNV1A_START};
 
@@ -110,13 +111,13 @@ impl Then {
                 std::mem::swap(&mut c.phi0, &mut c.phi);
                 std::mem::swap(&mut c.k1, &mut c.rate);
                 for ((phi, &p0), &k) in c.phi.iter_mut().zip(&c.phi0).zip(&c.k1) {
-                    *phi = p0 + dt * k;
+                    *phi = Store::from_f64(load(p0) + dt * load(k));
                 }
             }
             Then::Correct { dt, lo, hi } => {
                 let half = 0.5 * dt;
                 for ((phi, &p0), (&k1, &k2)) in c.phi.iter_mut().zip(&c.phi0).zip(c.k1.iter().zip(&c.rate)) {
-                    *phi = p0 + half * (k1 + k2);
+                    *phi = Store::from_f64(load(p0) + half * (load(k1) + load(k2)));
                 }
                 c.fault = first_out_of_range(c, lo, hi);
             }
@@ -274,7 +275,7 @@ impl Monolayer {
     pub fn state(&self) -> State {
         State {
             step: self.step,
-            cells: self.cells.iter().map(|c| (c.patch, c.phi.clone())).collect(),
+            cells: self.cells.iter().map(|c| (c.patch, c.phi.iter().map(|&v| load(v)).collect())).collect(),
             warm_start: self.solver.mean_velocity.clone(),
             substrate: self.lattice.substrate.clone(),
         }
@@ -374,8 +375,8 @@ impl Monolayer {
             for v in [p.x0, p.y0, p.w, p.h] {
                 eat(v as u64);
             }
-            for v in &c.phi {
-                eat(v.to_bits());
+            for &v in &c.phi {
+                eat(load(v).to_bits());
             }
         }
         h
@@ -384,7 +385,9 @@ impl Monolayer {
     /// Σ_i φ_i on the lattice.
     pub fn phi_sum(&mut self) -> &[f64] {
         let l = self.params.box_size;
-        gather(&mut self.lattice.phi_sum, 0.0, &self.cells, l, |c, r, out| add_each(out, c.phi[r].iter().copied()));
+        gather(&mut self.lattice.phi_sum, 0.0, &self.cells, l, |c, r, out| {
+            add_each(out, c.phi[r].iter().map(|&p| load(p)))
+        });
         &self.lattice.phi_sum
     }
 
@@ -393,7 +396,8 @@ impl Monolayer {
         let l = self.params.box_size;
         gather(&mut self.lattice.velocity, ZERO, &self.cells, l, |c, r, out| {
             let (phi, vx, vy) = (&c.phi[r.clone()], &c.vx[r.clone()], &c.vy[r]);
-            add_each(out, phi.iter().zip(vx.iter().zip(vy)).map(|(p, (x, y))| C64::new(p * x, p * y)));
+            let sites = phi.iter().zip(vx.iter().zip(vy));
+            add_each(out, sites.map(|(&p, (&x, &y))| C64::new(load(p) * load(x), load(p) * load(y))));
         });
         &self.lattice.velocity
     }
@@ -502,12 +506,14 @@ impl Monolayer {
             let (phi2, n) = (&mut lat.sum_phi2, &mut lat.weight);
             let mut with_weights = |kind| {
                 gather_pair((phi2, n), (0.0, 0.0), cells, l, |c, r, phi2, n| {
-                    add_each(phi2, c.phi[r.clone()].iter().map(|p| p * p));
-                    add_each(n, c.phi[r].iter().map(|&p| friction_weight(kind, p, threshold)));
+                    add_each(phi2, c.phi[r.clone()].iter().map(|&p| load(p) * load(p)));
+                    add_each(n, c.phi[r].iter().map(|&p| friction_weight(kind, load(p), threshold)));
                 })
             };
             match (friction, weights) {
-                (false, _) => gather(phi2, 0.0, cells, l, |c, r, out| add_each(out, c.phi[r].iter().map(|p| p * p))),
+                (false, _) => {
+                    gather(phi2, 0.0, cells, l, |c, r, out| add_each(out, c.phi[r].iter().map(|&p| load(p) * load(p))))
+                }
                 (true, FrictionWeights::Phi) => with_weights(FrictionWeights::Phi),
                 (true, FrictionWeights::Presence) => with_weights(FrictionWeights::Presence),
                 (true, FrictionWeights::Subdomain) => with_weights(FrictionWeights::Subdomain),
@@ -548,8 +554,8 @@ impl Monolayer {
                         add_each(
                             out,
                             sites.map(|(&p, (&x, &y))| {
-                                let w = friction_weight(kind, p, threshold);
-                                C64::new(w * x, w * y)
+                                let w = friction_weight(kind, load(p), threshold);
+                                C64::new(w * load(x), w * load(y))
                             }),
                         )
                     };
@@ -658,8 +664,8 @@ fn first_out_of_range(c: &Cell, lo: f64, hi: f64) -> Option<(usize, usize, f64)>
     let p = c.patch;
     for b in 0..p.h {
         let row = &c.phi[p.idx(0, b)..][..p.w];
-        if let Some(a) = row.iter().position(|v| !(*v >= lo && *v <= hi)) {
-            return Some((a, b, row[a]));
+        if let Some(a) = row.iter().position(|&v| !(load(v) >= lo && load(v) <= hi)) {
+            return Some((a, b, load(row[a])));
         }
     }
     None

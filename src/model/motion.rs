@@ -11,6 +11,7 @@ use num_complex::Complex64 as C64;
 
 use crate::model::lattice::{Neighbourhood, Patch};
 use crate::model::params::{Advection, FrictionWeights};
+use crate::model::precision::{load, Real};
 
 /// The weight w_j(x) with which cell j counts in the friction sum of Eq. 2 (docs/reading.md §4).
 #[inline(always)]
@@ -40,32 +41,45 @@ pub struct Drag<'a> {
 }
 
 /// The cell's fields on its patch that this stage reads and writes.
-pub struct MotionFields<'a> {
-    pub phi: &'a [f64],
-    pub mu: &'a [f64],
-    pub fx: &'a [f64],
-    pub fy: &'a [f64],
+pub struct MotionFields<'a, T = f64> {
+    pub phi: &'a [T],
+    pub mu: &'a [T],
+    pub fx: &'a [T],
+    pub fy: &'a [T],
     /// Where v_i goes, if it is to be kept (Heun's predictor does not keep it: the corrector's
     /// replaces it before anything reads it, and not writing it saves two of the pass's nine
     /// streams).
-    pub velocity: Option<(&'a mut [f64], &'a mut [f64])>,
-    pub rate: &'a mut [f64],
+    pub velocity: Option<(&'a mut [T], &'a mut [T])>,
+    pub rate: &'a mut [T],
 }
 
 /// v_i (if kept) and ∂_t φ_i at every site of the patch.
-pub fn velocity_and_rate(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j0: f64, advection: Advection) {
+pub fn velocity_and_rate<T: Real>(
+    patch: Patch,
+    c: MotionFields<T>,
+    drag: &Drag,
+    l: usize,
+    j0: f64,
+    advection: Advection,
+) {
     match (c.velocity.is_some(), advection) {
-        (true, Advection::Central) => rates::<true, false>(patch, c, drag, l, j0),
-        (true, Advection::Upwind) => rates::<true, true>(patch, c, drag, l, j0),
-        (false, Advection::Central) => rates::<false, false>(patch, c, drag, l, j0),
-        (false, Advection::Upwind) => rates::<false, true>(patch, c, drag, l, j0),
+        (true, Advection::Central) => rates::<T, true, false>(patch, c, drag, l, j0),
+        (true, Advection::Upwind) => rates::<T, true, true>(patch, c, drag, l, j0),
+        (false, Advection::Central) => rates::<T, false, false>(patch, c, drag, l, j0),
+        (false, Advection::Upwind) => rates::<T, false, true>(patch, c, drag, l, j0),
     }
 }
 
 /// The pass itself, one copy per choice, so that no choice is tested site by site and each loop
 /// runs in SIMD lanes.
 #[inline(always)]
-fn rates<const KEEP_V: bool, const UPWIND: bool>(patch: Patch, c: MotionFields, drag: &Drag, l: usize, j0: f64) {
+fn rates<T: Real, const KEEP_V: bool, const UPWIND: bool>(
+    patch: Patch,
+    c: MotionFields<T>,
+    drag: &Drag,
+    l: usize,
+    j0: f64,
+) {
     let MotionFields { phi, mu, fx, fy, velocity, rate } = c;
     let (vx_all, vy_all) = velocity.unwrap_or_default();
     for run in patch.runs(l) {
@@ -81,21 +95,22 @@ fn rates<const KEEP_V: bool, const UPWIND: bool>(patch: Patch, c: MotionFields, 
             (&mut [][..], &mut [][..])
         };
         for k in 0..len {
-            let vx = (fx[k] + pull[k].re) * mobility[k];
-            let vy = (fy[k] + pull[k].im) * mobility[k];
+            let vx = (load(fx[k]) + pull[k].re) * mobility[k];
+            let vy = (load(fy[k]) + pull[k].im) * mobility[k];
             if KEEP_V {
-                vx_out[k] = vx;
-                vy_out[k] = vy;
+                vx_out[k] = T::from_f64(vx);
+                vy_out[k] = T::from_f64(vy);
             }
             let (gx, gy) = if UPWIND {
+                let c = load(f.c[k]);
                 (
-                    if vx > 0.0 { f.c[k] - f.xm[k] } else { f.xp[k] - f.c[k] },
-                    if vy > 0.0 { f.c[k] - f.ym[k] } else { f.yp[k] - f.c[k] },
+                    if vx > 0.0 { c - load(f.xm[k]) } else { load(f.xp[k]) - c },
+                    if vy > 0.0 { c - load(f.ym[k]) } else { load(f.yp[k]) - c },
                 )
             } else {
                 f.gradient(k)
             };
-            rate[k] = -(vx * gx + vy * gy) - j0 * mu[k];
+            rate[k] = T::from_f64(-(vx * gx + vy * gy) - j0 * load(mu[k]));
         }
     }
 }

@@ -10,15 +10,16 @@
 //! fades to no direction instead of flipping between arbitrary ones.
 
 use crate::model::lattice::{row_neighbourhood, Patch};
+use crate::model::precision::{load, Real};
 
 /// Central-difference gradient of a padded field (row stride s) at padded index i.
 #[inline(always)]
-pub fn gradient(f: &[f64], i: usize, s: usize) -> (f64, f64) {
-    (0.5 * (f[i + 1] - f[i - 1]), 0.5 * (f[i + s] - f[i - s]))
+pub fn gradient<T: Real>(f: &[T], i: usize, s: usize) -> (f64, f64) {
+    (0.5 * (load(f[i + 1]) - load(f[i - 1])), 0.5 * (load(f[i + s]) - load(f[i - s])))
 }
 
 /// (Q_xx, Q_xy) of Eq. 5 over the patch (central differences).
-pub fn shape_tensor(patch: Patch, phi: &[f64]) -> [f64; 2] {
+pub fn shape_tensor<T: Real>(patch: Patch, phi: &[T]) -> [f64; 2] {
     // Two partial sums per component (even and odd sites), so that the loop runs in SIMD lanes;
     // the order is fixed, so the bits are too.
     let (mut qxx, mut qxy) = ([0.0; 2], [0.0; 2]);

@@ -15,6 +15,7 @@ use crate::analysis::defects::Defect;
 use crate::analysis::frame_file::FrameData;
 use crate::analysis::spirals::PlusOne;
 use crate::analysis::Analysis;
+use crate::model::precision::Real;
 use crate::model::shape::gradient;
 use crate::Monolayer;
 
@@ -260,7 +261,7 @@ impl ViewBuilder {
             let k = key as f32;
             for run in cell.patch().runs(l) {
                 for i in 0..run.len {
-                    let v = phi.data[run.padded + i] as f32;
+                    let v = phi.get(run.padded + i) as f32;
                     let t = &mut tissue[run.global + i];
                     if v > t[1] {
                         *t = [k, v, t[0], t[1]];
@@ -370,7 +371,7 @@ fn push(out: &mut Vec<Segment>, a: [f64; 2], b: [f64; 2], colour: [f32; 4], widt
 /// How elongated a cell is, in [0, 1]: |Q| of Eq. 5 over ½∫|∇φ|², its largest possible value
 /// (reached when every gradient is parallel). 0 for a disk, → 1 for a needle; 0.48 for an
 /// ellipse of aspect ratio 2, 0.79 for 4. Q̂ cannot say this: it is normalised.
-pub fn elongation(patch: crate::model::lattice::Patch, phi: &[f64], shape: [f64; 2]) -> f64 {
+pub fn elongation<T: Real>(patch: crate::model::lattice::Patch, phi: &[T], shape: [f64; 2]) -> f64 {
     let s = patch.stride();
     let mut norm = 0.0;
     for b in 0..patch.h {

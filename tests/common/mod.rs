@@ -58,7 +58,7 @@ pub fn ellipse(w: usize, h: usize, a: f64, b: f64, theta: f64) -> Vec<f64> {
 
 /// All φ of all cells, bit for bit.
 pub fn phi_bits(m: &Monolayer) -> Vec<u64> {
-    m.cells().iter().flat_map(|c| c.phi().data.iter().map(|v| v.to_bits())).collect()
+    m.cells().iter().flat_map(|c| c.phi().padded()).map(f64::to_bits).collect()
 }
 
 // ---- The command line as a user drives it ----
