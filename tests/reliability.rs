@@ -634,6 +634,27 @@ fn a_record_missing_a_parameter_is_refused_by_name() {
     refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["run.json", "`params.zeta` is missing"]);
 }
 
+/// Issue 25: a run continues only in the storage precision it started in. A record written
+/// before the field existed reads as f64 (every build before it stored f64).
+#[test]
+fn a_run_resumes_only_in_its_own_storage_precision() {
+    use monolayer::model::precision::STORE_NAME;
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    assert_eq!(RunRecord::load(&run).unwrap().storage, STORE_NAME, "run.json records the precision");
+    let other = if STORE_NAME == "f64" { "f32" } else { "f64" };
+    edit_record(&run, |v| {
+        v["storage"] = other.into();
+        v["status"] = "running".into();
+    });
+    refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["run.json", &format!("in {other} (`storage`)")]);
+    edit_record(&run, |v| {
+        v.as_object_mut().unwrap().remove("storage");
+    });
+    assert_eq!(RunRecord::load(&run).unwrap().storage, "f64", "a record without the field is an f64 run's");
+}
+
 /// Issue 24, item 4: grids that set one parameter twice (directly, or through `chi`) or list
 /// values equal as numbers are refused.
 #[test]

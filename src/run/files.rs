@@ -17,6 +17,7 @@ use crate::analysis::frame_file::{self, FrameData};
 use crate::model::lattice::Patch;
 use crate::model::monolayer::{Monolayer, State};
 use crate::model::params::Params;
+use crate::model::precision::STORE_NAME;
 
 /// Identifies the files of this program and the version of their layout.
 pub const FORMAT: &str = "monolayer-run";
@@ -217,6 +218,10 @@ impl<'de> Deserialize<'de> for RunStatus {
     }
 }
 
+fn storage_before_the_field() -> String {
+    "f64".into()
+}
+
 /// What `run.json` records: enough to reproduce the run and to continue it.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RunRecord {
@@ -224,6 +229,11 @@ pub struct RunRecord {
     pub format_version: u32,
     /// Version of this program that wrote the run.
     pub version: String,
+    /// The precision the cells' fields were stored in ([`STORE_NAME`]). A run continues only in
+    /// the precision it started in. Records without it were written before f32 storage existed,
+    /// by builds that stored f64.
+    #[serde(default = "storage_before_the_field")]
+    pub storage: String,
     pub seed: u64,
     /// Steps between frames in the active phase.
     pub frame_interval: u64,
@@ -239,6 +249,7 @@ impl RunRecord {
             format: FORMAT.into(),
             format_version: FORMAT_VERSION,
             version: env!("CARGO_PKG_VERSION").into(),
+            storage: STORE_NAME.into(),
             seed,
             frame_interval,
             status: RunStatus::Running,

@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
+use crate::model::precision::STORE_NAME;
 use crate::run::files::{
     checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint, write_frame, RunLock,
     RunRecord, RunStatus, LAST_GOOD_STATE,
@@ -246,6 +247,15 @@ impl RunDir {
     /// [`RunDir::resume`] in a directory whose lock the caller holds.
     pub fn resume_locked(lock: RunLock, dir: &Path) -> Result<Self, String> {
         let mut record = RunRecord::load(dir)?;
+        if record.storage != STORE_NAME {
+            return Err(format!(
+                "{}: the run stores the cells' fields in {} (`storage`), this build in {STORE_NAME}: it would \
+                 continue on another trajectory; resume it with a build of the run's precision (docs/performance.md, \
+                 \"Storage precision\")",
+                RunRecord::path(dir).display(),
+                record.storage
+            ));
+        }
         let checkpoint = checkpoint_path(dir);
         if !checkpoint.exists() {
             return Err(format!(

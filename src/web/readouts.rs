@@ -162,6 +162,7 @@ pub fn run_record_json(m: &Monolayer) -> String {
         "format": "monolayer-run",
         "format_version": 1,
         "version": code_version(),
+        "storage": crate::model::precision::STORE_NAME,
         "seed": m.seed(),
         "frame_interval": 1,
         "status": "stopped: the state of the browser page, downloaded",
