@@ -19,6 +19,7 @@ use crate::model::error::SimError;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::State;
 use crate::model::params::{FrictionWeights, Params};
+use crate::model::precision::STORE_NAME;
 
 const MAGIC: &[u8; 8] = b"MLSTATE\0";
 const VERSION: u32 = 1;
@@ -44,7 +45,8 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 /// not read (activity, the friction of the active phase and its solve, the active steps, the
 /// time unit) are set to fixed values first, so that one relaxed state serves every preset that
 /// differs only in them, and a change of their defaults leaves the key alone. Any other
-/// parameter changes the key.
+/// parameter changes the key, and so does the storage precision of the cells' fields (an f64
+/// build's keys are those of the builds before f32 storage existed).
 pub fn relaxation_key(params: &Params, seed: u64) -> u64 {
     let p = Params {
         zeta: 0.0,
@@ -60,7 +62,8 @@ pub fn relaxation_key(params: &Params, seed: u64) -> u64 {
         ..params.clone()
     };
     // Debug prints every field, floats exactly (shortest round-trip form), on both targets.
-    fnv1a(format!("seed {seed}; {p:?}").as_bytes())
+    let storage = if STORE_NAME == "f64" { String::new() } else { format!("storage {STORE_NAME}; ") };
+    fnv1a(format!("seed {seed}; {storage}{p:?}").as_bytes())
 }
 
 /// The bytes of `state`, under `key` (see [`relaxation_key`]).
@@ -249,7 +252,29 @@ mod tests {
         assert_ne!(relaxation_key(&p, 2), k, "the seed");
         assert_ne!(relaxation_key(&Params { gamma: 0.07, ..p.clone() }, 1), k, "γ");
         assert_ne!(relaxation_key(&Params { relax_steps: 31, ..p.clone() }, 1), k, "relaxation steps");
-        assert_ne!(relaxation_key(&Params { box_size: 41, ..p }, 1), k, "the box");
+        assert_ne!(relaxation_key(&Params { box_size: 41, ..p.clone() }, 1), k, "the box");
+        // The storage precision: an f64 build keeps the keys of the builds before f32 storage
+        // existed (the shipped states' keys), an f32 build's keys differ from them.
+        let before_f32 = relaxation_key_without_storage(&p, 1);
+        assert_eq!(k == before_f32, STORE_NAME == "f64", "the precision in the key");
+    }
+
+    /// The key as builds computed it before the storage precision entered it.
+    fn relaxation_key_without_storage(params: &Params, seed: u64) -> u64 {
+        let p = Params {
+            zeta: 0.0,
+            q_magnitude: 0.0,
+            q_epsilon: 0.0,
+            xi_substrate: 0.0,
+            xi_cell: 0.0,
+            friction_weights: FrictionWeights::Phi,
+            friction_tolerance: 0.0,
+            friction_max_iterations: 0,
+            active_steps: 0,
+            time_unit_seconds: 0.0,
+            ..params.clone()
+        };
+        fnv1a(format!("seed {seed}; {p:?}").as_bytes())
     }
 
     #[test]
