@@ -8,6 +8,9 @@
 #   bash scripts/celadro.sh --source DIR         a checkout of celadro, or a bare clone (git dir)
 #   bash scripts/celadro.sh --pairs 3            pairs to run (default 2)
 #   bash scripts/celadro.sh --set friction_weights=presence   passed on to `monolayer bench`
+#   bash scripts/celadro.sh --binary A --binary B   time these monolayer binaries instead of
+#                                                a fresh build, each after the same celadro run
+#                                                of every pair (two builds paired: f32 and f64)
 #
 # Needs cmake, a C++ compiler and Boost program_options (Debian: cmake g++
 # libboost-program-options-dev). Work files go to $CELADRO_WORK (default target/celadro).
@@ -19,12 +22,15 @@ COMMIT=4907f7d
 SOURCE=""
 PAIRS=2
 BENCH_EXTRA=()
+BINARIES=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --source) SOURCE="$2"; shift 2 ;;
     --pairs) PAIRS="$2"; shift 2 ;;
     --set) BENCH_EXTRA+=(--set "$2"); shift 2 ;;
-    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
+    --binary) [[ -x "$2" ]] || { echo "celadro.sh: --binary $2 is not an executable" >&2; exit 2; }
+              BINARIES+=("$2"); shift 2 ;;
+    -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
     *) echo "celadro.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -96,9 +102,11 @@ xi         = 1
 zetaQ      = 0.5
 EOF
 
-say "building monolayer (release)"
-cargo build --release --quiet
-MONOLAYER="${CARGO_TARGET_DIR:-target}/release/monolayer"
+if [[ ${#BINARIES[@]} -eq 0 ]]; then
+  say "building monolayer (release)"
+  cargo build --release --quiet
+  BINARIES=("${CARGO_TARGET_DIR:-target}/release/monolayer")
+fi
 
 now() { date +%s.%N; }
 for pair in $(seq 1 "$PAIRS"); do
@@ -108,9 +116,11 @@ for pair in $(seq 1 "$PAIRS"); do
   t1=$(now)
   # Milliseconds per substep: each of celadro's substeps is one Heun step of Δt = 0.1, as ours.
   cel=$(awk -v a="$t0" -v b="$t1" -v n=$((NSTEPS * NSUBSTEPS)) 'BEGIN { print (b - a) * 1000 / n }')
-  line=$("$MONOLAYER" bench --threads 1 --chi 0.001 "${BENCH_EXTRA[@]}" 2>&1 | grep 'ms/step over') || {
-    echo "celadro.sh: monolayer bench failed (run it by hand to see why)" >&2; exit 1; }
-  ours=$(sed -E 's/.*: ([0-9.]+) ms\/step over.*/\1/' <<<"$line")
-  printf 'pair %d: celadro %.1f ms per substep (Δt = 0.1); monolayer %.2f ms per step: ratio %.3f\n' \
-    "$pair" "$cel" "$ours" "$(awk -v a="$ours" -v b="$cel" 'BEGIN { print a / b }')"
+  for MONOLAYER in "${BINARIES[@]}"; do
+    line=$("$MONOLAYER" bench --threads 1 --chi 0.001 "${BENCH_EXTRA[@]}" 2>&1 | grep 'ms/step over') || {
+      echo "celadro.sh: $MONOLAYER bench failed (run it by hand to see why)" >&2; exit 1; }
+    ours=$(sed -E 's/.*: ([0-9.]+) ms\/step over.*/\1/' <<<"$line")
+    printf 'pair %d: celadro %.1f ms per substep (Δt = 0.1); %s %.2f ms per step: ratio %.3f\n' \
+      "$pair" "$cel" "$(basename "$MONOLAYER")" "$ours" "$(awk -v a="$ours" -v b="$cel" 'BEGIN { print a / b }')"
+  done
 done
