@@ -29,6 +29,12 @@ step "unit tests without the \`parallel\` feature (the serial path of par.rs the
 # No --release: the test profile ([profile.test] in Cargo.toml: optimised, debug assertions on).
 cargo test --no-default-features --lib
 
+step "lints and unit tests with the cells' fields stored in f32 (feature \`f32-storage\`, docs/performance.md)"
+# Not the default (it is safe but not faster here); kept compiling and tested, serial and in the
+# test profile, so that the comparison can be made again where memory traffic binds.
+cargo clippy --lib --no-default-features --features f32-storage -- -D warnings
+cargo test --no-default-features --features f32-storage --lib
+
 step "browser demo (headless Chromium: WebGPU on SwiftShader, then the WebGL2 fallback)"
 # Debian's chromium and the npm packages of tests/browser; .ci/run installs both. No browser
 # is ever downloaded (playwright-core drives /usr/bin/chromium).
