@@ -295,6 +295,12 @@ struct BenchArgs {
     /// Any other parameter, e.g. --set friction_weights=subdomain (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Start from this relaxed state (written by `relaxed-state`, e.g. the page's
+    /// www/assets/relaxed-paper-seed1.bin) instead of relaxing: the steps the page times, on
+    /// the same trajectory. Its parameters are --relax-steps, --seed and --set (checked against
+    /// the file's key); the relaxation is then not timed.
+    #[arg(long, value_name = "FILE")]
+    from_relaxed: Option<std::path::PathBuf>,
     /// Time the GPU kernels instead (those that exist so far, on the adapter found; needs a
     /// build with --features gpu). Uses --relax-steps, --seed, --set and ζ; --steps is the
     /// number of timed dispatches per kernel.
@@ -625,6 +631,7 @@ fn bench(a: &BenchArgs) -> Result<(), String> {
         threads: a.threads.clone(),
         blocks: a.blocks,
         seed: a.seed,
+        from_relaxed: a.from_relaxed.clone(),
     };
     monolayer::run::bench::bench(&options)
 }

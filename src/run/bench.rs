@@ -7,12 +7,13 @@
 //! two-thread speed-up is reported as a fraction of that ceiling.
 
 use std::fs;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::analysis::Analysis;
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
+use crate::model::snapshot::{self, relaxation_key};
 use crate::run::files::{frame_path, write_frame, RunRecord};
 use crate::run::offline::analyze_run;
 use crate::run::plots::Background;
@@ -29,6 +30,8 @@ pub struct BenchOptions {
     pub threads: Vec<usize>,
     pub blocks: u64,
     pub seed: u64,
+    /// A relaxed-state file to start from instead of relaxing (see [`relaxed_start`]).
+    pub from_relaxed: Option<PathBuf>,
 }
 
 fn pool(n: usize) -> Result<rayon::ThreadPool, String> {
@@ -83,11 +86,21 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
         if ceiling { ", and two one-thread simulations side by side (the ceiling)" } else { "" }
     );
     let base = Params { relax_steps: o.relax_steps, ..p.clone() };
-    let mut relaxed = Monolayer::new(base.clone(), o.seed).map_err(|e| e.to_string())?;
-    let t = Instant::now();
-    pools[0].install(|| relaxed.advance(o.relax_steps)).map_err(|e| e.to_string())?;
-    let relax_ms = 1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64;
-    println!("relaxation, {} thread(s): {relax_ms:.3} ms/step\n{}", o.threads[0], relaxed.counters().report());
+    let (relaxed, relax_ms) = match &o.from_relaxed {
+        Some(file) => {
+            let m = relaxed_start(file, &base, o.seed)?;
+            println!("relaxation: read from {} (step {}), not timed", file.display(), m.step_count());
+            (m, None)
+        }
+        None => {
+            let mut m = Monolayer::new(base.clone(), o.seed).map_err(|e| e.to_string())?;
+            let t = Instant::now();
+            pools[0].install(|| m.advance(o.relax_steps)).map_err(|e| e.to_string())?;
+            let relax_ms = 1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64;
+            println!("relaxation, {} thread(s): {relax_ms:.3} ms/step\n{}", o.threads[0], m.counters().report());
+            (m, Some(relax_ms))
+        }
+    };
     for &chi in &o.chis {
         let mut p = base.clone();
         p.set_chi(chi);
@@ -153,7 +166,7 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
                 c.report()
             );
         }
-        if o.relax_steps > 0 && !block_ms[0].is_empty() {
+        if let (Some(relax_ms), true) = (relax_ms.filter(|_| o.relax_steps > 0), !block_ms[0].is_empty()) {
             println!("  {}", paper_length_line(o.threads[0], relax_ms, median(&block_ms[0])));
         }
         for (times, threads) in block_ms.iter().zip(&o.threads).skip(1) {
@@ -184,6 +197,27 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// The relaxed state in `file` (the format of `monolayer relaxed-state`), checked against the key
+/// of `params` and `seed`: a file made with other relaxation parameters is refused, naming it.
+pub fn relaxed_start(file: &Path, params: &Params, seed: u64) -> Result<Monolayer, String> {
+    let bytes = fs::read(file).map_err(|e| format!("--from-relaxed {}: {e}", file.display()))?;
+    let state = snapshot::decode(&bytes, relaxation_key(params, seed), params.box_size).map_err(|e| {
+        format!(
+            "--from-relaxed {}: {e} (give the relaxation's parameters: --relax-steps, --seed, --set box_size=…, n_cells=…, gamma=…)",
+            file.display()
+        )
+    })?;
+    if state.step != params.relax_steps {
+        return Err(format!(
+            "--from-relaxed {}: saved at step {}, not at the end of --relax-steps {}",
+            file.display(),
+            state.step,
+            params.relax_steps
+        ));
+    }
+    Monolayer::from_state(params.clone(), seed, state).map_err(|e| format!("--from-relaxed {}: {e}", file.display()))
 }
 
 /// Wall time of a run of `relax_steps` relaxation and `active_steps` active steps, in minutes,
@@ -340,13 +374,47 @@ mod tests {
             threads: vec![1, 2],
             blocks: 2,
             seed: 1,
+            from_relaxed: None,
         };
         bench(&o).unwrap();
         let e = bench(&BenchOptions { blocks: 9, ..o.clone() }).unwrap_err();
         assert!(e.contains("--blocks"), "{e}");
         let e = bench(&BenchOptions { threads: vec![0], ..o.clone() }).unwrap_err();
         assert!(e.contains("--threads"), "{e}");
-        let e = bench(&BenchOptions { chis: vec![], ..o }).unwrap_err();
+        let e = bench(&BenchOptions { chis: vec![], ..o.clone() }).unwrap_err();
         assert!(e.contains("--chi"), "{e}");
+    }
+
+    /// --from-relaxed starts from the file's state, exactly what relaxing gives, and refuses a
+    /// file made with other relaxation parameters or saved at another step, naming the file.
+    #[test]
+    fn a_relaxed_start_is_the_relaxation_and_a_foreign_file_is_refused() {
+        let p = Params { box_size: 40, n_cells: 4, relax_steps: 20, ..Params::default() };
+        let mut relaxed = Monolayer::new(p.clone(), 3).unwrap();
+        relaxed.advance(20).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("r.bin");
+        fs::write(&file, snapshot::encode(&relaxed.state(), relaxation_key(&p, 3))).unwrap();
+        let start = relaxed_start(&file, &p, 3).unwrap();
+        assert_eq!(start.fingerprint(), relaxed.fingerprint());
+        let e = relaxed_start(&file, &Params { gamma: 0.07, ..p.clone() }, 3).err().unwrap();
+        assert!(e.contains("--from-relaxed") && e.contains("r.bin"), "{e}");
+        assert!(relaxed_start(&file, &p, 4).is_err(), "another seed");
+        let mut later = relaxed.clone();
+        later.advance(1).unwrap();
+        fs::write(&file, snapshot::encode(&later.state(), relaxation_key(&p, 3))).unwrap();
+        let e = relaxed_start(&file, &p, 3).err().unwrap();
+        assert!(e.contains("saved at step 21"), "{e}");
+        bench(&BenchOptions {
+            params: Params { zeta: 0.5, ..p.clone() },
+            chis: vec![0.01],
+            steps: 2,
+            relax_steps: 20,
+            threads: vec![1],
+            blocks: 1,
+            seed: 3,
+            from_relaxed: Some(dir.path().join("missing.bin")),
+        })
+        .unwrap_err();
     }
 }
