@@ -8,7 +8,8 @@
 //!
 //! [`lattice`] and [`cell`] hold the geometry, [`counters`] the time per stage, [`par`] the
 //! deterministic parallel loops, [`error`] what can go wrong, [`snapshot`] a state as bytes
-//! (the browser demo's confluent start). Nothing here touches files,
+//! (the browser demo's confluent start), [`precision`] the type the cells' per-site fields are
+//! stored in. Nothing here touches files,
 //! clocks or threads directly (threads only through [`par`], behind the `parallel` feature), so
 //! the core compiles for `wasm32-unknown-unknown` with the same bits. It imports nothing from
 //! `analysis`, `run` or `web` (tested by `tests/layers.rs`).
