@@ -139,7 +139,7 @@ struct GpuFields {
 }
 
 fn gpu_fields(ctx: &GpuContext, m: &Monolayer) -> (GpuMonolayer, GpuFields) {
-    let gpu = GpuMonolayer::new(ctx, m);
+    let gpu = GpuMonolayer::new(ctx, m).expect("the monolayer fits the device");
     // The stages up to n and F, then v and the rate (which are the CPU's only where it has no
     // friction solve; `compare_stages` checks them there).
     gpu.run(ctx, &[&Kernel::FRICTION_SUMS[..], &[Kernel::VelocityAndRate]].concat());
@@ -586,7 +586,7 @@ fn one_relaxation_step_matches_the_cpu() {
     let start = evaluated(r);
 
     // 1. The predictor.
-    let mut gpu = GpuMonolayer::new(&ctx, r);
+    let mut gpu = GpuMonolayer::new(&ctx, r).expect("the monolayer fits the device");
     gpu.run(&ctx, &[&Kernel::RATE[..], &[Kernel::Predict]].concat());
     let g_pred = gpu.read(&ctx, Slot::Phi);
     let layout = gpu.state().layout.clone();
@@ -620,7 +620,7 @@ fn one_relaxation_step_matches_the_cpu() {
     // 3. The whole step.
     let mut cpu = r.clone();
     cpu.step_on_fixed_patches().expect("the CPU steps");
-    gpu.upload(&ctx, r);
+    gpu.upload(&ctx, r).expect("the monolayer fits the device");
     gpu.step(&ctx);
     let (g_phi, faults) = (gpu.read(&ctx, Slot::Phi), gpu.read_u32(&ctx, Slot::Fault));
     let mut stepped = Worst::default();
@@ -646,7 +646,7 @@ fn one_relaxation_step_matches_the_cpu() {
     assert!(moved > 1e3 * delta, "the step must move φ by far more than the tolerance");
 
     // The same step from a second upload: the same bits, and the ms of a step on this adapter.
-    let again = GpuMonolayer::new(&ctx, r);
+    let again = GpuMonolayer::new(&ctx, r).expect("the monolayer fits the device");
     again.step(&ctx);
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&again.read(&ctx, Slot::Phi)), bits(&g_phi), "two GPU steps differ");
@@ -737,7 +737,7 @@ fn stages_match_the_cpu_at_full_size() {
     m.advance(20).expect("the tissue steps");
     compare_stages(&ctx, &m);
     assert_repeats(&ctx, &m);
-    let gpu = GpuMonolayer::new(&ctx, &m);
+    let gpu = GpuMonolayer::new(&ctx, &m).expect("the monolayer fits the device");
     for k in Kernel::ALL {
         eprintln!("{k:?}: {:.3} ms per dispatch (median of 21)", median_ms(&ctx, &gpu, &[k]));
     }
@@ -799,7 +799,7 @@ fn the_range_check_flags_the_cpus_sites() {
         phi[patch.idx(patch.w / 2, patch.h / 2)] = v;
     }
     let mut cpu = Monolayer::from_state(r.params().clone(), r.seed(), state).expect("the state loads");
-    let gpu = GpuMonolayer::new(&ctx, &cpu);
+    let gpu = GpuMonolayer::new(&ctx, &cpu).expect("the monolayer fits the device");
     let err = cpu.step_on_fixed_patches().expect_err("φ leaves its range");
     assert!(err.to_string().contains("phi"), "{err}");
     gpu.step(&ctx);

@@ -10,7 +10,7 @@
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-use crate::gpu::context::GpuContext;
+use crate::gpu::context::{GpuContext, GpuError};
 use crate::model::free_energy::FreeEnergy;
 use crate::model::monolayer::{Monolayer, Phase};
 use crate::model::params::{Advection, FrictionWeights, Laplacian, Params, PassiveForce};
@@ -211,6 +211,34 @@ impl Layout {
         self.patches.len()
     }
 
+    /// Whether the device can take this layout: the per-site kernels run one row of workgroups
+    /// per cell (kernels.rs, `Grid::Sites`), and the largest buffers are the per-site velocity
+    /// (2 values per padded site) and the lattice force (2 per site), in f32.
+    pub fn fits(&self, limits: &wgpu::Limits) -> Result<(), GpuError> {
+        let too_large = |what: String, value: u64, limit: u64, limit_name| {
+            (value > limit).then_some(GpuError::TooLarge { what, value, limit, limit_name })
+        };
+        let per_dimension = u64::from(limits.max_compute_workgroups_per_dimension);
+        let binding = limits.max_storage_buffer_binding_size;
+        let largest = 8 * (self.total as u64).max((self.box_size * self.box_size) as u64);
+        let errors = [
+            too_large(
+                "the number of cells (one row of workgroups each)".into(),
+                self.n_cells() as u64,
+                per_dimension,
+                "max_compute_workgroups_per_dimension",
+            ),
+            too_large(
+                "the largest buffer in bytes (2 f32 per padded patch site or lattice site)".into(),
+                largest,
+                binding,
+                "max_storage_buffer_binding_size",
+            ),
+            too_large("the largest buffer in bytes".into(), largest, limits.max_buffer_size, "max_buffer_size"),
+        ];
+        errors.into_iter().flatten().next().map_or(Ok(()), Err)
+    }
+
     /// A per-cell field of the CPU (one padded vector per cell) as one f32 array in this layout.
     pub fn flatten<'a, T: Real>(&self, fields: impl Iterator<Item = &'a [T]>) -> Vec<f32> {
         let mut out = Vec::with_capacity(self.total);
@@ -247,10 +275,10 @@ const STORAGE: wgpu::BufferUsages =
 impl DeviceState {
     /// φ of every cell, the patches and the parameters of the monolayer's current phase; every
     /// derived field zero until a kernel writes it.
-    pub fn upload(ctx: &GpuContext, m: &Monolayer) -> Self {
+    /// Refuses, naming the limit, a monolayer too large for the device.
+    pub fn upload(ctx: &GpuContext, m: &Monolayer) -> Result<Self, GpuError> {
         let layout = Layout::of(m);
-        // The per-site kernels take one row of workgroups per cell (kernels.rs, `Grid::Sites`).
-        assert!(layout.n_cells() <= 65_535, "{} cells: the GPU stages take at most 65,535", layout.n_cells());
+        layout.fits(&ctx.device.limits())?;
         let params = GpuParams::new(m.params(), m.phase());
         let phi = layout.flatten(m.cells().iter().map(|c| c.phi().data));
         let (l2, n, total) = (layout.box_size * layout.box_size, layout.n_cells(), layout.total);
@@ -280,7 +308,7 @@ impl DeviceState {
             })
             .collect();
         let solves_friction = m.phase() == Phase::Active && m.params().xi_cell > 0.0;
-        DeviceState { layout, params, solves_friction, buffers }
+        Ok(DeviceState { layout, params, solves_friction, buffers })
     }
 
     pub fn buffer(&self, slot: Slot) -> &wgpu::Buffer {
@@ -351,5 +379,26 @@ mod tests {
             offset += c.patch().padded_len();
         }
         assert_eq!((layout.total, flat.len()), (offset, offset));
+    }
+
+    /// A layout beyond a device's limits is refused, naming the limit; the full size fits
+    /// WebGPU's defaults (the limits every adapter offers).
+    #[test]
+    fn a_layout_beyond_the_device_limits_is_refused_by_name() {
+        let m = Monolayer::new(Params::default(), 1).unwrap();
+        let layout = Layout::of(&m);
+        layout.fits(&wgpu::Limits::default()).unwrap();
+        let few_rows = wgpu::Limits { max_compute_workgroups_per_dimension: 99, ..wgpu::Limits::default() };
+        let e = layout.fits(&few_rows).unwrap_err().to_string();
+        assert!(
+            e.contains("number of cells") && e.contains("is 100") && e.contains("max_compute_workgroups_per_dimension"),
+            "{e}"
+        );
+        let small = 8 * layout.total.max(140 * 140) as u64 - 1;
+        let narrow = wgpu::Limits { max_storage_buffer_binding_size: small, ..wgpu::Limits::default() };
+        let e = layout.fits(&narrow).unwrap_err().to_string();
+        assert!(e.contains("max_storage_buffer_binding_size"), "{e}");
+        let short = wgpu::Limits { max_buffer_size: small, ..wgpu::Limits::default() };
+        assert!(layout.fits(&short).unwrap_err().to_string().contains("max_buffer_size"));
     }
 }

@@ -10,6 +10,8 @@ pub enum GpuError {
     NoAdapter(String),
     #[error("the adapter {adapter} refused a device: {reason}")]
     NoDevice { adapter: String, reason: String },
+    #[error("{what} is {value}, beyond this device's limit {limit} (wgpu `Limits::{limit_name}`)")]
+    TooLarge { what: String, value: u64, limit: u64, limit_name: &'static str },
 }
 
 /// An adapter's device and queue, and what the adapter is.

@@ -5,7 +5,7 @@
 //! file is compiled with `shaders/model.wgsl` (the shared parameters and patches) in front.
 
 use crate::gpu::buffers::{DeviceState, Slot};
-use crate::gpu::context::GpuContext;
+use crate::gpu::context::{GpuContext, GpuError};
 use crate::model::monolayer::Monolayer;
 
 const MODEL_WGSL: &str = include_str!("../../shaders/model.wgsl");
@@ -52,7 +52,7 @@ enum Grid {
     /// One workgroup per cell.
     Cells,
     /// One invocation per padded site of each cell: x the site, y the cell (so at most 65,535
-    /// cells, WebGPU's workgroups per dimension; `DeviceState::upload` checks it).
+    /// cells, WebGPU's workgroups per dimension; `Layout::fits` checks it).
     Sites,
 }
 
@@ -243,19 +243,21 @@ pub struct GpuMonolayer {
 }
 
 impl GpuMonolayer {
-    /// Compiles the kernels and uploads the monolayer's current state.
-    pub fn new(ctx: &GpuContext, m: &Monolayer) -> Self {
+    /// Compiles the kernels and uploads the monolayer's current state; refuses a monolayer
+    /// beyond the device's limits, naming the limit.
+    pub fn new(ctx: &GpuContext, m: &Monolayer) -> Result<Self, GpuError> {
         let pipelines = Pipelines::new(ctx);
-        let state = DeviceState::upload(ctx, m);
+        let state = DeviceState::upload(ctx, m)?;
         let bind_groups = bind_groups(ctx, &pipelines, &state);
-        GpuMonolayer { pipelines, state, bind_groups }
+        Ok(GpuMonolayer { pipelines, state, bind_groups })
     }
 
     /// Replaces the device state by the monolayer's current one (patches may have moved, so
     /// buffers and bind groups are made anew).
-    pub fn upload(&mut self, ctx: &GpuContext, m: &Monolayer) {
-        self.state = DeviceState::upload(ctx, m);
+    pub fn upload(&mut self, ctx: &GpuContext, m: &Monolayer) -> Result<(), GpuError> {
+        self.state = DeviceState::upload(ctx, m)?;
         self.bind_groups = bind_groups(ctx, &self.pipelines, &self.state);
+        Ok(())
     }
 
     pub fn state(&self) -> &DeviceState {

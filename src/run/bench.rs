@@ -300,7 +300,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let p = Params { relax_steps, ..params.clone() };
     let mut m = Monolayer::new(p.clone(), seed).map_err(|e| e.to_string())?;
     m.advance(relax_steps + 5).map_err(|e| e.to_string())?;
-    let gpu = GpuMonolayer::new(&ctx, &m);
+    let gpu = GpuMonolayer::new(&ctx, &m).map_err(|e| e.to_string())?;
     let time = |kernels: &[Kernel]| -> f64 {
         gpu.run(&ctx, kernels);
         ctx.wait();
