@@ -48,7 +48,15 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 /// parameter changes the key, and so does the storage precision of the cells' fields (an f64
 /// build's keys are those of the builds before f32 storage existed).
 pub fn relaxation_key(params: &Params, seed: u64) -> u64 {
-    let p = Params {
+    let p = relaxation_params(params);
+    // Debug prints every field, floats exactly (shortest round-trip form), on both targets.
+    let storage = if STORE_NAME == "f64" { String::new() } else { format!("storage {STORE_NAME}; ") };
+    fnv1a(format!("seed {seed}; {storage}{p:?}").as_bytes())
+}
+
+/// `params` with every parameter the relaxation does not read set to a fixed value.
+fn relaxation_params(params: &Params) -> Params {
+    Params {
         zeta: 0.0,
         q_magnitude: 0.0,
         q_epsilon: 0.0,
@@ -60,10 +68,21 @@ pub fn relaxation_key(params: &Params, seed: u64) -> u64 {
         active_steps: 0,
         time_unit_seconds: 0.0,
         ..params.clone()
-    };
-    // Debug prints every field, floats exactly (shortest round-trip form), on both targets.
-    let storage = if STORE_NAME == "f64" { String::new() } else { format!("storage {STORE_NAME}; ") };
-    fnv1a(format!("seed {seed}; {storage}{p:?}").as_bytes())
+    }
+}
+
+/// The relaxed state of `params` and `seed` from `bytes` (see [`decode`]): refused if it was
+/// made with other relaxation parameters, another seed or precision, or saved at any step but
+/// the end of the relaxation.
+pub fn decode_relaxed(bytes: &[u8], params: &Params, seed: u64) -> Result<State, SimError> {
+    let state = decode(bytes, relaxation_key(params, seed), params.box_size)?;
+    if state.step != params.relax_steps {
+        return Err(SimError::Invalid(format!(
+            "relaxed state: saved at step {}, not at the end of the {} relaxation steps",
+            state.step, params.relax_steps
+        )));
+    }
+    Ok(state)
 }
 
 /// The bytes of `state`, under `key` (see [`relaxation_key`]).
@@ -261,20 +280,7 @@ mod tests {
 
     /// The key as builds computed it before the storage precision entered it.
     fn relaxation_key_without_storage(params: &Params, seed: u64) -> u64 {
-        let p = Params {
-            zeta: 0.0,
-            q_magnitude: 0.0,
-            q_epsilon: 0.0,
-            xi_substrate: 0.0,
-            xi_cell: 0.0,
-            friction_weights: FrictionWeights::Phi,
-            friction_tolerance: 0.0,
-            friction_max_iterations: 0,
-            active_steps: 0,
-            time_unit_seconds: 0.0,
-            ..params.clone()
-        };
-        fnv1a(format!("seed {seed}; {p:?}").as_bytes())
+        fnv1a(format!("seed {seed}; {:?}", relaxation_params(params)).as_bytes())
     }
 
     #[test]

@@ -10,7 +10,7 @@ use super::render::WebView;
 use super::view::{FieldKind, ViewBuilder};
 use crate::analysis::frame_file::encode_frame;
 use crate::analysis::holes::VoidRegions;
-use crate::model::snapshot::{self, relaxation_key};
+use crate::model::snapshot;
 use crate::{Monolayer, Params};
 
 fn js_err(e: impl std::fmt::Display) -> JsError {
@@ -77,14 +77,7 @@ impl WebSim {
     ) -> Result<WebSim, JsError> {
         let p = page_params(box_size, n_cells, relax_steps, zeta, chi, gamma);
         p.validate().map_err(js_err)?;
-        let key = relaxation_key(&p, seed as u64);
-        let state = snapshot::decode(snapshot, key, box_size).map_err(js_err)?;
-        if state.step != p.relax_steps {
-            return Err(JsError::new(&format!(
-                "relaxed state: saved at step {}, not at the end of the {} relaxation steps",
-                state.step, p.relax_steps
-            )));
-        }
+        let state = snapshot::decode_relaxed(snapshot, &p, seed as u64).map_err(js_err)?;
         Ok(Self::wrap(Monolayer::from_state(p, seed as u64, state).map_err(js_err)?))
     }
 
