@@ -70,16 +70,6 @@ impl Kernel {
         Kernel::Correct,
     ];
 
-    /// The stages up to the friction solve's right-hand side (n and F).
-    pub const FRICTION_SUMS: [Kernel; 6] = [
-        Kernel::LatticeSums,
-        Kernel::CellArea,
-        Kernel::ChemicalPotential,
-        Kernel::ShapeTensor,
-        Kernel::ForceDensity,
-        Kernel::FrictionSums,
-    ];
-
     /// One evaluation of the rate R(φ) where there is no friction solve: Σφ², A_i, μ_i, Q̂_i, f_i,
     /// then v_i and ∂_t φ_i. (In relaxation ζ = 0 and Q̂_i is not needed; its dispatch stays so
     /// that one list serves both phases, as the CPU computes Q_i in both.)
@@ -92,23 +82,26 @@ impl Kernel {
         Kernel::VelocityAndRate,
     ];
 
+    /// The stages up to the friction solve's right-hand side (n and F): [`Self::RATE`]'s up to
+    /// the forces, then the friction sums.
+    pub const FRICTION_SUMS: [Kernel; 6] = {
+        let mut out = Kernel::RATE;
+        out[5] = Kernel::FrictionSums;
+        out
+    };
+
     /// One Heun step without a friction solve: R(φ), the predictor, R(φ*), the corrector.
-    pub const STEP: [Kernel; 14] = [
-        Kernel::LatticeSums,
-        Kernel::CellArea,
-        Kernel::ChemicalPotential,
-        Kernel::ShapeTensor,
-        Kernel::ForceDensity,
-        Kernel::VelocityAndRate,
-        Kernel::Predict,
-        Kernel::LatticeSums,
-        Kernel::CellArea,
-        Kernel::ChemicalPotential,
-        Kernel::ShapeTensor,
-        Kernel::ForceDensity,
-        Kernel::VelocityAndRate,
-        Kernel::Correct,
-    ];
+    pub const STEP: [Kernel; 14] = {
+        let mut out = [Kernel::Predict; 14];
+        let mut k = 0;
+        while k < 6 {
+            out[k] = Kernel::RATE[k];
+            out[7 + k] = Kernel::RATE[k];
+            k += 1;
+        }
+        out[13] = Kernel::Correct;
+        out
+    };
 
     /// The stage's WGSL file and the kernel's entry point in it.
     fn source(self) -> (&'static str, &'static str) {
