@@ -18,12 +18,12 @@
 @compute @workgroup_size(64)
 fn force_density(@builtin(global_invocation_id) gid: vec3<u32>) {
     let p = patches[gid.y];
-    let site = padded_site(p, gid.x);
-    if site.x >= stride(p) {
+    let site = site_of(p, gid.x);
+    if !site.inside {
         return;
     }
-    let i = p.offset + gid.x;
-    if !is_interior(p, site) {
+    let i = site.i;
+    if !site.interior {
         fx[i] = 0.0;
         fy[i] = 0.0;
         return;

@@ -57,18 +57,18 @@ fn laplacian(i: u32, s: u32) -> f32 {
 @compute @workgroup_size(64)
 fn chemical_potential(@builtin(global_invocation_id) gid: vec3<u32>) {
     let p = patches[gid.y];
-    let site = padded_site(p, gid.x);
-    if site.x >= stride(p) {
+    let site = site_of(p, gid.x);
+    if !site.inside {
         return;
     }
-    let i = p.offset + gid.x;
-    if !is_interior(p, site) {
+    let i = site.i;
+    if !site.interior {
         mu[i] = 0.0;
         return;
     }
     let c = phi[i];
     let lap = laplacian(i, stride(p));
-    let g = sum_phi2[lattice_index(p, site, params.box_size)];
+    let g = sum_phi2[lattice_index(p, site.at, params.box_size)];
     let area_term = params.area * (1.0 - area[gid.y] / params.target_area);
     mu[i] = params.bulk * c * (1.0 - c) * (1.0 - 2.0 * c) - params.gradient * lap - area_term * c
         + params.repulsion * c * (g - c * c);

@@ -60,18 +60,23 @@ fn stride(p: Patch) -> u32 {
     return p.w + 2u;
 }
 
-// The padded index k of a patch as (column, row) of the padded storage, or none (x = w + 2)
-// past its end. Interior sites have column and row in 1..=w, 1..=h.
-fn padded_site(p: Patch, k: u32) -> vec2<u32> {
-    let s = stride(p);
-    if k >= s * (p.h + 2u) {
-        return vec2<u32>(s, 0u);
-    }
-    return vec2<u32>(k % s, k / s);
-}
+// Invocation k of a per-site kernel (`Grid::Sites`: x the padded index, y the cell) in its
+// cell's patch p: the padded site as (column, row), its index in the per-cell arrays, whether k
+// falls in the padded storage at all (a row's last workgroup has spare invocations, which do
+// nothing) and whether the site is interior (column and row in 1..=w, 1..=h: not the halo).
+struct Site {
+    at: vec2<u32>,
+    i: u32,
+    inside: bool,
+    interior: bool,
+};
 
-fn is_interior(p: Patch, site: vec2<u32>) -> bool {
-    return site.x >= 1u && site.x <= p.w && site.y >= 1u && site.y <= p.h;
+fn site_of(p: Patch, k: u32) -> Site {
+    let s = stride(p);
+    let at = vec2<u32>(k % s, k / s);
+    let inside = k < s * (p.h + 2u);
+    let interior = inside && at.x >= 1u && at.x <= p.w && at.y >= 1u && at.y <= p.h;
+    return Site(at, p.offset + k, inside, interior);
 }
 
 // Lattice index gy·L + gx of interior padded site (column, row) (`Patch::global_xy`).

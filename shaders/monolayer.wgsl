@@ -23,15 +23,15 @@ const NO_FAULT: u32 = 0xffffffffu;
 @compute @workgroup_size(64)
 fn predict(@builtin(global_invocation_id) gid: vec3<u32>) {
     let p = patches[gid.y];
-    let site = padded_site(p, gid.x);
-    if site.x >= stride(p) {
+    let site = site_of(p, gid.x);
+    if !site.inside {
         return;
     }
     // The corrector's check starts from no fault; the predictor runs in an earlier dispatch.
     if gid.x == 0u {
         atomicStore(&fault[gid.y], NO_FAULT);
     }
-    let i = p.offset + gid.x;
+    let i = site.i;
     let p0 = phi[i];
     let k = rate[i];
     phi0[i] = p0;
@@ -42,18 +42,18 @@ fn predict(@builtin(global_invocation_id) gid: vec3<u32>) {
 @compute @workgroup_size(64)
 fn correct(@builtin(global_invocation_id) gid: vec3<u32>) {
     let p = patches[gid.y];
-    let site = padded_site(p, gid.x);
-    if site.x >= stride(p) {
+    let site = site_of(p, gid.x);
+    if !site.inside {
         return;
     }
-    let i = p.offset + gid.x;
+    let i = site.i;
     let half = 0.5 * params.dt;
     let v = phi0[i] + half * (k1[i] + rate[i]);
     phi[i] = v;
     // `first_out_of_range` looks at the interior only, row by row; the padded index orders the
     // sites the same way. Written as !(in range) so that a NaN would count, as on the CPU,
     // though a WGSL compiler may assume there are none.
-    if is_interior(p, site) && !(v >= params.phi_min && v <= params.phi_max) {
+    if site.interior && !(v >= params.phi_min && v <= params.phi_max) {
         atomicMin(&fault[gid.y], gid.x);
     }
 }

@@ -24,18 +24,18 @@
 @compute @workgroup_size(64)
 fn velocity_and_rate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let p = patches[gid.y];
-    let site = padded_site(p, gid.x);
-    if site.x >= stride(p) {
+    let site = site_of(p, gid.x);
+    if !site.inside {
         return;
     }
-    let i = p.offset + gid.x;
-    if !is_interior(p, site) {
+    let i = site.i;
+    if !site.interior {
         velocity[i] = vec2<f32>(0.0, 0.0);
         rate[i] = 0.0;
         return;
     }
     let s = stride(p);
-    let m = mobility[lattice_index(p, site, params.box_size)];
+    let m = mobility[lattice_index(p, site.at, params.box_size)];
     let v = vec2<f32>(fx[i] * m, fy[i] * m);
     velocity[i] = v;
     let c = phi[i];
