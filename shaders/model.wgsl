@@ -39,7 +39,14 @@ struct Params {
     dt: f32,
     phi_min: f32,
     phi_max: f32,
+    // ξ_cell of this phase (0 during relaxation), and the relative tolerance the friction CG
+    // asks of its recursive residual: the CPU's times `RECURSIVE_RESIDUAL_MARGIN`
+    // (src/gpu/buffers.rs; shaders/friction.wgsl).
+    xi_cell: f32,
+    friction_tolerance: f32,
     _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 };
 
 // One cell's patch (src/model/lattice.rs `Patch`) and where its padded storage starts in the

@@ -1,9 +1,10 @@
 // src/model/motion.rs on the GPU: the velocity and the rate of Eq. 1 on each patch,
 //
-//   v_i = f_i × mobility,   ∂_t φ_i = −v_i · ∇φ_i − J₀ μ_i,
+//   v_i = (f_i + pull) × mobility,   ∂_t φ_i = −v_i · ∇φ_i − J₀ μ_i,
 //
-// for the phases without a friction solve (relaxation, and activity with ξ_cell = 0), where the
-// CPU's pull ξ_c S is zero and its mobility is 1/ξ_relax or 1/ξ_s(x) (`Slot::Mobility`). ∇φ is
+// with the CPU's `Drag` (`Slot::Drag`: the pull ξ_c S in .xy and the mobility in .z): from the
+// friction solve (friction.wgsl) when active with ξ_cell > 0, else a pull of zero and the
+// mobility 1/ξ_relax (relaxation) or 1/ξ_s(x) (activity with ξ_cell = 0). ∇φ is
 // central (`Neighbourhood::gradient`) or upwind, against v, as `Advection` says. v and the rate
 // are zero on the halo, as on the CPU (which writes the interior only of buffers that start
 // zero): Heun adds Δt × rate on the whole padded storage, so the halo of φ stays zero.
@@ -14,7 +15,7 @@
 @group(0) @binding(6) var<storage, read> mu: array<f32>;
 @group(0) @binding(9) var<storage, read> fx: array<f32>;
 @group(0) @binding(10) var<storage, read> fy: array<f32>;
-@group(0) @binding(13) var<storage, read> mobility: array<f32>;
+@group(0) @binding(13) var<storage, read> drag: array<vec4<f32>>;
 @group(0) @binding(14) var<storage, read_write> velocity: array<vec2<f32>>;
 @group(0) @binding(15) var<storage, read_write> rate: array<f32>;
 
@@ -35,8 +36,8 @@ fn velocity_and_rate(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let s = stride(p);
-    let m = mobility[lattice_index(p, site.at, params.box_size)];
-    let v = vec2<f32>(fx[i] * m, fy[i] * m);
+    let d = drag[lattice_index(p, site.at, params.box_size)];
+    let v = vec2<f32>((fx[i] + d.x) * d.z, (fy[i] + d.y) * d.z);
     velocity[i] = v;
     let c = phi[i];
     var g: vec2<f32>;

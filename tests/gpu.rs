@@ -28,6 +28,7 @@ use std::time::Instant;
 
 use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Slot, NO_FAULT};
 use monolayer::model::free_energy::FreeEnergy;
+use monolayer::model::friction::{FrictionProblem, FrictionSolver};
 use monolayer::model::lattice::Patch;
 use monolayer::model::motion::friction_weight;
 use monolayer::model::params::{Advection, FrictionWeights, Laplacian, PassiveForce};
@@ -652,8 +653,8 @@ fn one_relaxation_step_matches_the_cpu() {
     assert_eq!(bits(&again.read(&ctx, Slot::Phi)), bits(&g_phi), "two GPU steps differ");
     eprintln!(
         "one step: {:.3} ms in one submission of {} dispatches (median of 21)",
-        median_ms(&ctx, &again, &Kernel::STEP),
-        Kernel::STEP.len()
+        median_ms(&ctx, &again, &Kernel::step(false, 0)),
+        Kernel::step(false, 0).len()
     );
 }
 
@@ -737,6 +738,12 @@ fn stages_match_the_cpu_at_full_size() {
     m.advance(20).expect("the tissue steps");
     compare_stages(&ctx, &m);
     assert_repeats(&ctx, &m);
+    let iterations = check_friction_solve(&ctx, &m);
+    let mut state = m.state();
+    state.warm_start.iter_mut().for_each(|u| *u = Default::default());
+    let cold = Monolayer::from_state(m.params().clone(), m.seed(), state).expect("the state loads");
+    let cold_iterations = check_friction_solve(&ctx, &cold);
+    eprintln!("the friction solve at full size: {iterations} iterations from the CPU's warm start, {cold_iterations} from u = 0");
     let gpu = GpuMonolayer::new(&ctx, &m).expect("the monolayer fits the device");
     for k in Kernel::ALL {
         eprintln!("{k:?}: {:.3} ms per dispatch (median of 21)", median_ms(&ctx, &gpu, &[k]));
@@ -764,7 +771,7 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
     }
     assert!(text.contains(&format!("{} dispatches", Kernel::FRICTION_SUMS.len())), "{text}");
     assert!(
-        text.contains(&format!("one Heun step without a friction solve: {} dispatches", Kernel::STEP.len())),
+        text.contains(&format!("one Heun step without a friction solve: {} dispatches", Kernel::step(false, 0).len())),
         "{text}"
     );
 }
@@ -808,5 +815,232 @@ fn the_range_check_flags_the_cpus_sites() {
         let want = c.fault().map_or(NO_FAULT, |(a, b, _)| c.patch().idx(a, b) as u32);
         assert_eq!(faults[i], want, "cell {i}: GPU fault at padded index {}, CPU {:?}", faults[i], c.fault());
         assert_eq!(want != NO_FAULT, bad.iter().any(|&(k, _)| k == i), "cell {i}: {:?}", c.fault());
+    }
+}
+
+/// C u = n (ξ_s + ξ_c N) u − ξ_c n Σ_{N8} n u in f64 (an independent reading of Eq. 2's
+/// operator, `model::friction`), 0 where n = 0; n, u as (x, y) pairs per site.
+fn friction_operator(n: &[f64], u: &[[f64; 2]], xi_s: &[f64], xi_c: f64, l: usize) -> Vec<[f64; 2]> {
+    let at = |x: usize, dx: isize, dy: isize| {
+        let (i, j) = ((x % l) as isize, (x / l) as isize);
+        let (i, j) = ((i + dx).rem_euclid(l as isize) as usize, (j + dy).rem_euclid(l as isize) as usize);
+        j * l + i
+    };
+    (0..l * l)
+        .map(|x| {
+            if n[x] <= 0.0 {
+                return [0.0, 0.0];
+            }
+            let (mut nb, mut s) = (0.0, [0.0, 0.0]);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if (dx, dy) != (0, 0) {
+                        let y = at(x, dx, dy);
+                        nb += n[y];
+                        s[0] += n[y] * u[y][0];
+                        s[1] += n[y] * u[y][1];
+                    }
+                }
+            }
+            let d = n[x] * (xi_s[x] + xi_c * nb);
+            [d * u[x][0] - xi_c * n[x] * s[0], d * u[x][1] - xi_c * n[x] * s[1]]
+        })
+        .collect()
+}
+
+/// ‖F − C u‖/‖F‖ in f64.
+fn true_residual(n: &[f64], f: &[[f64; 2]], u: &[[f64; 2]], xi_s: &[f64], xi_c: f64, l: usize) -> f64 {
+    let cu = friction_operator(n, u, xi_s, xi_c, l);
+    let (mut num, mut den) = (0.0, 0.0);
+    for (f, c) in f.iter().zip(&cu) {
+        num += (f[0] - c[0]).powi(2) + (f[1] - c[1]).powi(2);
+        den += f[0] * f[0] + f[1] * f[1];
+    }
+    (num / den).sqrt()
+}
+
+fn pairs(v: &[f32]) -> Vec<[f64; 2]> {
+    v.chunks_exact(2).map(|p| [p[0] as f64, p[1] as f64]).collect()
+}
+
+/// The friction solve of Eq. 2 on the GPU (shaders/friction.wgsl), from the CPU's warm start
+/// and from a cold start (u = 0, so that CG iterates): its solution u meets the CPU's relative tolerance on the true residual ‖F − C u‖/‖F‖,
+/// computed here in f64 from the GPU's own n and F; it is as close to an exact solve (the CPU's
+/// at 10⁻¹⁰) as the CPU's own solve at the same tolerance; the mobility is 1/[ξ_s + ξ_c N]
+/// within f32 rounding; and the pull is ξ_c Σ_{N8} n u of the GPU's u within f32 rounding.
+#[test]
+fn the_friction_solve_meets_the_cpus_tolerance() {
+    let Some(ctx) = context() else { return };
+    let warm = reduced_tissue();
+    let mut state = warm.state();
+    state.warm_start.iter_mut().for_each(|u| *u = Default::default());
+    let cold = Monolayer::from_state(warm.params().clone(), warm.seed(), state).expect("the state loads");
+    let warm_iterations = check_friction_solve(&ctx, warm);
+    let cold_iterations = check_friction_solve(&ctx, &cold);
+    assert!(cold_iterations > 0, "from u = 0 CG must iterate");
+    assert!(warm_iterations <= cold_iterations);
+}
+
+/// One solve's checks; returns its iterations.
+fn check_friction_solve(ctx: &GpuContext, m: &Monolayer) -> u32 {
+    let p = m.params().clone();
+    let (l, xi_c, tol) = (p.box_size, p.xi_cell, p.friction_tolerance);
+    let gpu = GpuMonolayer::new(ctx, m).expect("the monolayer fits the device");
+    assert!(gpu.state().solves_friction);
+    gpu.run(ctx, &[&Kernel::FRICTION_SUMS[..], &Kernel::friction_solve(gpu.solve_iterations)].concat());
+    let solve = gpu.read_solve(ctx);
+    eprintln!("GPU friction solve: {solve:?}");
+    assert!(solve.converged(), "the GPU solve did not converge in {} iterations: {solve:?}", gpu.solve_iterations);
+    let n: Vec<f64> = gpu.read(ctx, Slot::Weight).iter().map(|&v| v as f64).collect();
+    let f = pairs(&gpu.read(ctx, Slot::Force));
+    let u = pairs(&gpu.read(ctx, Slot::MeanVelocity));
+    let xi_s = &m.lattice().xi_s;
+    let residual = true_residual(&n, &f, &u, xi_s, xi_c, l);
+    eprintln!(
+        "true residual of the GPU's u: {residual:.3e} (its own CG residual {:.3e}, tolerance {tol:e})",
+        solve.residual()
+    );
+    assert!(residual <= tol, "the GPU's solution misses the tolerance: {residual:e} > {tol:e}");
+    for (x, (&n, u)) in n.iter().zip(&u).enumerate() {
+        if n == 0.0 {
+            assert_eq!(*u, [0.0, 0.0], "site {x} is outside the solve and must keep u = 0");
+        }
+    }
+
+    // Against an exact solve of the CPU's n and F, and the CPU's own solve at its tolerance.
+    let cpu = evaluated(m);
+    let lat = cpu.lattice();
+    let solve_cpu = |tolerance: f64| {
+        let mut s = FrictionSolver::new(l);
+        s.mean_velocity.copy_from_slice(m.warm_start());
+        let pb =
+            FrictionProblem { weight: &lat.weight, force: &lat.force, xi_s, xi_c, tolerance, max_iterations: 10_000 };
+        let stats = s.solve(&pb).expect("the CPU solves");
+        (s, stats)
+    };
+    let (exact, _) = solve_cpu(1e-10);
+    let (own, own_stats) = solve_cpu(tol);
+    let distance = |u: &[[f64; 2]]| -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for (a, b) in u.iter().zip(&exact.mean_velocity) {
+            num += (a[0] - b.re).powi(2) + (a[1] - b.im).powi(2);
+            den += b.norm_sqr();
+        }
+        (num / den).sqrt()
+    };
+    let own_u: Vec<[f64; 2]> = own.mean_velocity.iter().map(|z| [z.re, z.im]).collect();
+    let (d_gpu, d_cpu) = (distance(&u), distance(&own_u));
+    eprintln!(
+        "‖u − u_exact‖/‖u_exact‖: GPU {d_gpu:.3e} ({} iterations), CPU at the same tolerance {d_cpu:.3e} ({} iterations)",
+        solve.iterations[0].max(solve.iterations[1]),
+        own_stats.iterations
+    );
+
+    // The mobility and the pull from the GPU's n and u, within f32 rounding.
+    let drag = gpu.read(ctx, Slot::Drag);
+    let mut mobility = Worst::default();
+    let mut pull = Worst::default();
+    for x in 0..l * l {
+        let (i, j) = (x % l, x / l);
+        let (mut sum_n, mut s, mut s_abs) = (0.0, [0.0, 0.0], [0.0, 0.0]);
+        for dy in [l - 1, 0, 1] {
+            for dx in [l - 1, 0, 1] {
+                if (dx, dy) != (0, 0) {
+                    let y = ((j + dy) % l) * l + (i + dx) % l;
+                    sum_n += n[y];
+                    for c in 0..2 {
+                        s[c] += n[y] * u[y][c];
+                        s_abs[c] += (n[y] * u[y][c]).abs();
+                    }
+                }
+            }
+        }
+        let total = xi_s[x] + xi_c * sum_n;
+        let at = || format!("site ({i}, {j})");
+        // ξ_s rounded, N's sum (exact for whole-patch weights, 9 roundings at most), ξ_c N, the
+        // sum, the division: 12 roundings of 1/total.
+        mobility.check(drag[4 * x + 2], 1.0 / total, 12.0 * U / total, at);
+        // Eight products and seven sums, ξ_c's product: 10 roundings of ξ_c Σ|n u|.
+        for c in 0..2 {
+            pull.check(drag[4 * x + c], xi_c * s[c], 10.0 * U * xi_c * s_abs[c], at);
+        }
+    }
+    mobility.assert_within("mobility 1/[ξ_s + ξ_c N]");
+    pull.assert_within("pull ξ_c S");
+    solve.iterations[0].max(solve.iterations[1])
+}
+
+/// The largest |a − b| over every padded site of every cell, a the GPU's φ in its layout.
+fn max_phi_difference(layout: &monolayer::gpu::buffers::Layout, gpu: &[f32], cpu: &Monolayer) -> f64 {
+    cpu.cells()
+        .iter()
+        .enumerate()
+        .flat_map(|(i, c)| {
+            let g = layout.cell(i, gpu).to_vec();
+            c.phi().padded().into_iter().zip(g).map(|(c, g)| (g as f64 - c).abs())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// One active Heun step with cell–cell friction on fixed patches, GPU against CPU: both solve
+/// Eq. 2 twice (predictor, corrector) to the same relative tolerance by different methods
+/// (Jacobi CG in f32 here, multigrid CG in f64 there), so their steps differ by more than f32
+/// rounding: by what the tolerance leaves free in u. The measure of that is the CPU's own step at
+/// the tolerance against its step with both solves at 10⁻⁸: the GPU's step must be as close to
+/// the tight step as 4 times that plus 8 roundings of φ in f32 (and far closer than the step
+/// moves φ), from the warm start and from a cold one. No cell leaves φ's range; the solves
+/// converged. Two uploads step to the same bits.
+#[test]
+fn one_active_step_with_friction_matches_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let warm = reduced_tissue();
+    let mut state = warm.state();
+    state.warm_start.iter_mut().for_each(|u| *u = Default::default());
+    let cold = Monolayer::from_state(warm.params().clone(), warm.seed(), state).expect("the state loads");
+    for (what, m) in [("warm start", warm), ("cold start", &cold)] {
+        let step_cpu = |tolerance: f64| {
+            let mut c = m.clone();
+            let p = Params { friction_tolerance: tolerance, ..m.params().clone() };
+            c.set_params(p).expect("valid tolerance");
+            c.step_on_fixed_patches().expect("the CPU steps");
+            c
+        };
+        let (cpu, tight) = (step_cpu(m.params().friction_tolerance), step_cpu(1e-8));
+        let gpu = GpuMonolayer::new(&ctx, m).expect("the monolayer fits the device");
+        gpu.step(&ctx);
+        let solve = gpu.read_solve(&ctx);
+        assert!(solve.converged(), "{what}: the corrector's solve did not converge: {solve:?}");
+        let (g_phi, faults) = (gpu.read(&ctx, Slot::Phi), gpu.read_u32(&ctx, Slot::Fault));
+        assert!(faults.iter().all(|&f| f == NO_FAULT), "{what}: φ left its range on the GPU");
+        let layout = &gpu.state().layout;
+        let d_gpu = max_phi_difference(layout, &g_phi, &tight);
+        let start: Vec<f32> = layout.flatten(m.cells().iter().map(|c| c.phi().data));
+        let moved = max_phi_difference(layout, &start, &tight);
+        let d_cpu = max_phi_difference(layout, &layout.flatten(cpu.cells().iter().map(|c| c.phi().data)), &tight);
+        let d_gpu_cpu = max_phi_difference(layout, &g_phi, &cpu);
+        // φ itself in f32: the step's own rounding (4 roundings of |φ|, as in the relaxation
+        // step's bound, doubled for the two solves' f32 residuals).
+        let phi_max = start.iter().fold(0.0f64, |a, &v| a.max((v as f64).abs()));
+        let rounding = 8.0 * U * phi_max;
+        let bound = 4.0 * d_cpu + rounding;
+        eprintln!(
+            "{what}: max |φ' − φ'_tight|: GPU {d_gpu:.3e}, CPU at the tolerance {d_cpu:.3e}, bound 4 × that + \
+             {rounding:.2e} = {bound:.2e}; GPU − CPU {d_gpu_cpu:.3e}; the step moved φ by {moved:.3e}; \
+             corrector's solve: {} iterations",
+            solve.iterations[0].max(solve.iterations[1])
+        );
+        assert!(d_gpu <= bound, "{what}: the GPU step is {d_gpu:e} from the tight one (bound {bound:e})");
+        assert!(d_gpu <= 1e-2 * moved, "{what}: the GPU step must be far closer than the step is long");
+        // Fixed orders in every sum of the solve: a second upload steps to the same bits.
+        let again = GpuMonolayer::new(&ctx, m).expect("the monolayer fits the device");
+        again.step(&ctx);
+        let bits = |v: Vec<f32>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for slot in [Slot::Phi, Slot::MeanVelocity, Slot::Drag] {
+            assert_eq!(
+                bits(again.read(&ctx, slot)),
+                bits(gpu.read(&ctx, slot)),
+                "{what}: two GPU steps differ in {slot:?}"
+            );
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! The state the kernels read and write, on the device: the cells' φ on their patches, the
 //! patch geometry, the parameters as a uniform, and the fields the stages derive (Σφ, Σφ², A_i,
-//! μ_i, Q_i, Q̂_i, f_i, n and F, v_i and ∂_t φ_i, and Heun's φ_n, R(φ_n) and range faults).
+//! μ_i, Q_i, Q̂_i, f_i, n and F, the friction solve's operator, vectors and scalars, the drag,
+//! v_i and ∂_t φ_i, and Heun's φ_n, R(φ_n) and range faults).
 //! Uploaded from a CPU [`Monolayer`], in f32.
 //!
 //! The per-cell fields (φ, μ, f_x, f_y) are every cell's padded patch storage one after the
@@ -45,9 +46,10 @@ pub enum Slot {
     Weight = 11,
     /// F = Σ_j w_j f_j on the lattice, (x, y) per site.
     Force = 12,
-    /// The mobility on the lattice: 1/ξ_relax in relaxation, 1/ξ_s(x) when active (the
-    /// friction solve's 1/[ξ_s + ξ_c N] is still to come).
-    Mobility = 13,
+    /// The CPU's `motion::Drag` on the lattice, with ξ_s(x): (pull ξ_c S, mobility, ξ_s) per
+    /// site. The friction solve writes the pull and the mobility 1/[ξ_s + ξ_c N]; without one
+    /// the pull is 0 and the mobility 1/ξ_relax (relaxation) or 1/ξ_s(x) (ξ_cell = 0).
+    Drag = 13,
     /// v_i, (x, y) per padded site of each cell (one buffer for both, as F: a kernel may bind
     /// at most 8 storage buffers, WebGPU's default, and the motion kernel needs them all).
     Velocity = 14,
@@ -59,13 +61,25 @@ pub enum Slot {
     /// Per cell, the padded index of the first site (in storage order, which is the CPU's row
     /// by row) where the corrector's φ left [φ_min, φ_max], or `NO_FAULT`.
     Fault = 18,
+    /// The friction operator's diagonal n (ξ_s + ξ_c N), 0 outside the solve (n = 0).
+    Diagonal = 19,
+    /// u = V/n, (x, y) per lattice site: the friction solve's solution and next warm start.
+    MeanVelocity = 20,
+    /// The friction CG's residual r, direction p and product q = C p, (x, y) per site.
+    Residual = 21,
+    Direction = 22,
+    Product = 23,
+    /// Per workgroup of the lattice, partial sums of the CG's inner products (two vec4 each).
+    Partials = 24,
+    /// The CG's scalars, [`SolveScalars`].
+    Solve = 25,
 }
 
 /// `Slot::Fault` of a cell whose φ stayed in range.
 pub const NO_FAULT: u32 = u32::MAX;
 
 impl Slot {
-    pub const ALL: [Slot; 19] = [
+    pub const ALL: [Slot; 26] = [
         Slot::Params,
         Slot::Patches,
         Slot::Phi,
@@ -79,18 +93,33 @@ impl Slot {
         Slot::Fy,
         Slot::Weight,
         Slot::Force,
-        Slot::Mobility,
+        Slot::Drag,
         Slot::Velocity,
         Slot::Rate,
         Slot::Phi0,
         Slot::K1,
         Slot::Fault,
+        Slot::Diagonal,
+        Slot::MeanVelocity,
+        Slot::Residual,
+        Slot::Direction,
+        Slot::Product,
+        Slot::Partials,
+        Slot::Solve,
     ];
 
     pub fn binding(self) -> u32 {
         self as u32
     }
 }
+
+/// The fraction of the CPU's relative tolerance that the GPU's friction CG asks of its own
+/// residual. CG updates r recursively (r −= α q); in f32 that r drifts from the true F − C u by
+/// rounding accumulated over the iterations, 7 % of the tolerance after 197 iterations at full
+/// size from a cold start (tests/gpu.rs), where the true residual then missed 10⁻⁴. Asking half
+/// the tolerance of the recursive residual keeps the true one within the CPU's tolerance at the
+/// cost of a few more iterations (CG's convergence is geometric).
+pub const RECURSIVE_RESIDUAL_MARGIN: f64 = 0.5;
 
 /// The parameters of the stages, as `Params` in `shaders/model.wgsl` (same fields, same
 /// order): the coefficients of [`FreeEnergy`], the knobs of shape, forces and motion, and the
@@ -117,12 +146,14 @@ pub struct GpuParams {
     pub dt: f32,
     pub phi_min: f32,
     pub phi_max: f32,
-    pub pad: u32,
+    pub xi_cell: f32,
+    pub friction_tolerance: f32,
+    pub pad: [u32; 3],
 }
 
 impl GpuParams {
-    /// The same coefficients as the CPU derives (`FreeEnergy::new`), rounded once to f32; ζ is
-    /// zero during relaxation, as in `Monolayer::evaluate`.
+    /// The same coefficients as the CPU derives (`FreeEnergy::new`), rounded once to f32; ζ and
+    /// ξ_cell are zero during relaxation, as in `Monolayer::evaluate`.
     pub fn new(p: &Params, phase: Phase) -> Self {
         let fe = FreeEnergy::new(p);
         GpuParams {
@@ -158,7 +189,9 @@ impl GpuParams {
             dt: p.dt as f32,
             phi_min: p.phi_min as f32,
             phi_max: p.phi_max as f32,
-            pad: 0,
+            xi_cell: if phase == Phase::Active { p.xi_cell as f32 } else { 0.0 },
+            friction_tolerance: (p.friction_tolerance * RECURSIVE_RESIDUAL_MARGIN) as f32,
+            pad: [0; 3],
         }
     }
 }
@@ -282,7 +315,9 @@ impl DeviceState {
         let params = GpuParams::new(m.params(), m.phase());
         let phi = layout.flatten(m.cells().iter().map(|c| c.phi().data));
         let (l2, n, total) = (layout.box_size * layout.box_size, layout.n_cells(), layout.total);
-        let mobility = mobility(m);
+        let drag = drag(m);
+        let warm_start: Vec<[f32; 2]> = m.warm_start().iter().map(|u| [u.re as f32, u.im as f32]).collect();
+        let groups = (l2).div_ceil(LATTICE_GROUP);
         let buffers = Slot::ALL
             .iter()
             .map(|&slot| {
@@ -300,10 +335,15 @@ impl DeviceState {
                     Slot::Area => zeros(n),
                     Slot::Shape | Slot::QHat => zeros(2 * n),
                     Slot::Mu | Slot::Fx | Slot::Fy => zeros(total),
-                    Slot::Mobility => init(bytemuck::cast_slice(&mobility), STORAGE),
+                    Slot::Drag => init(bytemuck::cast_slice(&drag), STORAGE),
                     Slot::Velocity => zeros(2 * total),
                     Slot::Rate | Slot::Phi0 | Slot::K1 => zeros(total),
                     Slot::Fault => init(bytemuck::cast_slice(&vec![NO_FAULT; n]), STORAGE),
+                    Slot::Diagonal => zeros(l2),
+                    Slot::MeanVelocity => init(bytemuck::cast_slice(&warm_start), STORAGE),
+                    Slot::Residual | Slot::Direction | Slot::Product => zeros(2 * l2),
+                    Slot::Partials => zeros(2 * 4 * groups),
+                    Slot::Solve => zeros(std::mem::size_of::<SolveScalars>() / 4),
                 }
             })
             .collect();
@@ -316,14 +356,56 @@ impl DeviceState {
     }
 }
 
-/// The mobility of `Monolayer::evaluate` without a friction solve, computed in f64 as the CPU
-/// does and rounded once: 1/ξ_relax during relaxation, 1/ξ_s(x) when active. (When active with
-/// ξ_cell > 0 the CPU takes the friction solver's instead; the GPU has none yet.)
-fn mobility(m: &Monolayer) -> Vec<f32> {
+/// `Slot::Drag` as uploaded: a pull of zero; the mobility of `Monolayer::evaluate` without a
+/// friction solve, computed in f64 as the CPU does and rounded once (1/ξ_relax during
+/// relaxation, 1/ξ_s(x) when active; with ξ_cell > 0 the friction solve replaces it in every
+/// evaluation); and ξ_s(x).
+fn drag(m: &Monolayer) -> Vec<[f32; 4]> {
     let p = m.params();
-    match m.phase() {
-        Phase::Relaxation => vec![(1.0 / p.xi_relax) as f32; p.box_size * p.box_size],
-        Phase::Active => m.lattice().xi_s.iter().map(|&xs| (1.0 / xs) as f32).collect(),
+    let xi_s = &m.lattice().xi_s;
+    let mobility = |xs: f64| match m.phase() {
+        Phase::Relaxation => 1.0 / p.xi_relax,
+        Phase::Active => 1.0 / xs,
+    };
+    xi_s.iter().map(|&xs| [0.0, 0.0, mobility(xs) as f32, xs as f32]).collect()
+}
+
+/// Sites per workgroup of the friction solve's lattice kernels (`GROUP` in
+/// `shaders/friction.wgsl`): one partial sum per workgroup.
+pub const LATTICE_GROUP: usize = 256;
+
+/// The friction CG's scalars, as `Solve` in `shaders/friction.wgsl` (x and y components).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct SolveScalars {
+    pub rz: [f32; 2],
+    pub alpha: [f32; 2],
+    pub beta: [f32; 2],
+    /// ‖r_c‖² of the last residual.
+    pub rr: [f32; 2],
+    /// (tolerance · ‖F‖)² / 2.
+    pub target2: f32,
+    /// ‖F‖².
+    pub ff: f32,
+    pub iterations: [u32; 2],
+    /// 1 once the component met its target.
+    pub done: [u32; 2],
+    pub pad: [u32; 2],
+}
+
+impl SolveScalars {
+    /// Whether both components met their target.
+    pub fn converged(&self) -> bool {
+        self.done == [1, 1]
+    }
+
+    /// ‖F − C u‖/‖F‖ by the CG's own (recursively updated) residual, as the CPU reports it.
+    pub fn residual(&self) -> f64 {
+        if self.ff == 0.0 {
+            0.0
+        } else {
+            ((self.rr[0] as f64 + self.rr[1] as f64) / self.ff as f64).sqrt()
+        }
     }
 }
 
@@ -342,12 +424,19 @@ fn slot_label(slot: Slot) -> &'static str {
         Slot::Fy => "fy",
         Slot::Weight => "weight",
         Slot::Force => "force",
-        Slot::Mobility => "mobility",
+        Slot::Drag => "drag",
         Slot::Velocity => "velocity",
         Slot::Rate => "rate",
         Slot::Phi0 => "phi0",
         Slot::K1 => "k1",
         Slot::Fault => "fault",
+        Slot::Diagonal => "diagonal",
+        Slot::MeanVelocity => "mean_velocity",
+        Slot::Residual => "residual",
+        Slot::Direction => "direction",
+        Slot::Product => "product",
+        Slot::Partials => "partials",
+        Slot::Solve => "solve",
     }
 }
 
@@ -355,12 +444,13 @@ fn slot_label(slot: Slot) -> &'static str {
 mod tests {
     use super::*;
 
-    /// The WGSL structs `Params` (20 four-byte fields) and `Patch` (8) have these sizes; a
-    /// field added on one side only changes them.
+    /// The WGSL structs `Params` (24 four-byte fields), `Patch` (8) and `Solve` (16) have these
+    /// sizes; a field added on one side only changes them.
     #[test]
     fn structs_have_the_wgsl_sizes() {
-        assert_eq!(std::mem::size_of::<GpuParams>(), 80);
+        assert_eq!(std::mem::size_of::<GpuParams>(), 96);
         assert_eq!(std::mem::size_of::<GpuPatch>(), 32);
+        assert_eq!(std::mem::size_of::<SolveScalars>(), 64);
     }
 
     /// Each cell's padded storage follows the previous one, and `cell` finds it again.

@@ -1,10 +1,13 @@
 //! The compute kernels, their pipelines and dispatches, and the object that ties them to a device
-//! state: [`GpuMonolayer`], which can take a whole Heun step where there is no friction solve.
+//! state: [`GpuMonolayer`], which takes a whole Heun step on fixed patches, with the friction
+//! solve where the phase has one.
 //!
 //! Each kernel's WGSL sits in `shaders/`, one file per stage, named like its CPU module; every
 //! file is compiled with `shaders/model.wgsl` (the shared parameters and patches) in front.
 
-use crate::gpu::buffers::{DeviceState, Slot};
+#[cfg(not(target_arch = "wasm32"))]
+use crate::gpu::buffers::SolveScalars;
+use crate::gpu::buffers::{DeviceState, Slot, LATTICE_GROUP};
 use crate::gpu::context::{GpuContext, GpuError};
 use crate::model::monolayer::Monolayer;
 
@@ -15,6 +18,7 @@ const SHAPE_WGSL: &str = include_str!("../../shaders/shape.wgsl");
 const FORCES_WGSL: &str = include_str!("../../shaders/forces.wgsl");
 const MOTION_WGSL: &str = include_str!("../../shaders/motion.wgsl");
 const MONOLAYER_WGSL: &str = include_str!("../../shaders/monolayer.wgsl");
+const FRICTION_WGSL: &str = include_str!("../../shaders/friction.wgsl");
 
 /// The per-site kernels' workgroup width (`@workgroup_size(64)`); the lattice kernels'
 /// workgroups are 8 × 8 sites.
@@ -43,6 +47,25 @@ pub enum Kernel {
     /// Heun's corrector and the range check (`shaders/monolayer.wgsl`); needs the predictor's
     /// φ_n and R(φ_n), and the rate at φ*.
     Correct,
+    /// The friction operator for the current n: its diagonal and the mobility
+    /// (`shaders/friction.wgsl`, as `FrictionSolver::prepare`).
+    FrictionSetup,
+    /// r = F − C u from the warm start, p = M r, and the partial sums of the start.
+    CgStart,
+    /// The start's scalars and targets (one workgroup).
+    CgBegin,
+    /// q = C p and partial sums of p·q.
+    CgProduct,
+    /// α per component (one workgroup).
+    CgAlpha,
+    /// u += α p, r −= α q, partial sums of r·z and ‖r‖².
+    CgUpdate,
+    /// The iteration's end: the stop test and β (one workgroup).
+    CgBeta,
+    /// p = M r + β p.
+    CgDirection,
+    /// The pull ξ_c S from the solution (`FrictionSolver::pull_from_solution`).
+    FrictionPull,
 }
 
 /// How a kernel's invocations cover the state.
@@ -54,11 +77,16 @@ enum Grid {
     /// One invocation per padded site of each cell: x the site, y the cell (so at most 65,535
     /// cells, WebGPU's workgroups per dimension; `Layout::fits` checks it).
     Sites,
+    /// One invocation per lattice site in row-major order, 256 per workgroup (the friction
+    /// solve: one partial sum per workgroup).
+    LatticeRows,
+    /// One workgroup: the friction solve's scalars.
+    Single,
 }
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 9] = [
+    pub const ALL: [Kernel; 18] = [
         Kernel::LatticeSums,
         Kernel::CellArea,
         Kernel::ChemicalPotential,
@@ -68,6 +96,15 @@ impl Kernel {
         Kernel::VelocityAndRate,
         Kernel::Predict,
         Kernel::Correct,
+        Kernel::FrictionSetup,
+        Kernel::CgStart,
+        Kernel::CgBegin,
+        Kernel::CgProduct,
+        Kernel::CgAlpha,
+        Kernel::CgUpdate,
+        Kernel::CgBeta,
+        Kernel::CgDirection,
+        Kernel::FrictionPull,
     ];
 
     /// One evaluation of the rate R(φ) where there is no friction solve: Σφ², A_i, μ_i, Q̂_i, f_i,
@@ -90,18 +127,45 @@ impl Kernel {
         out
     };
 
-    /// One Heun step without a friction solve: R(φ), the predictor, R(φ*), the corrector.
-    pub const STEP: [Kernel; 14] = {
-        let mut out = [Kernel::Predict; 14];
-        let mut k = 0;
-        while k < 6 {
-            out[k] = Kernel::RATE[k];
-            out[7 + k] = Kernel::RATE[k];
-            k += 1;
+    /// The friction solve's start: the operator, the residual of the warm start, the targets.
+    pub const SOLVE_START: [Kernel; 3] = [Kernel::FrictionSetup, Kernel::CgStart, Kernel::CgBegin];
+
+    /// One CG iteration of the friction solve.
+    pub const CG_ITERATION: [Kernel; 5] =
+        [Kernel::CgProduct, Kernel::CgAlpha, Kernel::CgUpdate, Kernel::CgBeta, Kernel::CgDirection];
+
+    /// The friction solve of Eq. 2 with `iterations` CG iterations recorded (those after both
+    /// components converged return at once), then the pull.
+    pub fn friction_solve(iterations: usize) -> Vec<Kernel> {
+        let mut out = Kernel::SOLVE_START.to_vec();
+        for _ in 0..iterations {
+            out.extend_from_slice(&Kernel::CG_ITERATION);
         }
-        out[13] = Kernel::Correct;
+        out.push(Kernel::FrictionPull);
         out
-    };
+    }
+
+    /// One evaluation of the rate R(φ): [`Self::RATE`], with the friction sums and the solve
+    /// before the velocities when the phase has cell–cell friction.
+    pub fn rate(solves_friction: bool, iterations: usize) -> Vec<Kernel> {
+        if !solves_friction {
+            return Kernel::RATE.to_vec();
+        }
+        let mut out = Kernel::FRICTION_SUMS.to_vec();
+        out.extend(Kernel::friction_solve(iterations));
+        out.push(Kernel::VelocityAndRate);
+        out
+    }
+
+    /// One Heun step: R(φ), the predictor, R(φ*), the corrector.
+    pub fn step(solves_friction: bool, iterations: usize) -> Vec<Kernel> {
+        let rate = Kernel::rate(solves_friction, iterations);
+        let mut out = rate.clone();
+        out.push(Kernel::Predict);
+        out.extend(rate);
+        out.push(Kernel::Correct);
+        out
+    }
 
     /// The stage's WGSL file and the kernel's entry point in it.
     fn source(self) -> (&'static str, &'static str) {
@@ -115,6 +179,15 @@ impl Kernel {
             Kernel::VelocityAndRate => (MOTION_WGSL, "velocity_and_rate"),
             Kernel::Predict => (MONOLAYER_WGSL, "predict"),
             Kernel::Correct => (MONOLAYER_WGSL, "correct"),
+            Kernel::FrictionSetup => (FRICTION_WGSL, "friction_setup"),
+            Kernel::CgStart => (FRICTION_WGSL, "cg_start"),
+            Kernel::CgBegin => (FRICTION_WGSL, "cg_begin"),
+            Kernel::CgProduct => (FRICTION_WGSL, "cg_product"),
+            Kernel::CgAlpha => (FRICTION_WGSL, "cg_alpha"),
+            Kernel::CgUpdate => (FRICTION_WGSL, "cg_update"),
+            Kernel::CgBeta => (FRICTION_WGSL, "cg_beta"),
+            Kernel::CgDirection => (FRICTION_WGSL, "cg_direction"),
+            Kernel::FrictionPull => (FRICTION_WGSL, "friction_pull"),
         }
     }
 
@@ -130,9 +203,18 @@ impl Kernel {
             Kernel::ShapeTensor => &[Params, Patches, Phi, Shape, QHat],
             Kernel::ForceDensity => &[Params, Patches, Phi, Mu, QHat, Fx, Fy],
             Kernel::FrictionSums => &[Params, Patches, Phi, Fx, Fy, Weight, Force],
-            Kernel::VelocityAndRate => &[Params, Patches, Phi, Mu, Fx, Fy, Mobility, Velocity, Rate],
+            Kernel::VelocityAndRate => &[Params, Patches, Phi, Mu, Fx, Fy, Drag, Velocity, Rate],
             Kernel::Predict => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
             Kernel::Correct => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
+            Kernel::FrictionSetup => &[Params, Weight, Drag, Diagonal],
+            Kernel::CgStart => &[Params, Weight, Force, Diagonal, MeanVelocity, Residual, Direction, Partials],
+            Kernel::CgBegin => &[Params, Partials, Solve],
+            Kernel::CgProduct => &[Params, Weight, Diagonal, MeanVelocity, Direction, Product, Partials, Solve],
+            Kernel::CgAlpha => &[Params, Partials, Solve],
+            Kernel::CgUpdate => &[Params, Diagonal, MeanVelocity, Residual, Direction, Product, Partials, Solve],
+            Kernel::CgBeta => &[Params, Partials, Solve],
+            Kernel::CgDirection => &[Params, Diagonal, Residual, Direction, Solve],
+            Kernel::FrictionPull => &[Params, Weight, Drag, MeanVelocity, Direction, Solve],
         }
     }
 
@@ -145,6 +227,13 @@ impl Kernel {
             | Kernel::VelocityAndRate
             | Kernel::Predict
             | Kernel::Correct => Grid::Sites,
+            Kernel::FrictionSetup
+            | Kernel::CgStart
+            | Kernel::CgProduct
+            | Kernel::CgUpdate
+            | Kernel::CgDirection
+            | Kernel::FrictionPull => Grid::LatticeRows,
+            Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta => Grid::Single,
         }
     }
 
@@ -175,6 +264,20 @@ impl Kernel {
             Kernel::Predict => 2 * padded + 3 * padded + n,
             // φ_n, R(φ_n) and the rate read; φ written.
             Kernel::Correct => 3 * padded + padded + n,
+            // n and the drag read; the diagonal and the mobility written.
+            Kernel::FrictionSetup => l2 + 4 * l2 + l2 + l2,
+            // n, F, the diagonal and u read; r and p written.
+            Kernel::CgStart => l2 + 2 * l2 + l2 + 2 * l2 + 4 * l2,
+            // p, n and the diagonal read; q written.
+            Kernel::CgProduct => 2 * l2 + 2 * l2 + 2 * l2,
+            // u, p, r, q and the diagonal read; u and r written.
+            Kernel::CgUpdate => 8 * l2 + l2 + 4 * l2,
+            // r, p and the diagonal read; p written.
+            Kernel::CgDirection => 4 * l2 + l2 + 2 * l2,
+            // n and u read; the pull written.
+            Kernel::FrictionPull => l2 + 2 * l2 + 2 * l2,
+            // The partial sums, one workgroup.
+            Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta => 8 * l2.div_ceil(LATTICE_GROUP as u64),
         };
         4 * values
     }
@@ -190,6 +293,8 @@ impl Kernel {
             }
             Grid::Cells => [n, 1, 1],
             Grid::Sites => [layout.max_padded.div_ceil(SITES_PER_GROUP) as u32, n, 1],
+            Grid::LatticeRows => [(layout.box_size * layout.box_size).div_ceil(LATTICE_GROUP) as u32, 1, 1],
+            Grid::Single => [1, 1, 1],
         }
     }
 }
@@ -233,7 +338,17 @@ pub struct GpuMonolayer {
     pipelines: Pipelines,
     state: DeviceState,
     bind_groups: Vec<wgpu::BindGroup>,
+    /// CG iterations recorded per friction solve (the host cannot stop early: nothing is read
+    /// back inside a step); a solve that has not converged by then is reported by
+    /// [`Self::read_solve`].
+    pub solve_iterations: usize,
 }
+
+/// CG iterations recorded per friction solve unless set otherwise: enough for a cold start at
+/// the paper's size and χ = 0.001 with the Jacobi preconditioner (about 250 with
+/// `RECURSIVE_RESIDUAL_MARGIN`, tests/gpu.rs), with a margin; a warm-started solve inside a run
+/// takes far fewer, and the iterations after convergence return at once.
+pub const SOLVE_ITERATIONS: usize = 400;
 
 impl GpuMonolayer {
     /// Compiles the kernels and uploads the monolayer's current state; refuses a monolayer
@@ -242,7 +357,7 @@ impl GpuMonolayer {
         let pipelines = Pipelines::new(ctx);
         let state = DeviceState::upload(ctx, m)?;
         let bind_groups = bind_groups(ctx, &pipelines, &state);
-        Ok(GpuMonolayer { pipelines, state, bind_groups })
+        Ok(GpuMonolayer { pipelines, state, bind_groups, solve_iterations: SOLVE_ITERATIONS })
     }
 
     /// Replaces the device state by the monolayer's current one (patches may have moved, so
@@ -283,16 +398,30 @@ impl GpuMonolayer {
         self.run(ctx, &Kernel::FRICTION_SUMS)
     }
 
+    /// The kernels of one evaluation of the rate in the uploaded phase ([`Kernel::rate`]).
+    pub fn rate_kernels(&self) -> Vec<Kernel> {
+        Kernel::rate(self.state.solves_friction, self.solve_iterations)
+    }
+
+    /// The kernels of one Heun step in the uploaded phase ([`Kernel::step`]).
+    pub fn step_kernels(&self) -> Vec<Kernel> {
+        Kernel::step(self.state.solves_friction, self.solve_iterations)
+    }
+
     /// One Heun step on the patches as they are (they do not follow the cells on the GPU yet),
-    /// all in one submission with nothing read back: [`Kernel::STEP`]. Only where the CPU has no
-    /// friction solve (relaxation, or ξ_cell = 0), which the state was uploaded in: the GPU has
-    /// no friction solve yet. Whether φ left its range is in [`Slot::Fault`], per cell.
+    /// with the friction solve where the phase has one, all in one submission with nothing read
+    /// back. Whether φ left its range is in [`Slot::Fault`], per cell; whether the last solve
+    /// converged, in [`Self::read_solve`].
     pub fn step(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
-        assert!(
-            !self.state.solves_friction,
-            "the GPU step needs a phase without a friction solve (relaxation, or xi_cell = 0)"
-        );
-        self.run(ctx, &Kernel::STEP)
+        self.run(ctx, &self.step_kernels())
+    }
+
+    /// The friction solve's scalars after every submitted kernel has finished: its iterations,
+    /// its residual and whether it converged. For tests and diagnostics (a readback).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn read_solve(&self, ctx: &GpuContext) -> SolveScalars {
+        let words = read_f32(ctx, self.state.buffer(Slot::Solve));
+        *bytemuck::from_bytes(bytemuck::cast_slice(&words))
     }
 
     /// A buffer's contents as u32 (`Slot::Fault`), after every submitted kernel has finished. For

@@ -1,7 +1,6 @@
 //! The GPU stepper's stages on wgpu compute (issue 26), f32, beside the CPU core that stays the
-//! reference. This is its foundation: a device ([`context`]), the state the kernels read and
-//! write on it ([`buffers`]), and the kernels of the first stages of one evaluation
-//! ([`kernels`]), each mirroring its CPU module one to one:
+//! reference: a device ([`context`]), the state the kernels read and write on it ([`buffers`]),
+//! and the kernels of one step ([`kernels`]), each mirroring its CPU module one to one:
 //!
 //! | kernel (`shaders/`)                  | CPU                                   | paper           |
 //! |--------------------------------------|---------------------------------------|-----------------|
@@ -11,14 +10,16 @@
 //! | `shape.wgsl` `shape_tensor`          | `model::shape` (Q_i, Q̂_i)            | Eq. 5           |
 //! | `forces.wgsl` `force_density`        | `model::forces::force_density`        | Eqs. 3, 4       |
 //! | `gather.wgsl` `friction_sums`        | `model::monolayer` gathers of n and F | Eq. 2 (Σ_j)     |
+//! | `friction.wgsl` `friction_setup`, `cg_*`, `friction_pull` | `model::friction` (`FrictionSolver`) | Eq. 2 |
 //! | `motion.wgsl` `velocity_and_rate`    | `model::motion::velocity_and_rate`    | Eq. 1           |
 //! | `monolayer.wgsl` `predict`, `correct`| `model::monolayer` `Then` (Heun)      | —               |
 //!
 //! Every sum runs in a fixed order (no float atomics), so two runs on the same adapter and
 //! driver give the same bits. Nothing is read back inside a step: [`GpuMonolayer::read`] is for
-//! tests and diagnostics. Where there is no friction solve (relaxation, or ξ_cell = 0),
-//! [`GpuMonolayer::step`] takes a whole Heun step on fixed patches in one submission. The
-//! friction solve and the moving patches are the next stages (docs/gpu.md).
+//! tests and diagnostics. [`GpuMonolayer::step`] takes a whole Heun step on fixed patches in one
+//! submission, with the friction solve of Eq. 2 (conjugate gradients, Jacobi-preconditioned,
+//! its scalars and stop flags on the device) where the phase has one. The moving patches and a
+//! multigrid preconditioner are the next stages (docs/gpu.md).
 //!
 //! A layer beside `analysis`: it imports only `model` (tested by `tests/layers.rs`).
 

@@ -307,6 +307,12 @@ impl Monolayer {
         &self.cells
     }
 
+    /// u = V/n of the last friction solve, the next solve's initial guess (zero before the
+    /// first; `State::warm_start` without the copy).
+    pub fn warm_start(&self) -> &[C64] {
+        &self.solver.mean_velocity
+    }
+
     pub fn lattice(&self) -> &LatticeFields {
         &self.lattice
     }

@@ -276,11 +276,11 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), S
     Ok(())
 }
 
-/// `monolayer bench --gpu`: the GPU kernels that exist so far (issue 26; no friction solve yet),
-/// timed one by one at the given size from a relaxed tissue a few active steps on: the adapter,
-/// ms per dispatch (the median of `repeats` submissions, each waited for) and the bytes each
-/// must move at the least; then the stages up to the friction solve's right-hand side, and a
-/// Heun step as the GPU takes it where there is no friction solve, each in one submission.
+/// `monolayer bench --gpu`: the GPU kernels (issue 26), timed one by one at the given size from
+/// a relaxed tissue a few active steps on: the adapter, ms per dispatch (the median of `repeats`
+/// submissions, each waited for) and the bytes each must move at the least; then the stages up
+/// to the friction solve's right-hand side, a Heun step without a friction solve (relaxation)
+/// and one with it (the active phase, on fixed patches), each in one submission.
 #[cfg(feature = "gpu")]
 pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -> Result<(), String> {
     use crate::gpu::{GpuContext, GpuMonolayer, Kernel};
@@ -292,8 +292,8 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let p = Params { relax_steps, ..params.clone() };
     let mut m = Monolayer::new(p.clone(), seed).map_err(|e| e.to_string())?;
     m.advance(relax_steps + 5).map_err(|e| e.to_string())?;
-    let gpu = GpuMonolayer::new(&ctx, &m).map_err(|e| e.to_string())?;
-    let time = |kernels: &[Kernel]| -> f64 {
+    let mut gpu = GpuMonolayer::new(&ctx, &m).map_err(|e| e.to_string())?;
+    let time = |gpu: &GpuMonolayer, kernels: &[Kernel]| -> f64 {
         gpu.run(&ctx, kernels);
         ctx.wait();
         let times: Vec<f64> = (0..repeats.max(1))
@@ -312,23 +312,48 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     );
     for k in Kernel::ALL {
         let b = k.compulsory_bytes(gpu.state());
-        println!("  {:<18} {:>8.3} ms/dispatch  {:>6.2} MB", format!("{k:?}"), time(&[k]), b as f64 / 1e6);
+        println!("  {:<18} {:>8.3} ms/dispatch  {:>6.2} MB", format!("{k:?}"), time(&gpu, &[k]), b as f64 / 1e6);
     }
-    let bytes = |kernels: &[Kernel]| kernels.iter().map(|k| k.compulsory_bytes(gpu.state())).sum::<u64>() as f64 / 1e6;
-    // The step's kernels are timed on this active state as they stand (the mobility uploaded is
-    // 1/ξ_s): the dispatches and bytes are those of a step without a friction solve.
+    let bytes = |gpu: &GpuMonolayer, kernels: &[Kernel]| {
+        kernels.iter().map(|k| k.compulsory_bytes(gpu.state())).sum::<u64>() as f64 / 1e6
+    };
+    // The kernels timed one by one leave the state meaningless (a CG step without its α, a
+    // corrector without its predictor): the sequences start again from the uploaded state.
+    gpu.upload(&ctx, &m).map_err(|e| e.to_string())?;
+    // The step without a friction solve is timed on this active state as it stands: its
+    // dispatches and bytes are those of a relaxation step.
     for (what, kernels) in [
         ("up to the friction solve's right-hand side", &Kernel::FRICTION_SUMS[..]),
-        ("one Heun step without a friction solve", &Kernel::STEP[..]),
+        ("one Heun step without a friction solve", &Kernel::step(false, 0)[..]),
     ] {
         println!(
             "{what}: {} dispatches, {:.3} ms in one submission, {:.2} MB at the least",
             kernels.len(),
-            time(kernels),
-            bytes(kernels)
+            time(&gpu, kernels),
+            bytes(&gpu, kernels)
         );
     }
-    println!("not yet on the GPU: the friction solve and the patches following the cells (docs/gpu.md)");
+    // Steps with the friction solve, from the uploaded state on (each timed step is a step of
+    // the same run, on fixed patches); the iterations the solves took decide the dispatches
+    // that work, the rest return at once.
+    gpu.upload(&ctx, &m).map_err(|e| e.to_string())?;
+    let step = gpu.step_kernels();
+    let ms = time(&gpu, &step);
+    let solve = gpu.read_solve(&ctx);
+    let taken = solve.iterations[0].max(solve.iterations[1]) as usize;
+    let working = step.len() - 2 * (gpu.solve_iterations - taken) * Kernel::CG_ITERATION.len();
+    let mut working_kernels = Kernel::step(true, taken);
+    working_kernels.truncate(working);
+    println!(
+        "one Heun step with the friction solve: {} dispatches recorded ({} CG iterations per solve), {ms:.3} ms in one submission; \
+         the last solve took {taken} iterations (residual {:.2e}{}), so about {working} dispatches worked, {:.2} MB at the least",
+        step.len(),
+        gpu.solve_iterations,
+        solve.residual(),
+        if solve.converged() { "" } else { ", NOT CONVERGED" },
+        bytes(&gpu, &working_kernels)
+    );
+    println!("not yet on the GPU: the patches following the cells (docs/gpu.md)");
     Ok(())
 }
 

@@ -1,0 +1,331 @@
+// src/model/friction.rs on the GPU: the force balance of Eq. 2 solved on the lattice for the
+// local mean velocity u = V/n,
+//
+//   C u = F,  C = diag(n (ξ_s + ξ_c N)) − ξ_c diag(n) A₈ diag(n),   N = Σ_{N8} n,
+//
+// then every cell's velocity v_i = [f_i + ξ_c S] / [ξ_s + ξ_c N], S = Σ_{N8} n u (motion.wgsl
+// reads the mobility and the pull from `drag`). Sites with n = 0 are outside the solve: C's row
+// there is zero and u stays 0.
+//
+// Conjugate gradients with the Jacobi preconditioner z = r / diag(C), both velocity components
+// at once (C is real: the x and y components are two independent systems, carried here as the
+// two lanes of a vec2, each with its own step lengths α and β and its own stop). The scalars
+// live on the device (`Solve`); nothing is read back. The host records a fixed number of
+// iterations; a component that has met its target, ‖r_c‖ ≤ tolerance·‖F‖/√2 (as the CPU's),
+// takes no further steps (α = 0), and once both have, the per-site kernels return at once.
+//
+// Sums (r·z, ‖r‖², p·Cp, ‖F‖²) are made in a fixed order: each workgroup of 256 sites adds its
+// sites in a halving tree into one partial sum (`partials`), and one workgroup then adds the
+// partial sums in the same way. No float atomics: the same state on the same adapter gives the
+// same bits.
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(11) var<storage, read> weight: array<f32>;
+@group(0) @binding(12) var<storage, read> force: array<vec2<f32>>;
+@group(0) @binding(13) var<storage, read_write> drag: array<vec4<f32>>;
+@group(0) @binding(19) var<storage, read_write> diagonal: array<f32>;
+@group(0) @binding(20) var<storage, read_write> mean_velocity: array<vec2<f32>>;
+@group(0) @binding(21) var<storage, read_write> residual: array<vec2<f32>>;
+@group(0) @binding(22) var<storage, read_write> direction: array<vec2<f32>>;
+@group(0) @binding(23) var<storage, read_write> product: array<vec2<f32>>;
+@group(0) @binding(24) var<storage, read_write> partials: array<vec4<f32>>;
+@group(0) @binding(25) var<storage, read_write> solve: Solve;
+
+// The CG scalars of both components (x, y), as `SolveScalars` in src/gpu/buffers.rs.
+struct Solve {
+    // r·z of the current residual.
+    rz: vec2<f32>,
+    alpha: vec2<f32>,
+    beta: vec2<f32>,
+    // ‖r‖² of the current residual.
+    rr: vec2<f32>,
+    // (tolerance·‖F‖)²/2: each component's target for ‖r‖².
+    target2: f32,
+    // ‖F‖², both components.
+    ff: f32,
+    // Iterations taken, and whether the component has met its target (1) or not (0).
+    iterations: vec2<u32>,
+    done: vec2<u32>,
+    _pad0: u32,
+    _pad1: u32,
+};
+
+const GROUP: u32 = 256u;
+
+// `partials` holds, per workgroup g of the lattice, (r·z, ‖r‖²) at g and (p·Cp, ‖F‖², 0) at
+// GROUPS + g, GROUPS the number of workgroups over the lattice.
+fn groups() -> u32 {
+    let l = params.box_size;
+    return (l * l + GROUP - 1u) / GROUP;
+}
+
+var<workgroup> tree: array<vec4<f32>, 256>;
+var<workgroup> both_done: u32;
+
+// Adds tree[0..256) into tree[0] by halving (a fixed order); every invocation of the
+// workgroup calls it.
+fn reduce_tree(t: u32) {
+    for (var half = GROUP / 2u; half > 0u; half = half / 2u) {
+        workgroupBarrier();
+        if t < half {
+            tree[t] = tree[t] + tree[t + half];
+        }
+    }
+    workgroupBarrier();
+}
+
+// Whether both components have met their target, uniformly across the workgroup.
+fn solve_finished(t: u32) -> bool {
+    if t == 0u {
+        both_done = solve.done.x & solve.done.y;
+    }
+    return workgroupUniformLoad(&both_done) != 0u;
+}
+
+// The 8 neighbours of lattice site x on the periodic L × L lattice.
+fn neighbour(x: u32, dx: i32, dy: i32) -> u32 {
+    let l = i32(params.box_size);
+    let gx = (i32(x % params.box_size) + dx + l) % l;
+    let gy = (i32(x / params.box_size) + dy + l) % l;
+    return u32(gy * l + gx);
+}
+
+// The vectors C is applied to (WGSL passes no pointers to storage to functions).
+const U: u32 = 0u;
+const P: u32 = 1u;
+
+// v(y) for v = u (`mean_velocity`) or p (`direction`).
+fn vector_at(v: u32, y: u32) -> vec2<f32> {
+    if v == U {
+        return mean_velocity[y];
+    }
+    return direction[y];
+}
+
+// Σ_{N8} n(x') v(x') (`lattice::neighbour_sum8` of n v).
+fn weighted_sum8(x: u32, v: u32) -> vec2<f32> {
+    var s = vec2<f32>(0.0, 0.0);
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            if dx != 0 || dy != 0 {
+                let y = neighbour(x, dx, dy);
+                s += weight[y] * vector_at(v, y);
+            }
+        }
+    }
+    return s;
+}
+
+// (C v)(x) = diag(x) v(x) − ξ_c n(x) Σ_{N8} n v (`multigrid::weights_row`); 0 outside the solve.
+fn apply_c(x: u32, v: u32) -> vec2<f32> {
+    let d = diagonal[x];
+    if d <= 0.0 {
+        return vec2<f32>(0.0, 0.0);
+    }
+    return d * vector_at(v, x) - params.xi_cell * weight[x] * weighted_sum8(x, v);
+}
+
+// z = M r, Jacobi: r / diag(C) in the solve, 0 outside.
+fn precondition(x: u32, r: vec2<f32>) -> vec2<f32> {
+    let d = diagonal[x];
+    return select(vec2<f32>(0.0, 0.0), r / d, d > 0.0);
+}
+
+// The operator for the current n (`FrictionSolver::prepare`): N, diag(C) = n (ξ_s + ξ_c N)
+// (0 where n = 0) and the mobility 1/[ξ_s + ξ_c N] into `drag`.z (ξ_s(x) is `drag`.w).
+@compute @workgroup_size(256)
+fn friction_setup(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let x = gid.x;
+    let l = params.box_size;
+    if x >= l * l {
+        return;
+    }
+    var nb = 0.0;
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            if dx != 0 || dy != 0 {
+                nb += weight[neighbour(x, dx, dy)];
+            }
+        }
+    }
+    let xi_s = drag[x].w;
+    let total = xi_s + params.xi_cell * nb;
+    drag[x].z = 1.0 / total;
+    let n = weight[x];
+    diagonal[x] = select(0.0, n * total, n > 0.0);
+}
+
+// r = F − C u, p = z = M r, from the warm start u; partial sums of r·z, ‖r‖² and ‖F‖²
+// (`Component::load` and the start of `Component::pcg`).
+@compute @workgroup_size(256)
+fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
+            @builtin(workgroup_id) wg: vec3<u32>) {
+    let x = gid.x;
+    let l = params.box_size;
+    var rz = vec2<f32>(0.0, 0.0);
+    var rr = vec2<f32>(0.0, 0.0);
+    var ff = 0.0;
+    if x < l * l && diagonal[x] > 0.0 {
+        let f = force[x];
+        let r = f - apply_c(x, U);
+        let z = precondition(x, r);
+        residual[x] = r;
+        direction[x] = z;
+        rz = r * z;
+        rr = r * r;
+        ff = dot(f, f);
+    } else if x < l * l {
+        residual[x] = vec2<f32>(0.0, 0.0);
+        direction[x] = vec2<f32>(0.0, 0.0);
+    }
+    tree[t] = vec4<f32>(rz, rr);
+    reduce_tree(t);
+    if t == 0u {
+        partials[wg.x] = tree[0];
+    }
+    workgroupBarrier();
+    tree[t] = vec4<f32>(0.0, 0.0, ff, 0.0);
+    reduce_tree(t);
+    if t == 0u {
+        partials[groups() + wg.x] = tree[0];
+    }
+}
+
+// Adds the partial sums from `first` on, one per workgroup of the lattice, in a fixed order
+// (invocation t adds entries t, t + 256, …; then the tree); every invocation calls it.
+fn total_of_partials(t: u32, first: u32) -> vec4<f32> {
+    var s = vec4<f32>(0.0, 0.0, 0.0, 0.0);
+    for (var g = t; g < groups(); g += GROUP) {
+        s += partials[first + g];
+    }
+    tree[t] = s;
+    reduce_tree(t);
+    return tree[0];
+}
+
+// The start's scalars: r·z, ‖r‖², ‖F‖², each component's target, and which components start
+// converged (`Component::pcg`'s first test).
+@compute @workgroup_size(256)
+fn cg_begin(@builtin(local_invocation_index) t: u32) {
+    let a = total_of_partials(t, 0u);
+    let b = total_of_partials(t, groups());
+    if t == 0u {
+        let tol = params.friction_tolerance;
+        solve.rz = a.xy;
+        solve.rr = a.zw;
+        solve.ff = b.z;
+        solve.target2 = tol * tol * b.z * 0.5;
+        solve.alpha = vec2<f32>(0.0, 0.0);
+        solve.beta = vec2<f32>(0.0, 0.0);
+        solve.iterations = vec2<u32>(0u, 0u);
+        solve.done = vec2<u32>(select(0u, 1u, a.z <= solve.target2), select(0u, 1u, a.w <= solve.target2));
+    }
+}
+
+// q = C p and partial sums of p·q.
+@compute @workgroup_size(256)
+fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
+              @builtin(workgroup_id) wg: vec3<u32>) {
+    if solve_finished(t) {
+        return;
+    }
+    let x = gid.x;
+    let l = params.box_size;
+    var pq = vec2<f32>(0.0, 0.0);
+    if x < l * l {
+        let q = apply_c(x, P);
+        product[x] = q;
+        pq = direction[x] * q;
+    }
+    tree[t] = vec4<f32>(pq, 0.0, 0.0);
+    reduce_tree(t);
+    if t == 0u {
+        partials[groups() + wg.x] = tree[0];
+    }
+}
+
+// α = r·z / p·Cp for each component still iterating, 0 for one that has converged.
+@compute @workgroup_size(256)
+fn cg_alpha(@builtin(local_invocation_index) t: u32) {
+    let pq = total_of_partials(t, groups()).xy;
+    if t == 0u {
+        let running = solve.done == vec2<u32>(0u, 0u);
+        solve.alpha = select(vec2<f32>(0.0, 0.0), solve.rz / pq, running);
+    }
+}
+
+// u += α p, r −= α q, z = M r; partial sums of r·z and ‖r‖².
+@compute @workgroup_size(256)
+fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
+             @builtin(workgroup_id) wg: vec3<u32>) {
+    if solve_finished(t) {
+        return;
+    }
+    let x = gid.x;
+    let l = params.box_size;
+    var rz = vec2<f32>(0.0, 0.0);
+    var rr = vec2<f32>(0.0, 0.0);
+    if x < l * l {
+        let alpha = solve.alpha;
+        mean_velocity[x] += alpha * direction[x];
+        let r = residual[x] - alpha * product[x];
+        residual[x] = r;
+        rz = r * precondition(x, r);
+        rr = r * r;
+    }
+    tree[t] = vec4<f32>(rz, rr);
+    reduce_tree(t);
+    if t == 0u {
+        partials[wg.x] = tree[0];
+    }
+}
+
+// One iteration's end for each component still iterating: count it; stop if ‖r‖² met the
+// target, else β = (r·z)_new / (r·z).
+@compute @workgroup_size(256)
+fn cg_beta(@builtin(local_invocation_index) t: u32) {
+    let a = total_of_partials(t, 0u);
+    if t == 0u {
+        let running = solve.done == vec2<u32>(0u, 0u);
+        solve.iterations += select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), running);
+        solve.rr = select(solve.rr, a.zw, running);
+        let met = running & (a.zw <= vec2<f32>(solve.target2, solve.target2));
+        solve.done = select(solve.done, vec2<u32>(1u, 1u), met);
+        solve.beta = select(vec2<f32>(0.0, 0.0), a.xy / solve.rz, running);
+        solve.rz = select(solve.rz, a.xy, running);
+    }
+}
+
+// p = z + β p for each component still iterating.
+@compute @workgroup_size(256)
+fn cg_direction(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
+    if solve_finished(t) {
+        return;
+    }
+    let x = gid.x;
+    let l = params.box_size;
+    if x >= l * l {
+        return;
+    }
+    let running = solve.done == vec2<u32>(0u, 0u);
+    let p = precondition(x, residual[x]) + solve.beta * direction[x];
+    direction[x] = select(direction[x], p, running);
+}
+
+// The pull ξ_c S, S = Σ_{N8} n u, into `drag`.xy (`FrictionSolver::pull_from_solution`); where
+// F vanished everywhere the solution is u = 0, as on the CPU.
+@compute @workgroup_size(256)
+fn friction_pull(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let x = gid.x;
+    let l = params.box_size;
+    if x >= l * l {
+        return;
+    }
+    if solve.ff == 0.0 {
+        mean_velocity[x] = vec2<f32>(0.0, 0.0);
+        drag[x] = vec4<f32>(0.0, 0.0, drag[x].zw);
+        return;
+    }
+    let s = params.xi_cell * weighted_sum8(x, U);
+    drag[x] = vec4<f32>(s, drag[x].zw);
+}
