@@ -7,8 +7,8 @@
 // reads the mobility and the pull from `drag`). Sites with n = 0 are outside the solve: C's row
 // there is zero and u stays 0.
 //
-// Conjugate gradients with the Jacobi preconditioner z = r / diag(C), both velocity components
-// at once (C is real: the x and y components are two independent systems, carried here as the
+// Conjugate gradients preconditioned by one multigrid cycle (multigrid.wgsl, as the CPU) or by
+// Jacobi, z = r / diag(C) (`jacobi`), both velocity components at once (C is real: the x and y components are two independent systems, carried here as the
 // two lanes of a vec2, each with its own step lengths α and β and its own stop). The scalars
 // live on the device (`Solve`); nothing is read back. The host records a fixed number of
 // iterations; a component that has met its target, ‖r_c‖ ≤ tolerance·‖F‖/√2 (as the CPU's),
@@ -30,6 +30,7 @@
 @group(0) @binding(23) var<storage, read_write> product: array<vec2<f32>>;
 @group(0) @binding(24) var<storage, read_write> partials: array<vec4<f32>>;
 @group(0) @binding(25) var<storage, read_write> solve: Solve;
+@group(0) @binding(26) var<storage, read_write> preconditioned: array<vec2<f32>>;
 
 // The CG scalars of both components (x, y), as `SolveScalars` in src/gpu/buffers.rs.
 struct Solve {
@@ -52,8 +53,14 @@ struct Solve {
 
 const GROUP: u32 = 256u;
 
-// `partials` holds, per workgroup g of the lattice, (r·z, ‖r‖²) at g and (p·Cp, ‖F‖², 0) at
-// GROUPS + g, GROUPS the number of workgroups over the lattice.
+// `partials` holds three parts of one vec4 per workgroup g of the lattice (G workgroups): at
+// RR·G + g (‖r‖² of x and y, ‖F‖², 0), at PQ·G + g (p·Cp of x and y, 0, 0), at RZ·G + g (r·z of
+// x and y, 0, 0); each part is written by one kernel of an iteration and read by the next
+// one-workgroup kernel.
+const RR: u32 = 0u;
+const PQ: u32 = 1u;
+const RZ: u32 = 2u;
+
 fn groups() -> u32 {
     let l = params.box_size;
     return (l * l + GROUP - 1u) / GROUP;
@@ -125,11 +132,6 @@ fn apply_c(x: u32, v: u32) -> vec2<f32> {
     return d * vector_at(v, x) - params.xi_cell * weight[x] * weighted_sum8(x, v);
 }
 
-// z = M r, Jacobi: r / diag(C) in the solve, 0 outside.
-fn precondition(x: u32, r: vec2<f32>) -> vec2<f32> {
-    let d = diagonal[x];
-    return select(vec2<f32>(0.0, 0.0), r / d, d > 0.0);
-}
 
 // The operator for the current n (`FrictionSolver::prepare`): N, diag(C) = n (ξ_s + ξ_c N)
 // (0 where n = 0) and the mobility 1/[ξ_s + ξ_c N] into `drag`.z (ξ_s(x) is `drag`.w).
@@ -155,39 +157,60 @@ fn friction_setup(@builtin(global_invocation_id) gid: vec3<u32>) {
     diagonal[x] = select(0.0, n * total, n > 0.0);
 }
 
-// r = F − C u, p = z = M r, from the warm start u; partial sums of r·z, ‖r‖² and ‖F‖²
-// (`Component::load` and the start of `Component::pcg`).
+// r = F − C u from the warm start u, p = 0 (`cg_direction` then sets p = z); partial sums of
+// ‖r‖² and ‖F‖² (`Component::load` and the start of `Component::pcg`). The stop flags of the
+// previous solve are cleared, so that the preconditioner runs.
 @compute @workgroup_size(256)
 fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
             @builtin(workgroup_id) wg: vec3<u32>) {
     let x = gid.x;
     let l = params.box_size;
-    var rz = vec2<f32>(0.0, 0.0);
+    if x == 0u {
+        solve.done = vec2<u32>(0u, 0u);
+    }
     var rr = vec2<f32>(0.0, 0.0);
     var ff = 0.0;
     if x < l * l && diagonal[x] > 0.0 {
         let f = force[x];
         let r = f - apply_c(x, U);
-        let z = precondition(x, r);
         residual[x] = r;
-        direction[x] = z;
-        rz = r * z;
         rr = r * r;
         ff = dot(f, f);
     } else if x < l * l {
         residual[x] = vec2<f32>(0.0, 0.0);
+    }
+    if x < l * l {
         direction[x] = vec2<f32>(0.0, 0.0);
     }
-    tree[t] = vec4<f32>(rz, rr);
+    tree[t] = vec4<f32>(rr, ff, 0.0);
     reduce_tree(t);
     if t == 0u {
-        partials[wg.x] = tree[0];
+        partials[RR * groups() + wg.x] = tree[0];
     }
-    workgroupBarrier();
-    tree[t] = vec4<f32>(0.0, 0.0, ff, 0.0);
+}
+
+// z = M r by Jacobi, r / diag(C) in the solve and 0 outside, into `preconditioned`; partial
+// sums of r·z.
+@compute @workgroup_size(256)
+fn jacobi(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
+          @builtin(workgroup_id) wg: vec3<u32>) {
+    if solve_finished(t) {
+        return;
+    }
+    let x = gid.x;
+    let l = params.box_size;
+    var rz = vec2<f32>(0.0, 0.0);
+    if x < l * l {
+        let d = diagonal[x];
+        let r = residual[x];
+        let z = select(vec2<f32>(0.0, 0.0), r / d, d > 0.0);
+        preconditioned[x] = z;
+        rz = r * z;
+    }
+    tree[t] = vec4<f32>(rz, 0.0, 0.0);
     reduce_tree(t);
     if t == 0u {
-        partials[groups() + wg.x] = tree[0];
+        partials[RZ * groups() + wg.x] = tree[0];
     }
 }
 
@@ -207,18 +230,19 @@ fn total_of_partials(t: u32, first: u32) -> vec4<f32> {
 // converged (`Component::pcg`'s first test).
 @compute @workgroup_size(256)
 fn cg_begin(@builtin(local_invocation_index) t: u32) {
-    let a = total_of_partials(t, 0u);
-    let b = total_of_partials(t, groups());
+    let a = total_of_partials(t, RR * groups());
+    let b = total_of_partials(t, RZ * groups());
     if t == 0u {
         let tol = params.friction_tolerance;
-        solve.rz = a.xy;
-        solve.rr = a.zw;
-        solve.ff = b.z;
-        solve.target2 = tol * tol * b.z * 0.5;
+        let target2 = tol * tol * a.z * 0.5;
+        solve.rz = b.xy;
+        solve.rr = a.xy;
+        solve.ff = a.z;
+        solve.target2 = target2;
         solve.alpha = vec2<f32>(0.0, 0.0);
         solve.beta = vec2<f32>(0.0, 0.0);
         solve.iterations = vec2<u32>(0u, 0u);
-        solve.done = vec2<u32>(select(0u, 1u, a.z <= solve.target2), select(0u, 1u, a.w <= solve.target2));
+        solve.done = select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), a.xy <= vec2<f32>(target2, target2));
     }
 }
 
@@ -240,21 +264,21 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
     tree[t] = vec4<f32>(pq, 0.0, 0.0);
     reduce_tree(t);
     if t == 0u {
-        partials[groups() + wg.x] = tree[0];
+        partials[PQ * groups() + wg.x] = tree[0];
     }
 }
 
 // α = r·z / p·Cp for each component still iterating, 0 for one that has converged.
 @compute @workgroup_size(256)
 fn cg_alpha(@builtin(local_invocation_index) t: u32) {
-    let pq = total_of_partials(t, groups()).xy;
+    let pq = total_of_partials(t, PQ * groups()).xy;
     if t == 0u {
         let running = solve.done == vec2<u32>(0u, 0u);
         solve.alpha = select(vec2<f32>(0.0, 0.0), solve.rz / pq, running);
     }
 }
 
-// u += α p, r −= α q, z = M r; partial sums of r·z and ‖r‖².
+// u += α p, r −= α q; partial sums of ‖r‖².
 @compute @workgroup_size(256)
 fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
              @builtin(workgroup_id) wg: vec3<u32>) {
@@ -263,20 +287,18 @@ fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
     }
     let x = gid.x;
     let l = params.box_size;
-    var rz = vec2<f32>(0.0, 0.0);
     var rr = vec2<f32>(0.0, 0.0);
     if x < l * l {
         let alpha = solve.alpha;
         mean_velocity[x] += alpha * direction[x];
         let r = residual[x] - alpha * product[x];
         residual[x] = r;
-        rz = r * precondition(x, r);
         rr = r * r;
     }
-    tree[t] = vec4<f32>(rz, rr);
+    tree[t] = vec4<f32>(rr, 0.0, 0.0);
     reduce_tree(t);
     if t == 0u {
-        partials[wg.x] = tree[0];
+        partials[RR * groups() + wg.x] = tree[0];
     }
 }
 
@@ -284,19 +306,20 @@ fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
 // target, else β = (r·z)_new / (r·z).
 @compute @workgroup_size(256)
 fn cg_beta(@builtin(local_invocation_index) t: u32) {
-    let a = total_of_partials(t, 0u);
+    let rr = total_of_partials(t, RR * groups()).xy;
+    let rz = total_of_partials(t, RZ * groups()).xy;
     if t == 0u {
         let running = solve.done == vec2<u32>(0u, 0u);
         solve.iterations += select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), running);
-        solve.rr = select(solve.rr, a.zw, running);
-        let met = running & (a.zw <= vec2<f32>(solve.target2, solve.target2));
+        solve.rr = select(solve.rr, rr, running);
+        let met = running & (rr <= vec2<f32>(solve.target2, solve.target2));
         solve.done = select(solve.done, vec2<u32>(1u, 1u), met);
-        solve.beta = select(vec2<f32>(0.0, 0.0), a.xy / solve.rz, running);
-        solve.rz = select(solve.rz, a.xy, running);
+        solve.beta = select(vec2<f32>(0.0, 0.0), rz / solve.rz, running);
+        solve.rz = select(solve.rz, rz, running);
     }
 }
 
-// p = z + β p for each component still iterating.
+// p = z + β p for each component still iterating (after `cg_begin`, β = 0 and p = 0: p = z).
 @compute @workgroup_size(256)
 fn cg_direction(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     if solve_finished(t) {
@@ -308,7 +331,7 @@ fn cg_direction(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_in
         return;
     }
     let running = solve.done == vec2<u32>(0u, 0u);
-    let p = precondition(x, residual[x]) + solve.beta * direction[x];
+    let p = preconditioned[x] + solve.beta * direction[x];
     direction[x] = select(direction[x], p, running);
 }
 

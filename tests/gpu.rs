@@ -26,7 +26,7 @@ mod common;
 use std::sync::OnceLock;
 use std::time::Instant;
 
-use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Slot, NO_FAULT};
+use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Preconditioner, Slot, NO_FAULT};
 use monolayer::model::free_energy::FreeEnergy;
 use monolayer::model::friction::{FrictionProblem, FrictionSolver};
 use monolayer::model::lattice::Patch;
@@ -653,8 +653,8 @@ fn one_relaxation_step_matches_the_cpu() {
     assert_eq!(bits(&again.read(&ctx, Slot::Phi)), bits(&g_phi), "two GPU steps differ");
     eprintln!(
         "one step: {:.3} ms in one submission of {} dispatches (median of 21)",
-        median_ms(&ctx, &again, &Kernel::step(false, 0)),
-        Kernel::step(false, 0).len()
+        median_ms(&ctx, &again, &Kernel::step(None)),
+        Kernel::step(None).len()
     );
 }
 
@@ -738,11 +738,14 @@ fn stages_match_the_cpu_at_full_size() {
     m.advance(20).expect("the tissue steps");
     compare_stages(&ctx, &m);
     assert_repeats(&ctx, &m);
-    let iterations = check_friction_solve(&ctx, &m);
+    let (iterations, _) = check_friction_solve(&ctx, &m, Preconditioner::Multigrid);
     let mut state = m.state();
     state.warm_start.iter_mut().for_each(|u| *u = Default::default());
     let cold = Monolayer::from_state(m.params().clone(), m.seed(), state).expect("the state loads");
-    let cold_iterations = check_friction_solve(&ctx, &cold);
+    let (cold_iterations, cpu_iterations) = check_friction_solve(&ctx, &cold, Preconditioner::Multigrid);
+    assert!(cold_iterations <= cpu_iterations + 3, "{cold_iterations} iterations against the CPU's {cpu_iterations}");
+    let (jacobi_iterations, _) = check_friction_solve(&ctx, &cold, Preconditioner::Jacobi);
+    eprintln!("with Jacobi from u = 0: {jacobi_iterations} iterations");
     eprintln!("the friction solve at full size: {iterations} iterations from the CPU's warm start, {cold_iterations} from u = 0");
     let gpu = GpuMonolayer::new(&ctx, &m).expect("the monolayer fits the device");
     for k in Kernel::ALL {
@@ -771,7 +774,7 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
     }
     assert!(text.contains(&format!("{} dispatches", Kernel::FRICTION_SUMS.len())), "{text}");
     assert!(
-        text.contains(&format!("one Heun step without a friction solve: {} dispatches", Kernel::step(false, 0).len())),
+        text.contains(&format!("one Heun step without a friction solve: {} dispatches", Kernel::step(None).len())),
         "{text}"
     );
 }
@@ -875,19 +878,35 @@ fn the_friction_solve_meets_the_cpus_tolerance() {
     let mut state = warm.state();
     state.warm_start.iter_mut().for_each(|u| *u = Default::default());
     let cold = Monolayer::from_state(warm.params().clone(), warm.seed(), state).expect("the state loads");
-    let warm_iterations = check_friction_solve(&ctx, warm);
-    let cold_iterations = check_friction_solve(&ctx, &cold);
-    assert!(cold_iterations > 0, "from u = 0 CG must iterate");
-    assert!(warm_iterations <= cold_iterations);
+    for pc in [Preconditioner::Multigrid, Preconditioner::Jacobi] {
+        let (warm_iterations, _) = check_friction_solve(&ctx, warm, pc);
+        let (cold_iterations, cpu_iterations) = check_friction_solve(&ctx, &cold, pc);
+        assert!(cold_iterations > 0, "from u = 0 CG must iterate");
+        assert!(warm_iterations <= cold_iterations);
+        if pc == Preconditioner::Multigrid {
+            // The same cycle as the CPU's: about as many iterations (the GPU asks half the
+            // tolerance of its recursive residual, `RECURSIVE_RESIDUAL_MARGIN`).
+            assert!(
+                cold_iterations <= cpu_iterations + 3,
+                "{cold_iterations} iterations against the CPU's {cpu_iterations}"
+            );
+        }
+    }
 }
 
-/// One solve's checks; returns its iterations.
-fn check_friction_solve(ctx: &GpuContext, m: &Monolayer) -> u32 {
+/// One solve's checks with the given preconditioner; returns its iterations and the CPU's at the
+/// same tolerance.
+fn check_friction_solve(ctx: &GpuContext, m: &Monolayer, pc: Preconditioner) -> (u32, u32) {
+    eprintln!("{pc:?}:");
     let p = m.params().clone();
     let (l, xi_c, tol) = (p.box_size, p.xi_cell, p.friction_tolerance);
-    let gpu = GpuMonolayer::new(ctx, m).expect("the monolayer fits the device");
+    let mut gpu = GpuMonolayer::new(ctx, m).expect("the monolayer fits the device");
+    gpu.set_preconditioner(pc);
     assert!(gpu.state().solves_friction);
-    gpu.run(ctx, &[&Kernel::FRICTION_SUMS[..], &Kernel::friction_solve(gpu.solve_iterations)].concat());
+    gpu.run(
+        ctx,
+        &[&Kernel::FRICTION_SUMS[..], &Kernel::friction_solve(gpu.preconditioner, gpu.solve_iterations)].concat(),
+    );
     let solve = gpu.read_solve(ctx);
     eprintln!("GPU friction solve: {solve:?}");
     assert!(solve.converged(), "the GPU solve did not converge in {} iterations: {solve:?}", gpu.solve_iterations);
@@ -967,7 +986,7 @@ fn check_friction_solve(ctx: &GpuContext, m: &Monolayer) -> u32 {
     }
     mobility.assert_within("mobility 1/[ξ_s + ξ_c N]");
     pull.assert_within("pull ξ_c S");
-    solve.iterations[0].max(solve.iterations[1])
+    (solve.iterations[0].max(solve.iterations[1]), own_stats.iterations as u32)
 }
 
 /// The largest |a − b| over every padded site of every cell, a the GPU's φ in its layout.

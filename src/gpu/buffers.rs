@@ -73,13 +73,20 @@ pub enum Slot {
     Partials = 24,
     /// The CG's scalars, [`SolveScalars`].
     Solve = 25,
+    /// z = M r, the preconditioned residual, (x, y) per site.
+    Preconditioned = 26,
+    /// The multigrid hierarchy below C: per level k ≥ 1 six values per site (diagonal, four
+    /// forward bonds, mass), then the coarsest level's Cholesky factor (`shaders/multigrid.wgsl`).
+    Hierarchy = 27,
+    /// Per level k ≥ 1 of the hierarchy, x, b and t of a cycle, (x, y) per site.
+    MgWork = 28,
 }
 
 /// `Slot::Fault` of a cell whose φ stayed in range.
 pub const NO_FAULT: u32 = u32::MAX;
 
 impl Slot {
-    pub const ALL: [Slot; 26] = [
+    pub const ALL: [Slot; 29] = [
         Slot::Params,
         Slot::Patches,
         Slot::Phi,
@@ -106,6 +113,9 @@ impl Slot {
         Slot::Product,
         Slot::Partials,
         Slot::Solve,
+        Slot::Preconditioned,
+        Slot::Hierarchy,
+        Slot::MgWork,
     ];
 
     pub fn binding(self) -> u32 {
@@ -318,6 +328,7 @@ impl DeviceState {
         let drag = drag(m);
         let warm_start: Vec<[f32; 2]> = m.warm_start().iter().map(|u| [u.re as f32, u.im as f32]).collect();
         let groups = (l2).div_ceil(LATTICE_GROUP);
+        let hierarchy = Hierarchy::new(layout.box_size);
         let buffers = Slot::ALL
             .iter()
             .map(|&slot| {
@@ -342,7 +353,10 @@ impl DeviceState {
                     Slot::Diagonal => zeros(l2),
                     Slot::MeanVelocity => init(bytemuck::cast_slice(&warm_start), STORAGE),
                     Slot::Residual | Slot::Direction | Slot::Product => zeros(2 * l2),
-                    Slot::Partials => zeros(2 * 4 * groups),
+                    Slot::Partials => zeros(3 * 4 * groups),
+                    Slot::Preconditioned => zeros(2 * l2),
+                    Slot::Hierarchy => zeros(hierarchy.hierarchy_floats().max(1)),
+                    Slot::MgWork => zeros(2 * hierarchy.work_sites().max(1)),
                     Slot::Solve => zeros(std::mem::size_of::<SolveScalars>() / 4),
                 }
             })
@@ -368,6 +382,41 @@ fn drag(m: &Monolayer) -> Vec<[f32; 4]> {
         Phase::Active => 1.0 / xs,
     };
     xi_s.iter().map(|&xs| [0.0, 0.0, mobility(xs) as f32, xs as f32]).collect()
+}
+
+/// The sides of the multigrid levels below the lattice, as `shaders/multigrid.wgsl` derives them
+/// (and `model::multigrid::Multigrid::new`): ⌈m/2⌉ per level while the side exceeds 6.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Hierarchy {
+    /// Sides of levels 1, 2, …, the coarsest last (empty when L ≤ 6).
+    pub sides: Vec<usize>,
+}
+
+/// `COARSEST_SIDE` of `model::multigrid` and `shaders/multigrid.wgsl`.
+const COARSEST_SIDE: usize = 6;
+
+impl Hierarchy {
+    pub fn new(l: usize) -> Self {
+        let (mut m, mut sides) = (l, Vec::new());
+        while m > COARSEST_SIDE {
+            m = m.div_ceil(2);
+            sides.push(m);
+        }
+        Hierarchy { sides }
+    }
+
+    /// f32 values of `Slot::Hierarchy`: six per site of every level, then the coarsest level's
+    /// dense factor.
+    pub fn hierarchy_floats(&self) -> usize {
+        let levels: usize = self.sides.iter().map(|m| 6 * m * m).sum();
+        let n = self.sides.last().map_or(0, |m| m * m);
+        levels + n * n
+    }
+
+    /// Sites of `Slot::MgWork`: x, b and t of every level.
+    pub fn work_sites(&self) -> usize {
+        self.sides.iter().map(|m| 3 * m * m).sum()
+    }
 }
 
 /// Sites per workgroup of the friction solve's lattice kernels (`GROUP` in
@@ -437,6 +486,9 @@ fn slot_label(slot: Slot) -> &'static str {
         Slot::Product => "product",
         Slot::Partials => "partials",
         Slot::Solve => "solve",
+        Slot::Preconditioned => "preconditioned",
+        Slot::Hierarchy => "hierarchy",
+        Slot::MgWork => "mg_work",
     }
 }
 
@@ -451,6 +503,16 @@ mod tests {
         assert_eq!(std::mem::size_of::<GpuParams>(), 96);
         assert_eq!(std::mem::size_of::<GpuPatch>(), 32);
         assert_eq!(std::mem::size_of::<SolveScalars>(), 64);
+    }
+
+    /// The levels of the paper's and the page's lattices, as the CPU's multigrid builds them.
+    #[test]
+    fn hierarchy_sides_follow_the_cpu() {
+        assert_eq!(Hierarchy::new(140).sides, [70, 35, 18, 9, 5]);
+        assert_eq!(Hierarchy::new(80).sides, [40, 20, 10, 5]);
+        assert_eq!(Hierarchy::new(60).sides, [30, 15, 8, 4]);
+        assert!(Hierarchy::new(6).sides.is_empty());
+        assert_eq!(Hierarchy::new(140).hierarchy_floats(), 6 * (4900 + 1225 + 324 + 81 + 25) + 625);
     }
 
     /// Each cell's padded storage follows the previous one, and `cell` finds it again.

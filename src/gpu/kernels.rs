@@ -7,7 +7,7 @@
 
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::buffers::SolveScalars;
-use crate::gpu::buffers::{DeviceState, Slot, LATTICE_GROUP};
+use crate::gpu::buffers::{DeviceState, Hierarchy, Slot, LATTICE_GROUP};
 use crate::gpu::context::{GpuContext, GpuError};
 use crate::model::monolayer::Monolayer;
 
@@ -19,6 +19,7 @@ const FORCES_WGSL: &str = include_str!("../../shaders/forces.wgsl");
 const MOTION_WGSL: &str = include_str!("../../shaders/motion.wgsl");
 const MONOLAYER_WGSL: &str = include_str!("../../shaders/monolayer.wgsl");
 const FRICTION_WGSL: &str = include_str!("../../shaders/friction.wgsl");
+const MULTIGRID_WGSL: &str = include_str!("../../shaders/multigrid.wgsl");
 
 /// The per-site kernels' workgroup width (`@workgroup_size(64)`); the lattice kernels'
 /// workgroups are 8 × 8 sites.
@@ -66,6 +67,46 @@ pub enum Kernel {
     CgDirection,
     /// The pull ξ_c S from the solution (`FrictionSolver::pull_from_solution`).
     FrictionPull,
+    /// z = r / diag C and partial sums of r·z: the Jacobi preconditioner.
+    Jacobi,
+    /// Multigrid level 1 from C (`shaders/multigrid.wgsl`, as `Multigrid::setup`).
+    MgCoarsenFine,
+    /// The coarser levels and the coarsest level's Cholesky factor (one workgroup).
+    MgCoarsenRest,
+    /// A cycle's level-0 sweep from zero and its restriction to level 1.
+    MgRestrict,
+    /// The cycle on levels 1 to the coarsest (one workgroup).
+    MgCoarseCycle,
+    /// The prolongation to level 0 and its last sweep: z, and partial sums of r·z.
+    MgSmooth,
+}
+
+/// What preconditions the friction CG on the GPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preconditioner {
+    /// One cycle of the CPU's aggregation multigrid (`shaders/multigrid.wgsl`): three dispatches
+    /// per application, few iterations.
+    Multigrid,
+    /// z = r / diag C: one dispatch per application, many iterations.
+    Jacobi,
+}
+
+impl Preconditioner {
+    /// The kernels of one application, z = M r with its partial sums of r·z.
+    pub fn kernels(self) -> &'static [Kernel] {
+        match self {
+            Preconditioner::Multigrid => &[Kernel::MgRestrict, Kernel::MgCoarseCycle, Kernel::MgSmooth],
+            Preconditioner::Jacobi => &[Kernel::Jacobi],
+        }
+    }
+
+    /// The kernels that set it up for a new operator.
+    pub fn setup(self) -> &'static [Kernel] {
+        match self {
+            Preconditioner::Multigrid => &[Kernel::MgCoarsenFine, Kernel::MgCoarsenRest],
+            Preconditioner::Jacobi => &[],
+        }
+    }
 }
 
 /// How a kernel's invocations cover the state.
@@ -80,13 +121,15 @@ enum Grid {
     /// One invocation per lattice site in row-major order, 256 per workgroup (the friction
     /// solve: one partial sum per workgroup).
     LatticeRows,
-    /// One workgroup: the friction solve's scalars.
+    /// One workgroup: the friction solve's scalars, the coarse levels of the multigrid.
     Single,
+    /// One invocation per site of multigrid level 1, 256 per workgroup.
+    LevelOne,
 }
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 18] = [
+    pub const ALL: [Kernel; 24] = [
         Kernel::LatticeSums,
         Kernel::CellArea,
         Kernel::ChemicalPotential,
@@ -105,6 +148,12 @@ impl Kernel {
         Kernel::CgBeta,
         Kernel::CgDirection,
         Kernel::FrictionPull,
+        Kernel::Jacobi,
+        Kernel::MgCoarsenFine,
+        Kernel::MgCoarsenRest,
+        Kernel::MgRestrict,
+        Kernel::MgCoarseCycle,
+        Kernel::MgSmooth,
     ];
 
     /// One evaluation of the rate R(φ) where there is no friction solve: Σφ², A_i, μ_i, Q̂_i, f_i,
@@ -127,39 +176,45 @@ impl Kernel {
         out
     };
 
-    /// The friction solve's start: the operator, the residual of the warm start, the targets.
-    pub const SOLVE_START: [Kernel; 3] = [Kernel::FrictionSetup, Kernel::CgStart, Kernel::CgBegin];
-
-    /// One CG iteration of the friction solve.
-    pub const CG_ITERATION: [Kernel; 5] =
-        [Kernel::CgProduct, Kernel::CgAlpha, Kernel::CgUpdate, Kernel::CgBeta, Kernel::CgDirection];
-
     /// The friction solve of Eq. 2 with `iterations` CG iterations recorded (those after both
-    /// components converged return at once), then the pull.
-    pub fn friction_solve(iterations: usize) -> Vec<Kernel> {
-        let mut out = Kernel::SOLVE_START.to_vec();
+    /// components converged return at once): the operator and its preconditioner, the residual
+    /// of the warm start, the first direction, the iterations, then the pull.
+    pub fn friction_solve(pc: Preconditioner, iterations: usize) -> Vec<Kernel> {
+        let mut out = vec![Kernel::FrictionSetup];
+        out.extend_from_slice(pc.setup());
+        out.push(Kernel::CgStart);
+        out.extend_from_slice(pc.kernels());
+        out.extend_from_slice(&[Kernel::CgBegin, Kernel::CgDirection]);
         for _ in 0..iterations {
-            out.extend_from_slice(&Kernel::CG_ITERATION);
+            out.extend_from_slice(&Kernel::cg_iteration(pc));
         }
         out.push(Kernel::FrictionPull);
         out
     }
 
+    /// One CG iteration: q = C p and α, u and r, z = M r, the stop test and β, p.
+    pub fn cg_iteration(pc: Preconditioner) -> Vec<Kernel> {
+        let mut out = vec![Kernel::CgProduct, Kernel::CgAlpha, Kernel::CgUpdate];
+        out.extend_from_slice(pc.kernels());
+        out.extend_from_slice(&[Kernel::CgBeta, Kernel::CgDirection]);
+        out
+    }
+
     /// One evaluation of the rate R(φ): [`Self::RATE`], with the friction sums and the solve
     /// before the velocities when the phase has cell–cell friction.
-    pub fn rate(solves_friction: bool, iterations: usize) -> Vec<Kernel> {
-        if !solves_friction {
+    pub fn rate(solve: Option<(Preconditioner, usize)>) -> Vec<Kernel> {
+        let Some((pc, iterations)) = solve else {
             return Kernel::RATE.to_vec();
-        }
+        };
         let mut out = Kernel::FRICTION_SUMS.to_vec();
-        out.extend(Kernel::friction_solve(iterations));
+        out.extend(Kernel::friction_solve(pc, iterations));
         out.push(Kernel::VelocityAndRate);
         out
     }
 
     /// One Heun step: R(φ), the predictor, R(φ*), the corrector.
-    pub fn step(solves_friction: bool, iterations: usize) -> Vec<Kernel> {
-        let rate = Kernel::rate(solves_friction, iterations);
+    pub fn step(solve: Option<(Preconditioner, usize)>) -> Vec<Kernel> {
+        let rate = Kernel::rate(solve);
         let mut out = rate.clone();
         out.push(Kernel::Predict);
         out.extend(rate);
@@ -170,6 +225,12 @@ impl Kernel {
     /// The stage's WGSL file and the kernel's entry point in it.
     fn source(self) -> (&'static str, &'static str) {
         match self {
+            Kernel::MgCoarsenFine => (MULTIGRID_WGSL, "mg_coarsen_fine"),
+            Kernel::MgCoarsenRest => (MULTIGRID_WGSL, "mg_coarsen_rest"),
+            Kernel::MgRestrict => (MULTIGRID_WGSL, "mg_restrict"),
+            Kernel::MgCoarseCycle => (MULTIGRID_WGSL, "mg_coarse_cycle"),
+            Kernel::MgSmooth => (MULTIGRID_WGSL, "mg_smooth"),
+            Kernel::Jacobi => (FRICTION_WGSL, "jacobi"),
             Kernel::LatticeSums => (GATHER_WGSL, "lattice_sums"),
             Kernel::CellArea => (FREE_ENERGY_WGSL, "cell_area"),
             Kernel::ChemicalPotential => (FREE_ENERGY_WGSL, "chemical_potential"),
@@ -207,14 +268,19 @@ impl Kernel {
             Kernel::Predict => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
             Kernel::Correct => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
             Kernel::FrictionSetup => &[Params, Weight, Drag, Diagonal],
-            Kernel::CgStart => &[Params, Weight, Force, Diagonal, MeanVelocity, Residual, Direction, Partials],
+            Kernel::CgStart => &[Params, Weight, Force, Diagonal, MeanVelocity, Residual, Direction, Partials, Solve],
             Kernel::CgBegin => &[Params, Partials, Solve],
             Kernel::CgProduct => &[Params, Weight, Diagonal, MeanVelocity, Direction, Product, Partials, Solve],
             Kernel::CgAlpha => &[Params, Partials, Solve],
-            Kernel::CgUpdate => &[Params, Diagonal, MeanVelocity, Residual, Direction, Product, Partials, Solve],
+            Kernel::CgUpdate => &[Params, MeanVelocity, Residual, Direction, Product, Partials, Solve],
             Kernel::CgBeta => &[Params, Partials, Solve],
-            Kernel::CgDirection => &[Params, Diagonal, Residual, Direction, Solve],
+            Kernel::CgDirection => &[Params, Direction, Solve, Preconditioned],
             Kernel::FrictionPull => &[Params, Weight, Drag, MeanVelocity, Direction, Solve],
+            Kernel::Jacobi => &[Params, Diagonal, Residual, Partials, Solve, Preconditioned],
+            Kernel::MgCoarsenFine | Kernel::MgCoarsenRest => &[Params, Weight, Drag, Diagonal, Hierarchy],
+            Kernel::MgRestrict => &[Params, Weight, Diagonal, Residual, Solve, MgWork],
+            Kernel::MgCoarseCycle => &[Params, Weight, Diagonal, Solve, Hierarchy, MgWork],
+            Kernel::MgSmooth => &[Params, Weight, Diagonal, Residual, Partials, Solve, Preconditioned, MgWork],
         }
     }
 
@@ -232,8 +298,13 @@ impl Kernel {
             | Kernel::CgProduct
             | Kernel::CgUpdate
             | Kernel::CgDirection
-            | Kernel::FrictionPull => Grid::LatticeRows,
-            Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta => Grid::Single,
+            | Kernel::FrictionPull
+            | Kernel::Jacobi
+            | Kernel::MgSmooth => Grid::LatticeRows,
+            Kernel::MgCoarsenFine | Kernel::MgRestrict => Grid::LevelOne,
+            Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta | Kernel::MgCoarsenRest | Kernel::MgCoarseCycle => {
+                Grid::Single
+            }
         }
     }
 
@@ -245,6 +316,9 @@ impl Kernel {
         let padded = layout.total as u64;
         let interior: u64 = layout.patches.iter().map(|p| p.w as u64 * p.h as u64).sum();
         let (n, l2) = (layout.n_cells() as u64, (layout.box_size * layout.box_size) as u64);
+        let hierarchy = Hierarchy::new(layout.box_size);
+        let level1 = hierarchy.sides.first().map_or(0, |m| (m * m) as u64);
+        let (coarse_floats, coarse_work) = (hierarchy.hierarchy_floats() as u64, hierarchy.work_sites() as u64);
         let values = match self {
             // φ at every covered site; Σφ and Σφ² written.
             Kernel::LatticeSums => interior + 2 * l2,
@@ -278,6 +352,19 @@ impl Kernel {
             Kernel::FrictionPull => l2 + 2 * l2 + 2 * l2,
             // The partial sums, one workgroup.
             Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta => 8 * l2.div_ceil(LATTICE_GROUP as u64),
+            // r and the diagonal read; z written.
+            Kernel::Jacobi => 2 * l2 + l2 + 2 * l2,
+            // n, ξ_s and the diagonal read; level 1 written.
+            Kernel::MgCoarsenFine => 3 * l2 + coarse_floats.min(6 * level1),
+            // The levels read and written once each.
+            Kernel::MgCoarsenRest => 2 * coarse_floats,
+            // n, the diagonal and r read; level 1's b written.
+            Kernel::MgRestrict => 4 * l2 + 2 * level1,
+            // Every coarse level's coefficients and vectors, once (the W-cycle reads them again
+            // from cache).
+            Kernel::MgCoarseCycle => coarse_floats + 2 * coarse_work,
+            // n, the diagonal, r and level 1's x read; z written.
+            Kernel::MgSmooth => 4 * l2 + 2 * level1 + 2 * l2,
         };
         4 * values
     }
@@ -295,6 +382,10 @@ impl Kernel {
             Grid::Sites => [layout.max_padded.div_ceil(SITES_PER_GROUP) as u32, n, 1],
             Grid::LatticeRows => [(layout.box_size * layout.box_size).div_ceil(LATTICE_GROUP) as u32, 1, 1],
             Grid::Single => [1, 1, 1],
+            Grid::LevelOne => {
+                let m = Hierarchy::new(layout.box_size).sides.first().copied().unwrap_or(1);
+                [(m * m).div_ceil(LATTICE_GROUP) as u32, 1, 1]
+            }
         }
     }
 }
@@ -317,7 +408,12 @@ impl Pipelines {
 
 fn pipeline(ctx: &GpuContext, kernel: Kernel) -> wgpu::ComputePipeline {
     let (stage, entry) = kernel.source();
-    let source = format!("{MODEL_WGSL}\n{stage}");
+    // The multigrid kernels use the friction solve's bindings and helpers.
+    let source = if stage == MULTIGRID_WGSL {
+        format!("{MODEL_WGSL}\n{FRICTION_WGSL}\n{stage}")
+    } else {
+        format!("{MODEL_WGSL}\n{stage}")
+    };
     let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(entry),
         source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -342,13 +438,16 @@ pub struct GpuMonolayer {
     /// back inside a step); a solve that has not converged by then is reported by
     /// [`Self::read_solve`].
     pub solve_iterations: usize,
+    pub preconditioner: Preconditioner,
 }
 
-/// CG iterations recorded per friction solve unless set otherwise: enough for a cold start at
-/// the paper's size and χ = 0.001 with the Jacobi preconditioner (about 250 with
-/// `RECURSIVE_RESIDUAL_MARGIN`, tests/gpu.rs), with a margin; a warm-started solve inside a run
-/// takes far fewer, and the iterations after convergence return at once.
-pub const SOLVE_ITERATIONS: usize = 400;
+/// CG iterations recorded per friction solve with the multigrid preconditioner unless set
+/// otherwise: a cold start at the paper's size and χ = 0.001 takes about a dozen (tests/gpu.rs),
+/// a warm-started solve inside a run 3–5; the iterations after convergence return at once.
+pub const SOLVE_ITERATIONS: usize = 30;
+
+/// The same for the Jacobi preconditioner: a cold start at the paper's size takes about 210.
+pub const JACOBI_ITERATIONS: usize = 400;
 
 impl GpuMonolayer {
     /// Compiles the kernels and uploads the monolayer's current state; refuses a monolayer
@@ -357,7 +456,13 @@ impl GpuMonolayer {
         let pipelines = Pipelines::new(ctx);
         let state = DeviceState::upload(ctx, m)?;
         let bind_groups = bind_groups(ctx, &pipelines, &state);
-        Ok(GpuMonolayer { pipelines, state, bind_groups, solve_iterations: SOLVE_ITERATIONS })
+        Ok(GpuMonolayer {
+            pipelines,
+            state,
+            bind_groups,
+            solve_iterations: SOLVE_ITERATIONS,
+            preconditioner: Preconditioner::Multigrid,
+        })
     }
 
     /// Replaces the device state by the monolayer's current one (patches may have moved, so
@@ -400,12 +505,26 @@ impl GpuMonolayer {
 
     /// The kernels of one evaluation of the rate in the uploaded phase ([`Kernel::rate`]).
     pub fn rate_kernels(&self) -> Vec<Kernel> {
-        Kernel::rate(self.state.solves_friction, self.solve_iterations)
+        Kernel::rate(self.solve())
+    }
+
+    /// The friction solve's preconditioner and recorded iterations where the phase has one.
+    pub fn solve(&self) -> Option<(Preconditioner, usize)> {
+        self.state.solves_friction.then_some((self.preconditioner, self.solve_iterations))
+    }
+
+    /// Sets the preconditioner, with its default recorded iterations.
+    pub fn set_preconditioner(&mut self, pc: Preconditioner) {
+        self.preconditioner = pc;
+        self.solve_iterations = match pc {
+            Preconditioner::Multigrid => SOLVE_ITERATIONS,
+            Preconditioner::Jacobi => JACOBI_ITERATIONS,
+        };
     }
 
     /// The kernels of one Heun step in the uploaded phase ([`Kernel::step`]).
     pub fn step_kernels(&self) -> Vec<Kernel> {
-        Kernel::step(self.state.solves_friction, self.solve_iterations)
+        Kernel::step(self.solve())
     }
 
     /// One Heun step on the patches as they are (they do not follow the cells on the GPU yet),

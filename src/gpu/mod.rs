@@ -11,15 +11,16 @@
 //! | `forces.wgsl` `force_density`        | `model::forces::force_density`        | Eqs. 3, 4       |
 //! | `gather.wgsl` `friction_sums`        | `model::monolayer` gathers of n and F | Eq. 2 (Σ_j)     |
 //! | `friction.wgsl` `friction_setup`, `cg_*`, `friction_pull` | `model::friction` (`FrictionSolver`) | Eq. 2 |
+//! | `multigrid.wgsl` `mg_*`                | `model::multigrid` (the preconditioner) | —             |
 //! | `motion.wgsl` `velocity_and_rate`    | `model::motion::velocity_and_rate`    | Eq. 1           |
 //! | `monolayer.wgsl` `predict`, `correct`| `model::monolayer` `Then` (Heun)      | —               |
 //!
 //! Every sum runs in a fixed order (no float atomics), so two runs on the same adapter and
 //! driver give the same bits. Nothing is read back inside a step: [`GpuMonolayer::read`] is for
 //! tests and diagnostics. [`GpuMonolayer::step`] takes a whole Heun step on fixed patches in one
-//! submission, with the friction solve of Eq. 2 (conjugate gradients, Jacobi-preconditioned,
-//! its scalars and stop flags on the device) where the phase has one. The moving patches and a
-//! multigrid preconditioner are the next stages (docs/gpu.md).
+//! submission, with the friction solve of Eq. 2 (conjugate gradients preconditioned by the
+//! CPU's aggregation multigrid, its scalars and stop flags on the device) where the phase has
+//! one. The moving patches are the next stage (docs/gpu.md).
 //!
 //! A layer beside `analysis`: it imports only `model` (tested by `tests/layers.rs`).
 
@@ -29,4 +30,4 @@ pub mod kernels;
 
 pub use buffers::{DeviceState, Slot, NO_FAULT};
 pub use context::{GpuContext, GpuError};
-pub use kernels::{GpuMonolayer, Kernel};
+pub use kernels::{GpuMonolayer, Kernel, Preconditioner};

@@ -324,7 +324,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     // dispatches and bytes are those of a relaxation step.
     for (what, kernels) in [
         ("up to the friction solve's right-hand side", &Kernel::FRICTION_SUMS[..]),
-        ("one Heun step without a friction solve", &Kernel::step(false, 0)[..]),
+        ("one Heun step without a friction solve", &Kernel::step(None)[..]),
     ] {
         println!(
             "{what}: {} dispatches, {:.3} ms in one submission, {:.2} MB at the least",
@@ -341,8 +341,9 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let ms = time(&gpu, &step);
     let solve = gpu.read_solve(&ctx);
     let taken = solve.iterations[0].max(solve.iterations[1]) as usize;
-    let working = step.len() - 2 * (gpu.solve_iterations - taken) * Kernel::CG_ITERATION.len();
-    let mut working_kernels = Kernel::step(true, taken);
+    let per_iteration = Kernel::cg_iteration(gpu.preconditioner).len();
+    let working = step.len() - 2 * (gpu.solve_iterations - taken) * per_iteration;
+    let mut working_kernels = Kernel::step(Some((gpu.preconditioner, taken)));
     working_kernels.truncate(working);
     println!(
         "one Heun step with the friction solve: {} dispatches recorded ({} CG iterations per solve), {ms:.3} ms in one submission; \
