@@ -252,6 +252,17 @@ impl Kernel {
         }
     }
 
+    /// The WGSL the kernel is compiled from: `shaders/model.wgsl`, then its stage's file (the
+    /// multigrid's after the friction solve's, whose bindings and helpers it uses).
+    pub fn wgsl(self) -> String {
+        let (stage, _) = self.source();
+        if stage == MULTIGRID_WGSL {
+            format!("{MODEL_WGSL}\n{FRICTION_WGSL}\n{stage}")
+        } else {
+            format!("{MODEL_WGSL}\n{stage}")
+        }
+    }
+
     /// The buffers the entry point uses, which is what its bind group must hold: the pipeline's
     /// layout is derived from the shader, so a slot missing here, or one too many, fails at
     /// bind-group creation.
@@ -407,13 +418,7 @@ impl Pipelines {
 }
 
 fn pipeline(ctx: &GpuContext, kernel: Kernel) -> wgpu::ComputePipeline {
-    let (stage, entry) = kernel.source();
-    // The multigrid kernels use the friction solve's bindings and helpers.
-    let source = if stage == MULTIGRID_WGSL {
-        format!("{MODEL_WGSL}\n{FRICTION_WGSL}\n{stage}")
-    } else {
-        format!("{MODEL_WGSL}\n{stage}")
-    };
+    let (source, entry) = (kernel.wgsl(), kernel.source().1);
     let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(entry),
         source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -620,11 +625,11 @@ mod tests {
         }
     }
 
-    /// Every binding a kernel lists is declared in its stage's WGSL file with that number.
+    /// Every binding a kernel lists is declared in the WGSL it is compiled from with that number.
     #[test]
     fn every_listed_slot_is_declared_by_its_shader() {
         for k in Kernel::ALL {
-            let (source, entry) = k.source();
+            let (source, entry) = (k.wgsl(), k.source().1);
             for s in k.slots() {
                 let declared = format!("@binding({})", s.binding());
                 assert!(source.contains(&declared), "{entry}: {s:?} not declared as {declared}");
