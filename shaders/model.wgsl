@@ -44,20 +44,24 @@ struct Params {
     // (src/gpu/buffers.rs; shaders/friction.wgsl).
     xi_cell: f32,
     friction_tolerance: f32,
-    _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // The patches (src/model/monolayer.rs `update_patches`; shaders/cell.wgsl): the square's
+    // side during relaxation, the margin beyond the support when active, and which phase this
+    // is (0: relaxation, 1: active).
+    relax_patch_size: u32,
+    patch_margin: u32,
+    active_phase: u32,
 };
 
 // One cell's patch (src/model/lattice.rs `Patch`) and where its padded storage starts in the
-// per-cell arrays (φ, μ, f): (w + 2) × (h + 2) values, row-major, a one-site ring of zeros.
+// per-cell arrays (φ, μ, f): (w + 2) × (h + 2) values, row-major, a one-site ring of zeros,
+// within a capacity the patch may grow into (shaders/cell.wgsl).
 struct Patch {
     x0: u32,
     y0: u32,
     w: u32,
     h: u32,
     offset: u32,
-    _pad0: u32,
+    capacity: u32,
     _pad1: u32,
     _pad2: u32,
 };

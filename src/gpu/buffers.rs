@@ -13,6 +13,7 @@ use wgpu::util::DeviceExt;
 
 use crate::gpu::context::{GpuContext, GpuError};
 use crate::model::free_energy::FreeEnergy;
+use crate::model::lattice::Patch;
 use crate::model::monolayer::{Monolayer, Phase};
 use crate::model::params::{Advection, FrictionWeights, Laplacian, Params, PassiveForce};
 use crate::model::precision::{load, Real};
@@ -80,13 +81,37 @@ pub enum Slot {
     Hierarchy = 27,
     /// Per level k ≥ 1 of the hierarchy, x, b and t of a cycle, (x, y) per site.
     MgWork = 28,
+    /// Each cell's next patch (`shaders/cell.wgsl`), `GpuPatch` per cell.
+    NextPatches = 29,
+    /// Per cell, a [`PatchFault`] code from the last patch update.
+    PatchFault = 30,
+}
+
+/// Why a cell's patch did not move (`Slot::PatchFault`; `shaders/cell.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PatchFault {
+    Moved = 0,
+    /// No site has φ above the presence threshold (the CPU's `CellLost`, "vanished").
+    Vanished = 1,
+    /// The patch would span the box (the CPU's `CellLost`).
+    SpansTheBox = 2,
+    /// The patch would outgrow the cell's storage: upload again with more room.
+    BeyondCapacity = 3,
+}
+
+impl PatchFault {
+    pub fn from_code(code: u32) -> Option<Self> {
+        [PatchFault::Moved, PatchFault::Vanished, PatchFault::SpansTheBox, PatchFault::BeyondCapacity]
+            .into_iter()
+            .find(|f| *f as u32 == code)
+    }
 }
 
 /// `Slot::Fault` of a cell whose φ stayed in range.
 pub const NO_FAULT: u32 = u32::MAX;
 
 impl Slot {
-    pub const ALL: [Slot; 29] = [
+    pub const ALL: [Slot; 31] = [
         Slot::Params,
         Slot::Patches,
         Slot::Phi,
@@ -116,6 +141,8 @@ impl Slot {
         Slot::Preconditioned,
         Slot::Hierarchy,
         Slot::MgWork,
+        Slot::NextPatches,
+        Slot::PatchFault,
     ];
 
     pub fn binding(self) -> u32 {
@@ -158,7 +185,10 @@ pub struct GpuParams {
     pub phi_max: f32,
     pub xi_cell: f32,
     pub friction_tolerance: f32,
-    pub pad: [u32; 3],
+    pub relax_patch_size: u32,
+    pub patch_margin: u32,
+    /// 0 during relaxation, 1 when active.
+    pub active: u32,
 }
 
 impl GpuParams {
@@ -201,7 +231,9 @@ impl GpuParams {
             phi_max: p.phi_max as f32,
             xi_cell: if phase == Phase::Active { p.xi_cell as f32 } else { 0.0 },
             friction_tolerance: (p.friction_tolerance * RECURSIVE_RESIDUAL_MARGIN) as f32,
-            pad: [0; 3],
+            relax_patch_size: p.relax_patch_size as u32,
+            patch_margin: p.patch_margin as u32,
+            active: (phase == Phase::Active) as u32,
         }
     }
 }
@@ -215,24 +247,47 @@ pub struct GpuPatch {
     pub w: u32,
     pub h: u32,
     pub offset: u32,
-    pub pad: [u32; 3],
+    /// Values the cell's storage holds: its padded patch may grow to this.
+    pub capacity: u32,
+    pub pad: [u32; 2],
+}
+
+impl GpuPatch {
+    /// The CPU's patch.
+    pub fn patch(&self) -> Patch {
+        Patch { x0: self.x0 as usize, y0: self.y0 as usize, w: self.w as usize, h: self.h as usize }
+    }
+
+    pub fn padded_len(&self) -> usize {
+        (self.w as usize + 2) * (self.h as usize + 2)
+    }
 }
 
 /// Where each cell's padded storage sits in the per-cell arrays.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Layout {
+    /// The patches as uploaded (on the device they move: `GpuMonolayer::read_patches`).
     pub patches: Vec<GpuPatch>,
-    /// Sum of the padded lengths: the length of φ, μ, f_x, f_y.
+    /// Sum of the capacities: the length of φ, μ, f_x, f_y.
     pub total: usize,
-    /// The longest padded patch: the per-site kernels' width.
+    /// The largest capacity: the per-site kernels' width.
     pub max_padded: usize,
     pub box_size: usize,
 }
 
+/// Every cell's capacity, in units of the largest padded patch at upload: room for a patch
+/// that grows (an active cell's support changes with its shape) without new buffers. A patch
+/// that would outgrow it is reported (`PatchFault::BeyondCapacity`).
+pub const CAPACITY_FACTOR: usize = 2;
+
 impl Layout {
     pub fn of(m: &Monolayer) -> Self {
+        let p = m.params();
+        let largest = m.cells().iter().map(|c| c.patch().padded_len()).max().unwrap_or(0);
+        let square = (p.relax_patch_size + 2) * (p.relax_patch_size + 2);
+        let capacity = (CAPACITY_FACTOR * largest).max(square);
         let mut patches = Vec::with_capacity(m.cells().len());
-        let (mut total, mut max_padded) = (0, 0);
+        let mut total = 0;
         for c in m.cells() {
             let p = c.patch();
             let offset = total as u32;
@@ -242,12 +297,12 @@ impl Layout {
                 w: p.w as u32,
                 h: p.h as u32,
                 offset,
-                pad: [0; 3],
+                capacity: capacity as u32,
+                pad: [0; 2],
             });
-            total += p.padded_len();
-            max_padded = max_padded.max(p.padded_len());
+            total += capacity;
         }
-        Layout { patches, total, max_padded, box_size: m.params().box_size }
+        Layout { patches, total, max_padded: capacity, box_size: p.box_size }
     }
 
     pub fn n_cells(&self) -> usize {
@@ -282,23 +337,33 @@ impl Layout {
         errors.into_iter().flatten().next().map_or(Ok(()), Err)
     }
 
-    /// A per-cell field of the CPU (one padded vector per cell) as one f32 array in this layout.
+    /// A per-cell field of the CPU (one padded vector per cell) as one f32 array in this layout
+    /// (zeros beyond each padded patch, up to its capacity).
     pub fn flatten<'a, T: Real>(&self, fields: impl Iterator<Item = &'a [T]>) -> Vec<f32> {
-        let mut out = Vec::with_capacity(self.total);
-        for f in fields {
-            out.extend(f.iter().map(|&v| load(v) as f32));
+        let mut out = vec![0.0; self.total];
+        let mut cells = 0;
+        for (f, p) in fields.zip(&self.patches) {
+            assert_eq!(f.len(), p.padded_len(), "fields must follow the layout's patches");
+            out[p.offset as usize..][..f.len()].iter_mut().zip(f).for_each(|(o, &v)| *o = load(v) as f32);
+            cells += 1;
         }
-        assert_eq!(out.len(), self.total, "fields must follow the layout's patches");
+        assert_eq!(cells, self.patches.len(), "one field per cell");
         out
     }
 
     /// Cell i's padded storage within a per-cell array of this layout.
     pub fn cell<'a, T>(&self, i: usize, data: &'a [T]) -> &'a [T] {
-        let p = self.patches[i];
-        let len = (p.w as usize + 2) * (p.h as usize + 2);
-        &data[p.offset as usize..][..len]
+        patch_storage(self.patches[i], data)
     }
 }
+
+/// A cell's padded storage within a per-cell array, given its patch (as uploaded, or as read
+/// back after the patches moved).
+pub fn patch_storage<T>(p: GpuPatch, data: &[T]) -> &[T] {
+    &data[p.offset as usize..][..p.padded_len()]
+}
+
+impl Layout {}
 
 /// The device buffers of one state, indexed by [`Slot`].
 pub struct DeviceState {
@@ -357,6 +422,8 @@ impl DeviceState {
                     Slot::Preconditioned => zeros(2 * l2),
                     Slot::Hierarchy => zeros(hierarchy.hierarchy_floats().max(1)),
                     Slot::MgWork => zeros(2 * hierarchy.work_sites().max(1)),
+                    Slot::NextPatches => init(bytemuck::cast_slice(&layout.patches), STORAGE),
+                    Slot::PatchFault => zeros(n),
                     Slot::Solve => zeros(std::mem::size_of::<SolveScalars>() / 4),
                 }
             })
@@ -489,6 +556,8 @@ fn slot_label(slot: Slot) -> &'static str {
         Slot::Preconditioned => "preconditioned",
         Slot::Hierarchy => "hierarchy",
         Slot::MgWork => "mg_work",
+        Slot::NextPatches => "next_patches",
+        Slot::PatchFault => "patch_fault",
     }
 }
 
@@ -501,6 +570,7 @@ mod tests {
     #[test]
     fn structs_have_the_wgsl_sizes() {
         assert_eq!(std::mem::size_of::<GpuParams>(), 96);
+        assert_eq!(PatchFault::from_code(3), Some(PatchFault::BeyondCapacity));
         assert_eq!(std::mem::size_of::<GpuPatch>(), 32);
         assert_eq!(std::mem::size_of::<SolveScalars>(), 64);
     }
@@ -515,7 +585,8 @@ mod tests {
         assert_eq!(Hierarchy::new(140).hierarchy_floats(), 6 * (4900 + 1225 + 324 + 81 + 25) + 625);
     }
 
-    /// Each cell's padded storage follows the previous one, and `cell` finds it again.
+    /// Each cell's storage follows the previous one, with room to grow, and `cell` finds its
+    /// padded patch again.
     #[test]
     fn layout_packs_the_patches_in_cell_order() {
         let p = Params { box_size: 40, n_cells: 4, ..Params::default() };
@@ -525,10 +596,11 @@ mod tests {
         let mut offset = 0;
         for (i, c) in m.cells().iter().enumerate() {
             assert_eq!(layout.patches[i].offset as usize, offset);
+            assert!(layout.patches[i].capacity as usize >= CAPACITY_FACTOR * c.patch().padded_len());
             let back: Vec<f64> = layout.cell(i, &flat).iter().map(|&v| v as f64).collect();
             let rounded: Vec<f64> = c.phi().padded().iter().map(|&v| v as f32 as f64).collect();
             assert_eq!(back, rounded, "cell {i}");
-            offset += c.patch().padded_len();
+            offset += layout.patches[i].capacity as usize;
         }
         assert_eq!((layout.total, flat.len()), (offset, offset));
     }

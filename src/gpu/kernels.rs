@@ -6,6 +6,8 @@
 //! file is compiled with `shaders/model.wgsl` (the shared parameters and patches) in front.
 
 #[cfg(not(target_arch = "wasm32"))]
+use crate::gpu::buffers::GpuPatch;
+#[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::buffers::SolveScalars;
 use crate::gpu::buffers::{DeviceState, Hierarchy, Slot, LATTICE_GROUP};
 use crate::gpu::context::{GpuContext, GpuError};
@@ -20,6 +22,7 @@ const MOTION_WGSL: &str = include_str!("../../shaders/motion.wgsl");
 const MONOLAYER_WGSL: &str = include_str!("../../shaders/monolayer.wgsl");
 const FRICTION_WGSL: &str = include_str!("../../shaders/friction.wgsl");
 const MULTIGRID_WGSL: &str = include_str!("../../shaders/multigrid.wgsl");
+const CELL_WGSL: &str = include_str!("../../shaders/cell.wgsl");
 
 /// The per-site kernels' workgroup width (`@workgroup_size(64)`); the lattice kernels'
 /// workgroups are 8 × 8 sites.
@@ -79,6 +82,13 @@ pub enum Kernel {
     MgCoarseCycle,
     /// The prolongation to level 0 and its last sweep: z, and partial sums of r·z.
     MgSmooth,
+    /// Each cell's next patch: re-centred (relaxation) or fitted to its support (active)
+    /// (`shaders/cell.wgsl`, as `Monolayer::update_patches`).
+    PatchBounds,
+    /// φ into the next patches (`Cell::relayout`), in Heun's φ_n storage.
+    Relayout,
+    /// The next patches and their φ made current.
+    CommitPatches,
 }
 
 /// What preconditions the friction CG on the GPU.
@@ -129,7 +139,7 @@ enum Grid {
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 24] = [
+    pub const ALL: [Kernel; 27] = [
         Kernel::LatticeSums,
         Kernel::CellArea,
         Kernel::ChemicalPotential,
@@ -154,7 +164,13 @@ impl Kernel {
         Kernel::MgRestrict,
         Kernel::MgCoarseCycle,
         Kernel::MgSmooth,
+        Kernel::PatchBounds,
+        Kernel::Relayout,
+        Kernel::CommitPatches,
     ];
+
+    /// The patches following the cells after a step (`Monolayer::update_patches`).
+    pub const MOVE_PATCHES: [Kernel; 3] = [Kernel::PatchBounds, Kernel::Relayout, Kernel::CommitPatches];
 
     /// One evaluation of the rate R(φ) where there is no friction solve: Σφ², A_i, μ_i, Q̂_i, f_i,
     /// then v_i and ∂_t φ_i. (In relaxation ζ = 0 and Q̂_i is not needed; its dispatch stays so
@@ -231,6 +247,9 @@ impl Kernel {
             Kernel::MgCoarseCycle => (MULTIGRID_WGSL, "mg_coarse_cycle"),
             Kernel::MgSmooth => (MULTIGRID_WGSL, "mg_smooth"),
             Kernel::Jacobi => (FRICTION_WGSL, "jacobi"),
+            Kernel::PatchBounds => (CELL_WGSL, "patch_bounds"),
+            Kernel::Relayout => (CELL_WGSL, "relayout"),
+            Kernel::CommitPatches => (CELL_WGSL, "commit_patches"),
             Kernel::LatticeSums => (GATHER_WGSL, "lattice_sums"),
             Kernel::CellArea => (FREE_ENERGY_WGSL, "cell_area"),
             Kernel::ChemicalPotential => (FREE_ENERGY_WGSL, "chemical_potential"),
@@ -292,18 +311,23 @@ impl Kernel {
             Kernel::MgRestrict => &[Params, Weight, Diagonal, Residual, Solve, MgWork],
             Kernel::MgCoarseCycle => &[Params, Weight, Diagonal, Solve, Hierarchy, MgWork],
             Kernel::MgSmooth => &[Params, Weight, Diagonal, Residual, Partials, Solve, Preconditioned, MgWork],
+            Kernel::PatchBounds => &[Params, Patches, Phi, NextPatches, PatchFault],
+            Kernel::Relayout => &[Params, Patches, Phi, Phi0, NextPatches],
+            Kernel::CommitPatches => &[Patches, Phi, Phi0, NextPatches],
         }
     }
 
     fn grid(self) -> Grid {
         match self {
             Kernel::LatticeSums | Kernel::FrictionSums => Grid::Lattice,
-            Kernel::CellArea | Kernel::ShapeTensor => Grid::Cells,
+            Kernel::CellArea | Kernel::ShapeTensor | Kernel::PatchBounds => Grid::Cells,
             Kernel::ChemicalPotential
             | Kernel::ForceDensity
             | Kernel::VelocityAndRate
             | Kernel::Predict
-            | Kernel::Correct => Grid::Sites,
+            | Kernel::Correct
+            | Kernel::Relayout
+            | Kernel::CommitPatches => Grid::Sites,
             Kernel::FrictionSetup
             | Kernel::CgStart
             | Kernel::CgProduct
@@ -324,7 +348,7 @@ impl Kernel {
     /// time for a dispatch is at least this over its memory bandwidth.
     pub fn compulsory_bytes(self, state: &DeviceState) -> u64 {
         let layout = &state.layout;
-        let padded = layout.total as u64;
+        let padded: u64 = layout.patches.iter().map(|p| p.padded_len() as u64).sum();
         let interior: u64 = layout.patches.iter().map(|p| p.w as u64 * p.h as u64).sum();
         let (n, l2) = (layout.n_cells() as u64, (layout.box_size * layout.box_size) as u64);
         let hierarchy = Hierarchy::new(layout.box_size);
@@ -376,6 +400,10 @@ impl Kernel {
             Kernel::MgCoarseCycle => coarse_floats + 2 * coarse_work,
             // n, the diagonal, r and level 1's x read; z written.
             Kernel::MgSmooth => 4 * l2 + 2 * level1 + 2 * l2,
+            // φ read; the next patches and their codes written.
+            Kernel::PatchBounds => interior + 10 * n,
+            // φ read and written twice (into φ_n, then back).
+            Kernel::Relayout | Kernel::CommitPatches => 2 * padded,
         };
         4 * values
     }
@@ -532,12 +560,26 @@ impl GpuMonolayer {
         Kernel::step(self.solve())
     }
 
-    /// One Heun step on the patches as they are (they do not follow the cells on the GPU yet),
-    /// with the friction solve where the phase has one, all in one submission with nothing read
-    /// back. Whether φ left its range is in [`Slot::Fault`], per cell; whether the last solve
-    /// converged, in [`Self::read_solve`].
-    pub fn step(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
+    /// One Heun step on the patches as they are, with the friction solve where the phase has
+    /// one, all in one submission with nothing read back (the CPU's
+    /// `Monolayer::step_on_fixed_patches`). Whether φ left its range is in [`Slot::Fault`], per
+    /// cell; whether the last solve converged, in [`Self::read_solve`].
+    pub fn step_on_fixed_patches(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
         self.run(ctx, &self.step_kernels())
+    }
+
+    /// One step as the CPU's `Monolayer::step` takes it within a phase: the Heun step, then the
+    /// patches following the cells ([`Kernel::MOVE_PATCHES`]), in one submission. A cell whose
+    /// patch could not follow is in [`Slot::PatchFault`].
+    pub fn step(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
+        self.run(ctx, &[self.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat())
+    }
+
+    /// The patches as they are on the device now (they move with every [`Self::step`]).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn read_patches(&self, ctx: &GpuContext) -> Vec<GpuPatch> {
+        let words = read_f32(ctx, self.state.buffer(Slot::Patches));
+        bytemuck::cast_slice(&words).to_vec()
     }
 
     /// The friction solve's scalars after every submitted kernel has finished: its iterations,
