@@ -47,7 +47,9 @@ struct Solve {
     // Iterations taken, and whether the component has met its target (1) or not (0).
     iterations: vec2<u32>,
     done: vec2<u32>,
-    _pad0: u32,
+    // Solves that ended without meeting their target since the host last reset it: sticky, so
+    // that a failure in any step of a submission is seen at the next check.
+    unconverged: u32,
     _pad1: u32,
 };
 
@@ -343,6 +345,9 @@ fn friction_pull(@builtin(global_invocation_id) gid: vec3<u32>) {
     let l = params.box_size;
     if x >= l * l {
         return;
+    }
+    if x == 0u && (solve.done.x & solve.done.y) == 0u {
+        solve.unconverged += 1u;
     }
     if solve.ff == 0.0 {
         mean_velocity[x] = vec2<f32>(0.0, 0.0);

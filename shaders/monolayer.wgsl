@@ -15,7 +15,9 @@
 @group(0) @binding(17) var<storage, read_write> k1: array<f32>;
 // Per cell, the smallest padded index with φ' out of range, or NO_FAULT. An atomic minimum on
 // integers: its result does not depend on the order the invocations arrive in, so the flag is
-// as deterministic as the rest (no float atomics anywhere).
+// as deterministic as the rest (no float atomics anywhere). It is sticky: over the steps of a
+// submission it keeps the smallest index of any step, until the host resets it
+// (`GpuMonolayer::reset_faults`), so that a fault in any step is seen at the next check.
 @group(0) @binding(18) var<storage, read_write> fault: array<atomic<u32>>;
 
 const NO_FAULT: u32 = 0xffffffffu;
@@ -26,10 +28,6 @@ fn predict(@builtin(global_invocation_id) gid: vec3<u32>) {
     let site = site_of(p, gid.x);
     if !site.inside {
         return;
-    }
-    // The corrector's check starts from no fault; the predictor runs in an earlier dispatch.
-    if gid.x == 0u {
-        atomicStore(&fault[gid.y], NO_FAULT);
     }
     let i = site.i;
     let p0 = phi[i];

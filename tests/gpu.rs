@@ -27,6 +27,7 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use monolayer::gpu::buffers::{patch_storage, PatchFault};
+use monolayer::gpu::stepper::{GpuRun, GpuRunError};
 use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Preconditioner, Slot, NO_FAULT};
 use monolayer::model::free_energy::FreeEnergy;
 use monolayer::model::friction::{FrictionProblem, FrictionSolver};
@@ -1255,4 +1256,63 @@ fn a_hundred_steps_at_full_size_stay_near_the_cpu() {
     );
     assert!(worst <= 1e-4, "the GPU drifted {worst:e} from the CPU in 100 steps");
     assert!(differ * 10 <= patches.len(), "{differ} patches differ from the CPU's");
+}
+
+/// A GPU run (`gpu::stepper::GpuRun`) from a fresh reduced tissue through the end of relaxation
+/// into activity, in submissions of 25 steps checked between them: it takes the CPU's steps
+/// (the same step count and phase; φ on the lattice within 10⁻⁴ of the CPU's after 60 steps,
+/// each engine with its own friction solve and patches).
+#[test]
+fn a_gpu_run_crosses_into_activity_as_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let p = Params { box_size: 60, n_cells: 18, relax_steps: 40, xi_substrate: 0.01, ..Params::default() };
+    let m = Monolayer::new(p, 3).expect("valid parameters");
+    let mut run = GpuRun::new(&ctx, &m).expect("the monolayer fits the device");
+    run.check_every = 25;
+    run.advance(&ctx, 60).expect("the GPU steps");
+    let mut cpu = m.clone();
+    cpu.advance(60).expect("the CPU steps");
+    let got = run.download(&ctx);
+    assert_eq!((got.step_count(), got.phase()), (cpu.step_count(), cpu.phase()));
+    assert_eq!(got.phase(), Phase::Active);
+    let l = m.params().box_size;
+    let worst = got
+        .cells()
+        .iter()
+        .zip(cpu.cells())
+        .map(|(a, b)| {
+            let (a, b) = (on_lattice(a.patch(), &a.phi().padded(), l), on_lattice(b.patch(), &b.phi().padded(), l));
+            a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max);
+    eprintln!("60 steps across the phase switch: max |φ_GPU − φ_CPU| = {worst:.3e}");
+    assert!(worst <= 1e-4, "{worst:e}");
+}
+
+/// A fault stops a GPU run: φ pushed out of its range in one cell makes `advance` fail naming
+/// the cell and the steps, with the state back at their start, bit for bit as uploaded.
+#[test]
+fn a_gpu_run_stops_on_a_fault_and_keeps_the_last_good_state() {
+    let Some(ctx) = context() else { return };
+    let r = relaxing_tissue();
+    let mut state = r.state();
+    let (patch, phi) = &mut state.cells[7];
+    phi[patch.idx(patch.w / 2, patch.h / 2)] = 3.0;
+    let bad = Monolayer::from_state(r.params().clone(), r.seed(), state).expect("the state loads");
+    let mut run = GpuRun::new(&ctx, &bad).expect("the monolayer fits the device");
+    run.check_every = 4;
+    let before = run.download(&ctx);
+    let err = run.advance(&ctx, 10).expect_err("φ leaves its range");
+    eprintln!("{err}");
+    assert!(
+        matches!(err, GpuRunError::Unstable { from, to: _, cell: 7, site: _ } if from == r.step_count()),
+        "{err:?}"
+    );
+    assert_eq!(run.step_count(), r.step_count());
+    let after = run.download(&ctx);
+    for (a, b) in after.cells().iter().zip(before.cells()) {
+        assert_eq!(a.patch(), b.patch());
+        let bits = |c: &monolayer::model::cell::Cell| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(a), bits(b), "the state after the fault must be the one before it");
+    }
 }

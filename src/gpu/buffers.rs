@@ -390,7 +390,7 @@ impl DeviceState {
         let params = GpuParams::new(m.params(), m.phase());
         let phi = layout.flatten(m.cells().iter().map(|c| c.phi().data));
         let (l2, n, total) = (layout.box_size * layout.box_size, layout.n_cells(), layout.total);
-        let drag = drag(m);
+        let drag = drag(m.params(), m.phase(), &m.lattice().xi_s);
         let warm_start: Vec<[f32; 2]> = m.warm_start().iter().map(|u| [u.re as f32, u.im as f32]).collect();
         let groups = (l2).div_ceil(LATTICE_GROUP);
         let hierarchy = Hierarchy::new(layout.box_size);
@@ -403,7 +403,9 @@ impl DeviceState {
                 };
                 let zeros = |floats: usize| init(&vec![0u8; 4 * floats], STORAGE);
                 match slot {
-                    Slot::Params => init(bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM),
+                    Slot::Params => {
+                        init(bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST)
+                    }
                     Slot::Patches => init(bytemuck::cast_slice(&layout.patches), STORAGE),
                     Slot::Phi => init(bytemuck::cast_slice(&phi), STORAGE),
                     Slot::SumPhi | Slot::SumPhi2 | Slot::Weight => zeros(l2),
@@ -435,16 +437,31 @@ impl DeviceState {
     pub fn buffer(&self, slot: Slot) -> &wgpu::Buffer {
         &self.buffers[slot as usize]
     }
+
+    /// Enters a phase: the parameters of `GpuParams::new` and the drag as uploaded for it (the
+    /// CPU's switch from relaxation to activity at `relax_steps`). Written through the queue, so
+    /// it takes effect before the next submission.
+    pub fn set_phase(&mut self, ctx: &GpuContext, p: &Params, phase: Phase, xi_s: &[f64]) {
+        self.params = GpuParams::new(p, phase);
+        self.solves_friction = phase == Phase::Active && p.xi_cell > 0.0;
+        ctx.queue.write_buffer(self.buffer(Slot::Params), 0, bytemuck::bytes_of(&self.params));
+        ctx.queue.write_buffer(self.buffer(Slot::Drag), 0, bytemuck::cast_slice(&drag(p, phase, xi_s)));
+    }
+
+    /// Clears the sticky faults: φ's range per cell, and the count of unconverged solves.
+    pub fn reset_faults(&self, ctx: &GpuContext) {
+        let n = self.layout.n_cells();
+        ctx.queue.write_buffer(self.buffer(Slot::Fault), 0, bytemuck::cast_slice(&vec![NO_FAULT; n]));
+        ctx.queue.write_buffer(self.buffer(Slot::Solve), 0, bytemuck::bytes_of(&SolveScalars::default()));
+    }
 }
 
 /// `Slot::Drag` as uploaded: a pull of zero; the mobility of `Monolayer::evaluate` without a
 /// friction solve, computed in f64 as the CPU does and rounded once (1/ξ_relax during
 /// relaxation, 1/ξ_s(x) when active; with ξ_cell > 0 the friction solve replaces it in every
 /// evaluation); and ξ_s(x).
-fn drag(m: &Monolayer) -> Vec<[f32; 4]> {
-    let p = m.params();
-    let xi_s = &m.lattice().xi_s;
-    let mobility = |xs: f64| match m.phase() {
+pub fn drag(p: &Params, phase: Phase, xi_s: &[f64]) -> Vec<[f32; 4]> {
+    let mobility = |xs: f64| match phase {
         Phase::Relaxation => 1.0 / p.xi_relax,
         Phase::Active => 1.0 / xs,
     };
@@ -506,7 +523,9 @@ pub struct SolveScalars {
     pub iterations: [u32; 2],
     /// 1 once the component met its target.
     pub done: [u32; 2],
-    pub pad: [u32; 2],
+    /// Solves that ended short of their target since the host last reset the scalars.
+    pub unconverged: u32,
+    pub pad: u32,
 }
 
 impl SolveScalars {

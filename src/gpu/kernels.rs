@@ -295,7 +295,7 @@ impl Kernel {
             Kernel::ForceDensity => &[Params, Patches, Phi, Mu, QHat, Fx, Fy],
             Kernel::FrictionSums => &[Params, Patches, Phi, Fx, Fy, Weight, Force],
             Kernel::VelocityAndRate => &[Params, Patches, Phi, Mu, Fx, Fy, Drag, Velocity, Rate],
-            Kernel::Predict => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
+            Kernel::Predict => &[Params, Patches, Phi, Rate, Phi0, K1],
             Kernel::Correct => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
             Kernel::FrictionSetup => &[Params, Weight, Drag, Diagonal],
             Kernel::CgStart => &[Params, Weight, Force, Diagonal, MeanVelocity, Residual, Direction, Partials, Solve],
@@ -508,6 +508,10 @@ impl GpuMonolayer {
 
     pub fn state(&self) -> &DeviceState {
         &self.state
+    }
+
+    pub fn state_mut(&mut self) -> &mut DeviceState {
+        &mut self.state
     }
 
     /// Records the kernels, in the given order, into one compute pass. Within a pass every

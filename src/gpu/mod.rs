@@ -20,13 +20,16 @@
 //! tests and diagnostics. [`GpuMonolayer::step`] takes a whole Heun step on fixed patches in one
 //! submission, with the friction solve of Eq. 2 (conjugate gradients preconditioned by the
 //! CPU's aggregation multigrid, its scalars and stop flags on the device) where the phase has
-//! one. The moving patches are the next stage (docs/gpu.md).
+//! one, then the patches following the cells; [`stepper::GpuRun`] takes many steps with the
+//! faults checked between submissions (docs/gpu.md).
 //!
 //! A layer beside `analysis`: it imports only `model` (tested by `tests/layers.rs`).
 
 pub mod buffers;
 pub mod context;
 pub mod kernels;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod stepper;
 
 pub use buffers::{DeviceState, Slot, NO_FAULT};
 pub use context::{GpuContext, GpuError};
