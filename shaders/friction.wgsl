@@ -83,6 +83,16 @@ fn reduce_tree(t: u32) {
     workgroupBarrier();
 }
 
+// Adds every invocation's value over the workgroup (`reduce_tree`) and stores the sum as
+// workgroup g's entry of `part` in `partials`; every invocation calls it.
+fn store_partial(t: u32, part: u32, g: u32, value: vec4<f32>) {
+    tree[t] = value;
+    reduce_tree(t);
+    if t == 0u {
+        partials[part * groups() + g] = tree[0];
+    }
+}
+
 // Whether both components have met their target, uniformly across the workgroup.
 fn solve_finished(t: u32) -> bool {
     if t == 0u {
@@ -184,11 +194,7 @@ fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoca
     if x < l * l {
         direction[x] = vec2<f32>(0.0, 0.0);
     }
-    tree[t] = vec4<f32>(rr, ff, 0.0);
-    reduce_tree(t);
-    if t == 0u {
-        partials[RR * groups() + wg.x] = tree[0];
-    }
+    store_partial(t, RR, wg.x, vec4<f32>(rr, ff, 0.0));
 }
 
 // z = M r by Jacobi, r / diag(C) in the solve and 0 outside, into `preconditioned`; partial
@@ -209,11 +215,7 @@ fn jacobi(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
         preconditioned[x] = z;
         rz = r * z;
     }
-    tree[t] = vec4<f32>(rz, 0.0, 0.0);
-    reduce_tree(t);
-    if t == 0u {
-        partials[RZ * groups() + wg.x] = tree[0];
-    }
+    store_partial(t, RZ, wg.x, vec4<f32>(rz, 0.0, 0.0));
 }
 
 // Adds the partial sums from `first` on, one per workgroup of the lattice, in a fixed order
@@ -263,11 +265,7 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
         product[x] = q;
         pq = direction[x] * q;
     }
-    tree[t] = vec4<f32>(pq, 0.0, 0.0);
-    reduce_tree(t);
-    if t == 0u {
-        partials[PQ * groups() + wg.x] = tree[0];
-    }
+    store_partial(t, PQ, wg.x, vec4<f32>(pq, 0.0, 0.0));
 }
 
 // α = r·z / p·Cp for each component still iterating, 0 for one that has converged.
@@ -297,11 +295,7 @@ fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
         residual[x] = r;
         rr = r * r;
     }
-    tree[t] = vec4<f32>(rr, 0.0, 0.0);
-    reduce_tree(t);
-    if t == 0u {
-        partials[RR * groups() + wg.x] = tree[0];
-    }
+    store_partial(t, RR, wg.x, vec4<f32>(rr, 0.0, 0.0));
 }
 
 // One iteration's end for each component still iterating: count it; stop if ‖r‖² met the

@@ -27,11 +27,9 @@
 // diagonal, r, z, the partial sums, the scalars), `GROUP`, `tree` and helpers it uses.
 @group(0) @binding(27) var<storage, read_write> hierarchy: array<f32>;
 @group(0) @binding(28) var<storage, read_write> mg_work: array<vec2<f32>>;
-// `multigrid::COARSEST_SIDE`, `OMEGA`, `OVER_CORRECTION`, `COARSE_CORRECTIONS`.
-const COARSEST_SIDE: u32 = 6u;
-const OMEGA: f32 = 0.6666667;
-const OVER_CORRECTION: f32 = 1.5;
-const COARSE_CORRECTIONS: u32 = 2u;
+// COARSEST_SIDE, OMEGA, OVER_CORRECTION and COARSE_CORRECTIONS are `model::multigrid`'s own,
+// written in front of this file by src/gpu/kernels.rs (`Kernel::wgsl`), so the two cycles
+// cannot drift apart.
 // Values per site of a level in `hierarchy`: the diagonal, four forward bonds, the mass.
 const PER_SITE: u32 = 6u;
 const DIAG: u32 = 0u;
@@ -483,11 +481,7 @@ fn mg_smooth(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
         preconditioned[x] = z;
         rz = residual[x] * z;
     }
-    tree[t] = vec4<f32>(rz, 0.0, 0.0);
-    reduce_tree(t);
-    if t == 0u {
-        partials[RZ * groups() + wg.x] = tree[0];
-    }
+    store_partial(t, RZ, wg.x, vec4<f32>(rz, 0.0, 0.0));
 }
 
 // x₀′ at site y of level 0: ω D⁻¹ r + 1.5 x₁ of its aggregate (x₁ from `coarse` in `mg_work`,

@@ -15,6 +15,7 @@ use crate::gpu::context::{GpuContext, GpuError};
 use crate::model::free_energy::FreeEnergy;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::{Monolayer, Phase};
+use crate::model::multigrid::level_sides;
 use crate::model::params::{Advection, FrictionWeights, Laplacian, Params, PassiveForce};
 use crate::model::precision::{load, Real};
 
@@ -468,25 +469,17 @@ pub fn drag(p: &Params, phase: Phase, xi_s: &[f64]) -> Vec<[f32; 4]> {
     xi_s.iter().map(|&xs| [0.0, 0.0, mobility(xs) as f32, xs as f32]).collect()
 }
 
-/// The sides of the multigrid levels below the lattice, as `shaders/multigrid.wgsl` derives them
-/// (and `model::multigrid::Multigrid::new`): ⌈m/2⌉ per level while the side exceeds 6.
+/// The multigrid levels below the lattice, as `shaders/multigrid.wgsl` derives them: the CPU's
+/// (`model::multigrid::level_sides`) without the finest.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Hierarchy {
     /// Sides of levels 1, 2, …, the coarsest last (empty when L ≤ 6).
     pub sides: Vec<usize>,
 }
 
-/// `COARSEST_SIDE` of `model::multigrid` and `shaders/multigrid.wgsl`.
-const COARSEST_SIDE: usize = 6;
-
 impl Hierarchy {
     pub fn new(l: usize) -> Self {
-        let (mut m, mut sides) = (l, Vec::new());
-        while m > COARSEST_SIDE {
-            m = m.div_ceil(2);
-            sides.push(m);
-        }
-        Hierarchy { sides }
+        Hierarchy { sides: level_sides(l)[1..].to_vec() }
     }
 
     /// f32 values of `Slot::Hierarchy`: six per site of every level, then the coarsest level's

@@ -272,11 +272,18 @@ impl Kernel {
     }
 
     /// The WGSL the kernel is compiled from: `shaders/model.wgsl`, then its stage's file (the
-    /// multigrid's after the friction solve's, whose bindings and helpers it uses).
+    /// multigrid's after the friction solve's, whose bindings and helpers it uses, and after
+    /// the CPU cycle's constants).
     pub fn wgsl(self) -> String {
         let (stage, _) = self.source();
         if stage == MULTIGRID_WGSL {
-            format!("{MODEL_WGSL}\n{FRICTION_WGSL}\n{stage}")
+            use crate::model::multigrid::{COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
+            let cycle = format!(
+                "const COARSEST_SIDE: u32 = {COARSEST_SIDE}u;\nconst OMEGA: f32 = {:?};\n\
+                 const OVER_CORRECTION: f32 = {:?};\nconst COARSE_CORRECTIONS: u32 = {COARSE_CORRECTIONS}u;\n",
+                OMEGA as f32, OVER_CORRECTION as f32
+            );
+            format!("{MODEL_WGSL}\n{FRICTION_WGSL}\n{cycle}{stage}")
         } else {
             format!("{MODEL_WGSL}\n{stage}")
         }

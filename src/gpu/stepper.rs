@@ -62,7 +62,7 @@ impl GpuRun {
             params: m.params().clone(),
             seed: m.seed(),
             step: m.step_count(),
-            substrate: m.state().substrate,
+            substrate: m.lattice().substrate.clone(),
             xi_s: m.lattice().xi_s.clone(),
             kept,
             check_every: 50,

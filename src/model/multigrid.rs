@@ -87,27 +87,27 @@ fn step(i: usize, d: isize, m: usize) -> usize {
 }
 
 /// Coarsening stops at this side; the level is then solved exactly.
-const COARSEST_SIDE: usize = 6;
+pub const COARSEST_SIDE: usize = 6;
 
 /// Factor on every coarse correction. Piecewise-constant interpolation stores too much energy
 /// in the coarse vectors, so a plain correction falls short; over-correcting makes up for it
 /// (Vaněk's classic remedy for unsmoothed aggregation). Any value in (0, 2) keeps the cycle
 /// symmetric positive definite; 1.5 is the measured optimum with a margin
 /// (docs/performance.md, "Multigrid: what was measured").
-const OVER_CORRECTION: f64 = 1.5;
+pub const OVER_CORRECTION: f64 = 1.5;
 
 /// Coarse corrections per visit of every level but the finest: 1 is a V-cycle, 2 a W-cycle.
 /// Unsmoothed aggregation loses accuracy level by level; visiting the coarse levels twice makes
 /// up for it at little cost, since they hold a third of the sites (the cycles compared are in
 /// docs/performance.md).
-const COARSE_CORRECTIONS: usize = 2;
+pub const COARSE_CORRECTIONS: usize = 2;
 
 /// Damped Jacobi weight: the operators are weakly diagonally dominant M-matrices on every
 /// level (Galerkin aggregation keeps that), so D⁻¹A has its spectrum in [0, 2) and 2/3 keeps the
 /// smoother convergent while damping the highest modes. One sweep before and one after each
 /// coarse correction, equal so that the cycle is symmetric (a second sweep saves iterations but
 /// costs more time than it saves: docs/performance.md).
-const OMEGA: f64 = 2.0 / 3.0;
+pub const OMEGA: f64 = 2.0 / 3.0;
 
 #[inline]
 fn prev(i: usize, m: usize) -> usize {
@@ -557,14 +557,20 @@ pub struct Multigrid {
     coarsest: Coarsest,
 }
 
+/// The sides of the levels for an L × L lattice, finest first: ⌈m/2⌉ per level while the side
+/// exceeds `COARSEST_SIDE` (the GPU's hierarchy, `gpu::buffers::Hierarchy`, is the same).
+pub fn level_sides(l: usize) -> Vec<usize> {
+    let mut sides = vec![l];
+    while let Some(&m) = sides.last().filter(|&&m| m > COARSEST_SIDE) {
+        sides.push(m.div_ceil(2));
+    }
+    sides
+}
+
 impl Multigrid {
     pub fn new(l: usize) -> Self {
-        let mut levels = vec![Level { stencil: Vec::new(), ..Level::with_side(l) }];
-        let mut m = l;
-        while m > COARSEST_SIDE {
-            m = m.div_ceil(2);
-            levels.push(Level::with_side(m));
-        }
+        let mut levels: Vec<Level> = level_sides(l).into_iter().map(Level::with_side).collect();
+        levels[0].stencil = Vec::new();
         Multigrid { levels, coarsest: Coarsest::default() }
     }
 
