@@ -112,7 +112,11 @@ fn patch_bounds(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_
         next = p;
     }
     next_patches[i] = next;
-    patch_fault[i] = code;
+    // Sticky, as the other faults: the first one stays until the host reads and clears it, so
+    // that a fault in the middle of a submission is not hidden by a later step.
+    if patch_fault[i] == MOVED {
+        patch_fault[i] = code;
+    }
 }
 
 // φ in the next layout, into `phi0` (`Cell::relayout`): each padded site of the next patch takes

@@ -50,7 +50,9 @@ struct Solve {
     // Solves that ended without meeting their target since the host last reset it: sticky, so
     // that a failure in any step of a submission is seen at the next check.
     unconverged: u32,
-    _pad1: u32,
+    // The most iterations any solve took since the host last reset it (sticky, as above): what
+    // the host sizes the recorded iterations by.
+    most_iterations: u32,
 };
 
 const GROUP: u32 = 256u;
@@ -340,8 +342,11 @@ fn friction_pull(@builtin(global_invocation_id) gid: vec3<u32>) {
     if x >= l * l {
         return;
     }
-    if x == 0u && (solve.done.x & solve.done.y) == 0u {
-        solve.unconverged += 1u;
+    if x == 0u {
+        if (solve.done.x & solve.done.y) == 0u {
+            solve.unconverged += 1u;
+        }
+        solve.most_iterations = max(solve.most_iterations, max(solve.iterations.x, solve.iterations.y));
     }
     if solve.ff == 0.0 {
         mean_velocity[x] = vec2<f32>(0.0, 0.0);

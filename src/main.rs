@@ -14,7 +14,7 @@ use monolayer::run::config::{load_params, parse_assignment};
 use monolayer::run::files::{self, RunStatus};
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
-use monolayer::run::runner::{Event, RunDir};
+use monolayer::run::runner::{Engine, Event, RunDir};
 use monolayer::run::sweep::{measure_existing, run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
 use monolayer::{Monolayer, Params, Phase};
 
@@ -224,6 +224,11 @@ struct RunArgs {
     /// Analyse every frame as it is written (tables and plots in OUT/analysis, as `analyze`).
     #[arg(long)]
     analyze: bool,
+    /// What steps the run: cpu (the reference, the same bits everywhere) or gpu (the GPU
+    /// stepper in f32 on a Vulkan adapter; a build with --features gpu). A resumed run keeps
+    /// the engine it started on (default: cpu for a new run).
+    #[arg(long, value_parser = ["cpu", "gpu"])]
+    engine: Option<String>,
 }
 
 #[derive(Args)]
@@ -370,7 +375,7 @@ fn with_threads(threads: Option<usize>, f: impl FnOnce() -> Result<(), String> +
 }
 
 fn run(a: &RunArgs) -> Result<(), String> {
-    let mut run = match &a.resume {
+    let run = match &a.resume {
         Some(dir) => {
             let run = RunDir::resume(dir)?;
             eprintln!("resuming {} at step {}", dir.display(), run.monolayer.step_count());
@@ -378,6 +383,11 @@ fn run(a: &RunArgs) -> Result<(), String> {
         }
         None => RunDir::create(&a.out, a.params.params()?, a.seed, a.frame_interval)?,
     };
+    let engine = match &a.engine {
+        Some(e) => Engine::parse(e)?,
+        None => Engine::parse(&run.record.engine)?,
+    };
+    let mut run = run.with_engine(engine)?;
     let total = run.monolayer.params().total_steps();
     let bar = progress_bar(total, run.monolayer.step_count(), a.quiet);
     let (start, start_step) = (Instant::now(), run.monolayer.step_count());
@@ -387,7 +397,8 @@ fn run(a: &RunArgs) -> Result<(), String> {
                 Phase::Relaxation => "relaxing",
                 Phase::Active => "active",
             });
-            bar.inc(1);
+            // The GPU engine reports once per submission, the CPU once per step.
+            bar.set_position(m.step_count());
         }
         Event::Frame if a.quiet => {
             let s = m.step_count();

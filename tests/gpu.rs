@@ -26,7 +26,7 @@ mod common;
 use std::sync::OnceLock;
 use std::time::Instant;
 
-use monolayer::gpu::buffers::{patch_storage, PatchFault};
+use monolayer::gpu::buffers::{patch_storage, Layout, PatchFault};
 use monolayer::gpu::stepper::{GpuRun, GpuRunError};
 use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Preconditioner, Slot, NO_FAULT};
 use monolayer::model::free_energy::FreeEnergy;
@@ -779,6 +779,8 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
         text.contains(&format!("one Heun step without a friction solve: {} dispatches", Kernel::step(None).len())),
         "{text}"
     );
+    assert!(text.contains("PROJECTION for a laptop GPU, not a measurement"), "{text}");
+    assert!(text.contains("a GPU run (GpuRun, checked every 50 steps)"), "{text}");
 }
 
 /// The median wall time of submitting `kernels` and waiting for them, after one warm-up.
@@ -1264,12 +1266,71 @@ fn a_gpu_run_crosses_into_activity_as_the_cpu() {
     run.advance(&ctx, 60).expect("the GPU steps");
     let mut cpu = m.clone();
     cpu.advance(60).expect("the CPU steps");
-    let got = run.download(&ctx);
+    let got = run.download_now(&ctx);
     assert_eq!((got.step_count(), got.phase()), (cpu.step_count(), cpu.phase()));
     assert_eq!(got.phase(), Phase::Active);
     let worst = max_distance(&phi_on_lattice(&got), &phi_on_lattice(&cpu));
     eprintln!("60 steps across the phase switch: max |φ_GPU − φ_CPU| = {worst:.3e}");
     assert!(worst <= 1e-4, "{worst:e}");
+}
+
+/// A GPU run whose cells outgrow their storage: an active tissue uploaded with room for no
+/// more than its largest patch, the first cell whose patch grows beyond it faults
+/// (`BeyondCapacity`, a fault the CPU never meets); `advance` puts that submission back,
+/// uploads the state again with room for the patches it has then, and takes the steps again,
+/// so the run ends where the CPU's does.
+#[test]
+fn a_gpu_run_regrows_its_storage_and_goes_on_as_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let m = reduced_tissue();
+    let mut run = GpuRun::new(&ctx, m).expect("the monolayer fits the device");
+    let tight = Layout::with_capacity(m, 0);
+    let capacity = tight.max_padded;
+    run.upload_in(&ctx, m, tight).expect("the monolayer fits the device");
+    run.check_every = 10;
+    run.advance(&ctx, 60).expect("the GPU steps, regrowing its storage");
+    let regrown = run.gpu().state().layout.max_padded;
+    let mut cpu = m.clone();
+    cpu.advance(60).expect("the CPU steps");
+    let got = run.download_now(&ctx);
+    let worst = max_distance(&phi_on_lattice(&got), &phi_on_lattice(&cpu));
+    eprintln!("tight storage: capacity {capacity} → {regrown} values per cell; after 60 steps max |φ_GPU − φ_CPU| = {worst:.3e}");
+    assert!(regrown > capacity, "the storage was never regrown ({capacity} values per cell): the test proves nothing");
+    assert_eq!(got.step_count(), cpu.step_count());
+    assert!(worst <= 1e-4, "{worst:e}");
+}
+
+/// The recorded solve iterations follow what the solves need: a run that starts with far too
+/// few meets unconverged solves, puts those steps back, doubles the count and takes them again;
+/// one that starts with many halves them while the solves take under a third. Either way the
+/// run is bit for bit the run of a fixed, ample count, since iterations recorded after a
+/// solve converged return at once.
+#[test]
+fn the_recorded_iterations_adapt_without_changing_a_bit() {
+    let Some(ctx) = context() else { return };
+    let m = reduced_tissue();
+    let run = |iterations: usize, adapt: bool| {
+        let mut run = GpuRun::new(&ctx, m).expect("the monolayer fits the device");
+        run.gpu_mut().solve_iterations = iterations;
+        run.adapt_iterations = adapt;
+        run.check_every = 10;
+        run.advance(&ctx, 40).expect("the GPU steps");
+        (run.gpu().solve_iterations, run.download_now(&ctx))
+    };
+    let (fixed, reference) = run(60, false);
+    let (grown, from_few) = run(1, true);
+    let (shrunk, from_many) = run(60, true);
+    eprintln!("recorded iterations: fixed {fixed}; from 1 → {grown}; from 60 → {shrunk}");
+    assert!(grown > 1, "too few iterations were never raised");
+    assert!(shrunk < 60, "ample iterations were never lowered");
+    let bits = |m: &Monolayer| {
+        m.cells()
+            .iter()
+            .flat_map(|c| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+            .collect::<Vec<_>>()
+    };
+    assert!(bits(&from_few) == bits(&reference), "raising the iterations changed the run");
+    assert!(bits(&from_many) == bits(&reference), "lowering the iterations changed the run");
 }
 
 /// A fault stops a GPU run: φ pushed out of its range in one cell makes `advance` fail naming
@@ -1284,7 +1345,7 @@ fn a_gpu_run_stops_on_a_fault_and_keeps_the_last_good_state() {
     let bad = Monolayer::from_state(r.params().clone(), r.seed(), state).expect("the state loads");
     let mut run = GpuRun::new(&ctx, &bad).expect("the monolayer fits the device");
     run.check_every = 4;
-    let before = run.download(&ctx);
+    let before = run.download_now(&ctx);
     let err = run.advance(&ctx, 10).expect_err("φ leaves its range");
     eprintln!("{err}");
     assert!(
@@ -1292,10 +1353,46 @@ fn a_gpu_run_stops_on_a_fault_and_keeps_the_last_good_state() {
         "{err:?}"
     );
     assert_eq!(run.step_count(), r.step_count());
-    let after = run.download(&ctx);
+    let after = run.download_now(&ctx);
     for (a, b) in after.cells().iter().zip(before.cells()) {
         assert_eq!(a.patch(), b.patch());
         let bits = |c: &monolayer::model::cell::Cell| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(a), bits(b), "the state after the fault must be the one before it");
     }
+}
+
+/// `monolayer run --engine gpu`: the run's protocol stepped on the GPU, its frames and
+/// checkpoints written from the state downloaded at their steps. The record names the engine,
+/// the state at the end is the CPU run's within 10⁻⁴, and a resume on the other engine is
+/// refused, naming the engine it started on.
+#[test]
+fn a_run_on_the_gpu_engine_writes_the_cpus_frames() {
+    let Some(_ctx) = context() else { return };
+    let tmp = tempfile::tempdir().expect("a temporary directory");
+    let small = ["--set", "box_size=60", "--set", "n_cells=18", "--relax-steps", "40", "--steps", "30"];
+    let small =
+        [&small[..], &["--set", "xi_substrate=0.01", "--frame-interval", "10", "--quiet", "--seed", "3"]].concat();
+    let (gpu_dir, cpu_dir) = (tmp.path().join("gpu"), tmp.path().join("cpu"));
+    for (dir, engine) in [(&gpu_dir, "gpu"), (&cpu_dir, "cpu")] {
+        let out = common::monolayer(&[&["run", "--engine", engine, "--out", common::arg(dir)][..], &small].concat());
+        assert!(out.status.success(), "{engine}: {}", common::stderr(&out));
+    }
+    let record = std::fs::read_to_string(gpu_dir.join("run.json")).expect("run.json");
+    assert!(record.contains("\"engine\": \"gpu-f32\""), "{record}");
+    for step in [40, 50, 60, 70] {
+        assert!(gpu_dir.join(format!("frames/frame_{step:07}.npz")).exists(), "frame {step} missing");
+    }
+    let end = |dir: &std::path::Path| {
+        let state = monolayer::run::files::read_checkpoint(&dir.join("checkpoint.npz"), 60).expect("a checkpoint");
+        let p = Params { box_size: 60, n_cells: 18, relax_steps: 40, xi_substrate: 0.01, ..Params::default() };
+        Monolayer::from_state(p, 3, state).expect("the checkpoint loads")
+    };
+    let (gpu, cpu) = (end(&gpu_dir), end(&cpu_dir));
+    assert_eq!(gpu.step_count(), 70);
+    let worst = max_distance(&phi_on_lattice(&gpu), &phi_on_lattice(&cpu));
+    eprintln!("monolayer run --engine gpu: 70 steps, max |φ_GPU − φ_CPU| = {worst:.3e}");
+    assert!(worst <= 1e-4, "{worst:e}");
+    let out = common::monolayer(&["run", "--resume", common::arg(&gpu_dir), "--engine", "cpu"]);
+    assert!(!out.status.success());
+    assert!(common::stderr(&out).contains("stepped by the gpu-f32 engine"), "{}", common::stderr(&out));
 }

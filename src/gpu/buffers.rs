@@ -84,7 +84,8 @@ pub enum Slot {
     MgWork = 28,
     /// Each cell's next patch (`shaders/cell.wgsl`), `GpuPatch` per cell.
     NextPatches = 29,
-    /// Per cell, a [`PatchFault`] code from the last patch update.
+    /// Per cell, the first [`PatchFault`] code other than `Moved` since the faults were last
+    /// cleared (sticky), or `Moved`.
     PatchFault = 30,
 }
 
@@ -282,11 +283,27 @@ pub struct Layout {
 pub const CAPACITY_FACTOR: usize = 2;
 
 impl Layout {
+    /// The layout with the default capacity ([`Layout::default_capacity`]).
     pub fn of(m: &Monolayer) -> Self {
+        Self::with_capacity(m, Self::default_capacity(m))
+    }
+
+    /// [`CAPACITY_FACTOR`] times the largest padded patch, and at least a relaxation patch.
+    pub fn default_capacity(m: &Monolayer) -> usize {
         let p = m.params();
-        let largest = m.cells().iter().map(|c| c.patch().padded_len()).max().unwrap_or(0);
         let square = (p.relax_patch_size + 2) * (p.relax_patch_size + 2);
-        let capacity = (CAPACITY_FACTOR * largest).max(square);
+        (CAPACITY_FACTOR * Self::largest_padded(m)).max(square)
+    }
+
+    /// The largest padded patch of the monolayer: the least capacity that takes its cells.
+    pub fn largest_padded(m: &Monolayer) -> usize {
+        m.cells().iter().map(|c| c.patch().padded_len()).max().unwrap_or(0)
+    }
+
+    /// Every cell with storage for `capacity` values (at least its padded patch).
+    pub fn with_capacity(m: &Monolayer, capacity: usize) -> Self {
+        let capacity = capacity.max(Self::largest_padded(m));
+        let p = m.params();
         let mut patches = Vec::with_capacity(m.cells().len());
         let mut total = 0;
         for c in m.cells() {
@@ -386,7 +403,11 @@ impl DeviceState {
     /// derived field zero until a kernel writes it.
     /// Refuses, naming the limit, a monolayer too large for the device.
     pub fn upload(ctx: &GpuContext, m: &Monolayer) -> Result<Self, GpuError> {
-        let layout = Layout::of(m);
+        Self::upload_in(ctx, m, Layout::of(m))
+    }
+
+    /// [`DeviceState::upload`] in a given layout (tests: a tight capacity).
+    pub fn upload_in(ctx: &GpuContext, m: &Monolayer, layout: Layout) -> Result<Self, GpuError> {
         layout.fits(&ctx.device.limits())?;
         let params = GpuParams::new(m.params(), m.phase());
         let phi = layout.flatten(m.cells().iter().map(|c| c.phi().data));
@@ -449,10 +470,16 @@ impl DeviceState {
         ctx.queue.write_buffer(self.buffer(Slot::Drag), 0, bytemuck::cast_slice(&drag(p, phase, xi_s)));
     }
 
-    /// Clears the sticky faults: φ's range per cell, and the count of unconverged solves.
+    /// Clears the sticky faults: φ's range and the patch's per cell, and the count of
+    /// unconverged solves.
     pub fn reset_faults(&self, ctx: &GpuContext) {
         let n = self.layout.n_cells();
         ctx.queue.write_buffer(self.buffer(Slot::Fault), 0, bytemuck::cast_slice(&vec![NO_FAULT; n]));
+        ctx.queue.write_buffer(
+            self.buffer(Slot::PatchFault),
+            0,
+            bytemuck::cast_slice(&vec![PatchFault::Moved as u32; n]),
+        );
         ctx.queue.write_buffer(self.buffer(Slot::Solve), 0, bytemuck::bytes_of(&SolveScalars::default()));
     }
 }
@@ -518,7 +545,8 @@ pub struct SolveScalars {
     pub done: [u32; 2],
     /// Solves that ended short of their target since the host last reset the scalars.
     pub unconverged: u32,
-    pub pad: u32,
+    /// The most iterations any solve took since the host last reset the scalars.
+    pub most_iterations: u32,
 }
 
 impl SolveScalars {

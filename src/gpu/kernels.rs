@@ -9,8 +9,10 @@
 use crate::gpu::buffers::GpuPatch;
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::buffers::SolveScalars;
-use crate::gpu::buffers::{DeviceState, Hierarchy, Slot, LATTICE_GROUP};
+use crate::gpu::buffers::{DeviceState, Hierarchy, Layout, Slot, LATTICE_GROUP};
 use crate::gpu::context::{GpuContext, GpuError};
+#[cfg(not(target_arch = "wasm32"))]
+use crate::gpu::readback::read_now;
 use crate::model::monolayer::Monolayer;
 
 const MODEL_WGSL: &str = include_str!("../../shaders/model.wgsl");
@@ -508,7 +510,12 @@ impl GpuMonolayer {
     /// Replaces the device state by the monolayer's current one (patches may have moved, so
     /// buffers and bind groups are made anew).
     pub fn upload(&mut self, ctx: &GpuContext, m: &Monolayer) -> Result<(), GpuError> {
-        self.state = DeviceState::upload(ctx, m)?;
+        self.upload_in(ctx, m, Layout::of(m))
+    }
+
+    /// [`Self::upload`] in a given layout (tests: a capacity the patches soon outgrow).
+    pub fn upload_in(&mut self, ctx: &GpuContext, m: &Monolayer, layout: Layout) -> Result<(), GpuError> {
+        self.state = DeviceState::upload_in(ctx, m, layout)?;
         self.bind_groups = bind_groups(ctx, &self.pipelines, &self.state);
         Ok(())
     }
@@ -587,33 +594,31 @@ impl GpuMonolayer {
     }
 
     /// The patches as they are on the device now (they move with every [`Self::step`]).
+    /// Blocking, native only, as the three below: tests and diagnostics; a run reads its state
+    /// through [`crate::gpu::readback::read_words`].
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_patches(&self, ctx: &GpuContext) -> Vec<GpuPatch> {
-        let words = read_f32(ctx, self.state.buffer(Slot::Patches));
-        bytemuck::cast_slice(&words).to_vec()
+        bytemuck::cast_slice(&read_now(ctx, self.state.buffer(Slot::Patches))).to_vec()
     }
 
     /// The friction solve's scalars after every submitted kernel has finished: its iterations,
-    /// its residual and whether it converged. For tests and diagnostics (a readback).
+    /// its residual and whether it converged.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_solve(&self, ctx: &GpuContext) -> SolveScalars {
-        let words = read_f32(ctx, self.state.buffer(Slot::Solve));
-        *bytemuck::from_bytes(bytemuck::cast_slice(&words))
+        *bytemuck::from_bytes(bytemuck::cast_slice(&read_now(ctx, self.state.buffer(Slot::Solve))))
     }
 
-    /// A buffer's contents as u32 (`Slot::Fault`), after every submitted kernel has finished. For
-    /// tests and diagnostics only.
+    /// A buffer's contents as u32 (`Slot::Fault`), after every submitted kernel has finished.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_u32(&self, ctx: &GpuContext, slot: Slot) -> Vec<u32> {
-        read_f32(ctx, self.state.buffer(slot)).iter().map(|v| v.to_bits()).collect()
+        read_now(ctx, self.state.buffer(slot))
     }
 
-    /// A buffer's contents as f32, after every submitted kernel has finished. For tests and
-    /// diagnostics only: a readback stalls the queue (milliseconds in a browser). Native only
-    /// for now (it blocks on the device).
+    /// A buffer's contents as f32, after every submitted kernel has finished: a readback stalls
+    /// the queue (milliseconds in a browser).
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read(&self, ctx: &GpuContext, slot: Slot) -> Vec<f32> {
-        read_f32(ctx, self.state.buffer(slot))
+        read_now(ctx, self.state.buffer(slot)).into_iter().map(f32::from_bits).collect()
     }
 }
 
@@ -633,33 +638,6 @@ fn bind_groups(ctx: &GpuContext, pipelines: &Pipelines, state: &DeviceState) -> 
             })
         })
         .collect()
-}
-
-/// Copies `buffer` to a mappable one, waits for the queue and reads it as f32.
-#[cfg(not(target_arch = "wasm32"))]
-fn read_f32(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Vec<f32> {
-    let size = buffer.size();
-    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("readback"),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
-    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
-    ctx.queue.submit([encoder.finish()]);
-    let (tx, rx) = std::sync::mpsc::channel();
-    staging.map_async(wgpu::MapMode::Read, .., move |r| {
-        // The receiver waits below; it cannot be gone.
-        let _ = tx.send(r);
-    });
-    ctx.wait();
-    rx.recv().expect("the map callback runs during the poll").expect("the readback buffer maps");
-    let data = staging.get_mapped_range(..).expect("the buffer is mapped");
-    let out = bytemuck::cast_slice(&data).to_vec();
-    drop(data);
-    staging.unmap();
-    out
 }
 
 #[cfg(test)]

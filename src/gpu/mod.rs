@@ -21,14 +21,15 @@
 //! submission, with the friction solve of Eq. 2 (conjugate gradients preconditioned by the
 //! CPU's aggregation multigrid, its scalars and stop flags on the device) where the phase has
 //! one, then the patches following the cells; [`stepper::GpuRun`] takes many steps with the
-//! faults checked between submissions (docs/gpu.md).
+//! faults checked between submissions, natively and in the page's worker
+//! (`web::gpu_engine`), its readbacks futures ([`readback`]) (docs/gpu.md).
 //!
 //! A layer beside `analysis`: it imports only `model` (tested by `tests/layers.rs`).
 
 pub mod buffers;
 pub mod context;
 pub mod kernels;
-#[cfg(not(target_arch = "wasm32"))]
+pub mod readback;
 pub mod stepper;
 
 pub use buffers::{DeviceState, Slot, NO_FAULT};

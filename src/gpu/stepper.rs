@@ -1,18 +1,22 @@
 //! Many steps on the GPU, as `Monolayer::advance` takes them: the switch from relaxation to
-//! activity at `relax_steps`, and the faults checked every so many steps with one small
-//! readback, the state put back to the last check when one is found (the CPU's rule: an
-//! unstable run stops, naming when and where, and keeps its last good state).
+//! activity at `relax_steps`, and the faults checked after every submission of a few dozen
+//! steps with one small readback, the state put back to the start of that submission when one
+//! is found (the CPU's rule: an unstable run stops, naming when and where, and keeps its last
+//! good state).
 //!
-//! Native only for now: the checks block on the device (in a browser they would map
-//! asynchronously, which the page's worker is to do).
+//! The same code on both targets: a submission is recorded at once ([`GpuRun::submit`]), its
+//! faults arrive as a future ([`GpuRun::read_faults`]) that a browser awaits from its event
+//! loop and a native caller blocks on ([`GpuRun::advance`]), and [`GpuRun::settle`] decides.
 
-use crate::gpu::buffers::{PatchFault, Slot, NO_FAULT};
-use crate::gpu::context::GpuContext;
-use crate::gpu::kernels::{GpuMonolayer, Kernel};
+use crate::gpu::buffers::{patch_storage, GpuPatch, Layout, PatchFault, Slot, SolveScalars, NO_FAULT};
+use crate::gpu::context::{GpuContext, GpuError};
+use crate::gpu::kernels::{GpuMonolayer, Kernel, Preconditioner, JACOBI_ITERATIONS, SOLVE_ITERATIONS};
+use crate::gpu::readback::read_words;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::{Monolayer, Phase, State};
 use crate::model::params::Params;
 use num_complex::Complex64 as C64;
+use std::future::Future;
 
 /// Why a GPU run stopped; the state is back at the start of the steps named.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -21,12 +25,47 @@ pub enum GpuRunError {
     Unstable { from: u64, to: u64, cell: usize, site: u32 },
     #[error("in steps {from}..{to}: cell {cell} lost its patch ({why}); the state is back at step {from}")]
     CellLost { from: u64, to: u64, cell: usize, why: &'static str },
+    #[error("in steps {from}..{to}: cell {cell}'s patch outgrew its GPU storage; the state is back at step {from}, to be uploaded again with more room")]
+    BeyondCapacity { from: u64, to: u64, cell: usize },
+    #[error("at step {from}: the state could not be uploaded again with more room: {reason}")]
+    Regrow { from: u64, reason: String },
     #[error("in steps {from}..{to}: {count} friction solves missed their tolerance in the recorded iterations; the state is back at step {from}")]
     Friction { from: u64, to: u64, count: u32 },
 }
 
-/// The per-cell and lattice buffers a step changes and the copies that keep the last check's
-/// state.
+/// The sticky faults of one submission, read back together.
+#[derive(Clone, Debug)]
+pub struct Faults {
+    /// Per cell, the first padded index where φ left its range, or [`NO_FAULT`].
+    pub range: Vec<u32>,
+    /// Per cell, a [`PatchFault`] code.
+    pub patch: Vec<u32>,
+    pub solve: SolveScalars,
+}
+
+impl Faults {
+    /// The first fault, in the order the CPU would meet them (φ's range is checked inside the
+    /// step, the patches after it, the solves' count is the GPU's own).
+    fn error(&self, from: u64, to: u64) -> Option<GpuRunError> {
+        if let Some((cell, &site)) = self.range.iter().enumerate().find(|(_, &f)| f != NO_FAULT) {
+            return Some(GpuRunError::Unstable { from, to, cell, site });
+        }
+        for (cell, &code) in self.patch.iter().enumerate() {
+            let why = match PatchFault::from_code(code) {
+                Some(PatchFault::Moved) => continue,
+                Some(PatchFault::BeyondCapacity) => return Some(GpuRunError::BeyondCapacity { from, to, cell }),
+                Some(PatchFault::Vanished) => "vanished: no site above the presence threshold",
+                Some(PatchFault::SpansTheBox) => "its patch would span the box",
+                None => "an unknown fault code",
+            };
+            return Some(GpuRunError::CellLost { from, to, cell, why });
+        }
+        (self.solve.unconverged > 0).then_some(GpuRunError::Friction { from, to, count: self.solve.unconverged })
+    }
+}
+
+/// The per-cell and lattice buffers a step changes, of which a copy keeps the state at the
+/// start of each submission.
 const KEPT: [Slot; 3] = [Slot::Phi, Slot::Patches, Slot::MeanVelocity];
 
 /// A monolayer stepped on the GPU from a CPU state.
@@ -34,47 +73,91 @@ pub struct GpuRun {
     gpu: GpuMonolayer,
     params: Params,
     seed: u64,
+    /// Steps taken and checked.
     step: u64,
+    /// The steps submitted and not yet settled, as (from, to).
+    pending: Option<(u64, u64)>,
     substrate: Vec<f64>,
     xi_s: Vec<f64>,
     kept: Vec<wgpu::Buffer>,
     /// Steps between fault checks (each check one readback of a few hundred bytes).
     pub check_every: u64,
+    /// Whether the recorded solve iterations follow what the solves need ([`Self::settle`]).
+    pub adapt_iterations: bool,
+}
+
+/// The recorded solve iterations, when adapted, stay within these multiples of the
+/// preconditioner's default ([`GpuMonolayer::set_preconditioner`]): a quarter of it (the
+/// multigrid's 30 → 7; a warm-started solve inside a run takes 3–5) to eight times.
+const FEWEST_ITERATIONS: f64 = 0.25;
+const MOST_ITERATIONS: usize = 8;
+
+fn kept_buffers(ctx: &GpuContext, gpu: &GpuMonolayer) -> Vec<wgpu::Buffer> {
+    KEPT.iter()
+        .map(|&s| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("kept"),
+                size: gpu.state().buffer(s).size(),
+                usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })
+        .collect()
 }
 
 impl GpuRun {
     /// Uploads the monolayer's state, in its current phase.
-    pub fn new(ctx: &GpuContext, m: &Monolayer) -> Result<Self, crate::gpu::GpuError> {
+    pub fn new(ctx: &GpuContext, m: &Monolayer) -> Result<Self, GpuError> {
         let gpu = GpuMonolayer::new(ctx, m)?;
-        let kept = KEPT
-            .iter()
-            .map(|&s| {
-                ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("kept"),
-                    size: gpu.state().buffer(s).size(),
-                    usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                })
-            })
-            .collect();
+        let kept = kept_buffers(ctx, &gpu);
         Ok(GpuRun {
             gpu,
             params: m.params().clone(),
             seed: m.seed(),
             step: m.step_count(),
+            pending: None,
             substrate: m.lattice().substrate.clone(),
             xi_s: m.lattice().xi_s.clone(),
             kept,
             check_every: 50,
+            adapt_iterations: true,
         })
+    }
+
+    /// Replaces the state by the monolayer's (its parameters, substrate and cells may have
+    /// changed), keeping the compiled kernels; each cell's storage is sized anew from its patch.
+    pub fn upload(&mut self, ctx: &GpuContext, m: &Monolayer) -> Result<(), GpuError> {
+        self.upload_in(ctx, m, Layout::of(m))
+    }
+
+    /// [`Self::upload`] in a given layout (tests: a capacity the patches soon outgrow).
+    pub fn upload_in(&mut self, ctx: &GpuContext, m: &Monolayer, layout: Layout) -> Result<(), GpuError> {
+        self.gpu.upload_in(ctx, m, layout)?;
+        self.kept = kept_buffers(ctx, &self.gpu);
+        self.params = m.params().clone();
+        self.seed = m.seed();
+        self.step = m.step_count();
+        self.pending = None;
+        self.substrate = m.lattice().substrate.clone();
+        self.xi_s = m.lattice().xi_s.clone();
+        Ok(())
     }
 
     pub fn step_count(&self) -> u64 {
         self.step
     }
 
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
     pub fn gpu(&self) -> &GpuMonolayer {
         &self.gpu
+    }
+
+    /// The GPU's own settings: the recorded solve iterations and the preconditioner.
+    pub fn gpu_mut(&mut self) -> &mut GpuMonolayer {
+        &mut self.gpu
     }
 
     fn phase_at(&self, step: u64) -> Phase {
@@ -85,29 +168,25 @@ impl GpuRun {
         }
     }
 
-    /// `n` steps: in submissions of at most `check_every` steps that do not cross into the
-    /// active phase, each followed by a check of the faults. On a fault the state is put back to
-    /// the start of that submission and the error names its steps and the cell.
-    pub fn advance(&mut self, ctx: &GpuContext, n: u64) -> Result<(), GpuRunError> {
-        let end = self.step + n;
-        while self.step < end {
-            let phase = self.phase_at(self.step);
-            if self.gpu.state().params.active != (phase == Phase::Active) as u32 {
-                self.gpu.state_mut().set_phase(ctx, &self.params, phase, &self.xi_s);
-            }
-            let mut batch = self.check_every.max(1).min(end - self.step);
-            if phase == Phase::Relaxation {
-                batch = batch.min(self.params.relax_steps - self.step);
-            }
-            self.submit(ctx, batch);
-            self.check(ctx, self.step, self.step + batch)?;
-            self.step += batch;
+    /// Keeps the state, then records up to `n` steps in one submission: at most
+    /// `check_every`, and none across the switch to activity. Returns the steps submitted,
+    /// which [`Self::settle`] then accepts or puts back.
+    ///
+    /// # Panics
+    /// If a submission is still pending (submit, read the faults, settle, in that order).
+    pub fn submit(&mut self, ctx: &GpuContext, n: u64) -> u64 {
+        assert!(self.pending.is_none(), "the last submission must be settled before the next");
+        let phase = self.phase_at(self.step);
+        if self.gpu.state().params.active != (phase == Phase::Active) as u32 {
+            self.gpu.state_mut().set_phase(ctx, &self.params, phase, &self.xi_s);
         }
-        Ok(())
-    }
-
-    /// Keeps the state, then records `steps` steps, all in one submission.
-    fn submit(&self, ctx: &GpuContext, steps: u64) {
+        let mut steps = self.check_every.max(1).min(n);
+        if phase == Phase::Relaxation {
+            steps = steps.min(self.params.relax_steps - self.step);
+        }
+        if steps == 0 {
+            return 0;
+        }
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
         for (&slot, kept) in KEPT.iter().zip(&self.kept) {
             encoder.copy_buffer_to_buffer(self.gpu.state().buffer(slot), 0, kept, 0, kept.size());
@@ -117,52 +196,121 @@ impl GpuRun {
             self.gpu.encode(&mut encoder, &one);
         }
         ctx.queue.submit([encoder.finish()]);
+        self.pending = Some((self.step, self.step + steps));
+        steps
     }
 
-    /// Reads the sticky faults; on one, puts the kept state back and says what happened.
-    fn check(&self, ctx: &GpuContext, from: u64, to: u64) -> Result<(), GpuRunError> {
-        let faults = self.gpu.read_u32(ctx, Slot::Fault);
-        let patch_faults = self.gpu.read_u32(ctx, Slot::PatchFault);
-        let solve = self.gpu.read_solve(ctx);
-        let error = if let Some((cell, &site)) = faults.iter().enumerate().find(|(_, &f)| f != NO_FAULT) {
-            Some(GpuRunError::Unstable { from, to, cell, site })
-        } else if let Some((cell, why)) = patch_faults.iter().enumerate().find_map(|(i, &f)| {
-            let why = match PatchFault::from_code(f) {
-                Some(PatchFault::Moved) => return None,
-                Some(PatchFault::Vanished) => "vanished: no site above the presence threshold",
-                Some(PatchFault::SpansTheBox) => "its patch would span the box",
-                Some(PatchFault::BeyondCapacity) => "its patch outgrew the GPU storage; upload again",
-                None => "an unknown code",
-            };
-            Some((i, why))
-        }) {
-            Some(GpuRunError::CellLost { from, to, cell, why })
-        } else if solve.unconverged > 0 {
-            Some(GpuRunError::Friction { from, to, count: solve.unconverged })
-        } else {
-            None
+    /// The sticky faults once every submitted step has finished: one readback.
+    pub fn read_faults(&self, ctx: &GpuContext) -> impl Future<Output = Faults> + 'static {
+        let s = self.gpu.state();
+        let words = read_words(ctx, &[s.buffer(Slot::Fault), s.buffer(Slot::PatchFault), s.buffer(Slot::Solve)]);
+        async move {
+            let [range, patch, solve]: [Vec<u32>; 3] = words.await.try_into().expect("three buffers read");
+            Faults { range, patch, solve: *bytemuck::from_bytes(bytemuck::cast_slice(&solve)) }
+        }
+    }
+
+    /// Accepts the pending steps (`Ok(true)`), or on a fault puts the state kept at their start
+    /// back and clears the faults. A solve that missed its tolerance within the recorded
+    /// iterations, while they may still grow (`adapt_iterations`), doubles them and asks for
+    /// the same steps again (`Ok(false)`): a solve that converges gives the same bits whatever
+    /// the iterations recorded after it, so the run is the one a larger count would have made.
+    /// Otherwise the error says what happened. After accepted steps the recorded iterations
+    /// halve while the most any solve took is under a third of them.
+    pub fn settle(&mut self, ctx: &GpuContext, faults: &Faults) -> Result<bool, GpuRunError> {
+        let Some((from, to)) = self.pending.take() else { return Ok(true) };
+        self.gpu.state().reset_faults(ctx);
+        let (default, recorded) = (self.default_iterations(), self.gpu.solve_iterations);
+        let fewest = ((default as f64 * FEWEST_ITERATIONS) as usize).max(1);
+        let error = match faults.error(from, to) {
+            None => {
+                let most = faults.solve.most_iterations as usize;
+                if self.adapt_iterations && self.gpu.solve().is_some() && 3 * most < recorded {
+                    self.gpu.solve_iterations = (recorded / 2).max(fewest);
+                }
+                self.step = to;
+                return Ok(true);
+            }
+            Some(GpuRunError::Friction { .. }) if self.adapt_iterations && recorded < MOST_ITERATIONS * default => {
+                self.gpu.solve_iterations = (2 * recorded).min(MOST_ITERATIONS * default);
+                None
+            }
+            Some(e) => Some(e),
         };
-        let Some(error) = error else { return Ok(()) };
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("restore") });
         for (&slot, kept) in KEPT.iter().zip(&self.kept) {
             encoder.copy_buffer_to_buffer(kept, 0, self.gpu.state().buffer(slot), 0, kept.size());
         }
         ctx.queue.submit([encoder.finish()]);
-        self.gpu.state().reset_faults(ctx);
-        Err(error)
+        error.map_or(Ok(false), Err)
     }
 
-    /// The state on the device as a CPU monolayer (φ rounded from f32; a readback).
-    pub fn download(&self, ctx: &GpuContext) -> Monolayer {
-        let patches = self.gpu.read_patches(ctx);
-        let phi = self.gpu.read(ctx, Slot::Phi);
-        let u = self.gpu.read(ctx, Slot::MeanVelocity);
-        let cells: Vec<(Patch, Vec<f64>)> = patches
-            .iter()
-            .map(|p| (p.patch(), crate::gpu::buffers::patch_storage(*p, &phi).iter().map(|&v| v as f64).collect()))
-            .collect();
-        let warm_start = u.chunks_exact(2).map(|c| C64::new(c[0] as f64, c[1] as f64)).collect();
-        let state = State { step: self.step, cells, warm_start, substrate: self.substrate.clone() };
-        Monolayer::from_state(self.params.clone(), self.seed, state).expect("the GPU's state is a valid state")
+    /// The recorded iterations the preconditioner starts from.
+    fn default_iterations(&self) -> usize {
+        match self.gpu.preconditioner {
+            Preconditioner::Multigrid => SOLVE_ITERATIONS,
+            Preconditioner::Jacobi => JACOBI_ITERATIONS,
+        }
+    }
+
+    /// The state on the device as a CPU monolayer (φ rounded from f32), once every submitted
+    /// step has finished: one readback. Ask for it with nothing pending, so that its step
+    /// count is the state's.
+    pub fn download(&self, ctx: &GpuContext) -> impl Future<Output = Monolayer> + 'static {
+        assert!(self.pending.is_none(), "download a settled state");
+        let s = self.gpu.state();
+        let words = read_words(ctx, &[s.buffer(Slot::Patches), s.buffer(Slot::Phi), s.buffer(Slot::MeanVelocity)]);
+        let (params, seed, step, substrate) = (self.params.clone(), self.seed, self.step, self.substrate.clone());
+        async move {
+            let [patches, phi, u]: [Vec<u32>; 3] = words.await.try_into().expect("three buffers read");
+            let patches: &[GpuPatch] = bytemuck::cast_slice(&patches);
+            let cells: Vec<(Patch, Vec<f64>)> = patches
+                .iter()
+                .map(|p| (p.patch(), patch_storage(*p, &phi).iter().map(|&v| f32::from_bits(v) as f64).collect()))
+                .collect();
+            let u: Vec<f32> = u.into_iter().map(f32::from_bits).collect();
+            let warm_start = u.chunks_exact(2).map(|c| C64::new(c[0] as f64, c[1] as f64)).collect();
+            let state = State { step, cells, warm_start, substrate };
+            Monolayer::from_state(params, seed, state).expect("the GPU's state is a valid state")
+        }
+    }
+
+    /// `n` steps, blocking (native): submissions of at most `check_every` steps, each checked.
+    /// A cell that outgrows its storage is met as the CPU would never meet it: the state of
+    /// the start of that submission is uploaded again with room for the patches it has then,
+    /// and the steps are taken again. On any other fault the state is back at the start of the
+    /// submission and the error names its steps and the cell.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn advance(&mut self, ctx: &GpuContext, n: u64) -> Result<(), GpuRunError> {
+        let end = self.step + n;
+        let mut regrown_at = None;
+        while self.step < end {
+            self.submit(ctx, end - self.step);
+            let faults = pollster::block_on(self.read_faults(ctx));
+            match self.settle(ctx, &faults) {
+                Err(GpuRunError::BeyondCapacity { from, .. }) if regrown_at != Some(from) => {
+                    regrown_at = Some(from);
+                    self.regrow(ctx).map_err(|e| GpuRunError::Regrow { from, reason: e.to_string() })?;
+                }
+                result => {
+                    result?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Uploads the state again, each cell's storage sized anew from its patch now (blocking;
+    /// native). The browser's engine does the same with [`Self::download`] awaited.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn regrow(&mut self, ctx: &GpuContext) -> Result<(), GpuError> {
+        let m = self.download_now(ctx);
+        self.upload(ctx, &m)
+    }
+
+    /// [`Self::download`], blocking (native).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn download_now(&self, ctx: &GpuContext) -> Monolayer {
+        pollster::block_on(self.download(ctx))
     }
 }

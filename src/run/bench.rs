@@ -355,10 +355,80 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
         if solve.converged() { "" } else { ", NOT CONVERGED" },
         bytes(&gpu, &working_kernels)
     );
+    let coarse_cycles = working_kernels.iter().filter(|&&k| k == Kernel::MgCoarseCycle).count();
+    let working_bytes = bytes(&gpu, &working_kernels);
+
+    // A run as the page's GPU engine takes it (gpu::stepper::GpuRun): submissions of 50 steps,
+    // each checked by one readback, the recorded iterations following what the solves need.
+    let mut run = crate::gpu::stepper::GpuRun::new(&ctx, &m).map_err(|e| e.to_string())?;
+    let recorded = run.gpu().solve_iterations;
+    run.advance(&ctx, run.check_every).map_err(|e| e.to_string())?;
+    let t = Instant::now();
+    let steps = 2 * run.check_every;
+    run.advance(&ctx, steps).map_err(|e| e.to_string())?;
+    let per_step = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
+    let adapted = run.gpu().solve_iterations;
+    let recorded_now = [Kernel::step(run.gpu().solve()), Kernel::MOVE_PATCHES.to_vec()].concat().len();
     println!(
-        "not yet on the GPU: the switch from relaxation to activity, the fault readback that stops a run (docs/gpu.md)"
+        "a GPU run (GpuRun, checked every {} steps): {per_step:.3} ms per step over {steps} steps; \
+         the recorded CG iterations went from {recorded} to {adapted} per solve, {recorded_now} dispatches recorded per step",
+        run.check_every
     );
+    // Every recorded dispatch is launched, the ones after convergence too; the bytes and the
+    // coarse cycles are those of the dispatches that work.
+    println!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, coarse_cycles)));
     Ok(())
+}
+
+/// A laptop GPU's time per full-size step, projected from the counts of a step (what works
+/// in it), with the assumed costs below. Not a measurement: no GPU was at hand (docs/gpu.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LaptopProjection {
+    pub dispatches: usize,
+    pub megabytes: f64,
+    pub coarse_cycles: usize,
+    /// Fastest and slowest, in ms per step.
+    pub ms: (f64, f64),
+}
+
+/// Launch and dependency cost of one dispatch within a compute pass on a laptop GPU, µs.
+pub const DISPATCH_US: (f64, f64) = (2.0, 10.0);
+/// Memory bandwidth, GB/s: a discrete laptop GPU, an integrated one.
+pub const BANDWIDTH_GB_S: (f64, f64) = (200.0, 60.0);
+/// One barrier phase of the one-workgroup coarse cycle, µs, and the phases of one cycle (the
+/// W-cycle's walk over the coarse levels, `shaders/multigrid.wgsl`).
+pub const BARRIER_US: f64 = 1.0;
+pub const PHASES_PER_COARSE_CYCLE: usize = 150;
+
+impl LaptopProjection {
+    pub fn of(dispatches: usize, megabytes: f64, coarse_cycles: usize) -> Self {
+        let cycles_ms = (coarse_cycles * PHASES_PER_COARSE_CYCLE) as f64 * BARRIER_US / 1e3;
+        let at = |dispatch_us: f64, gb_s: f64| dispatches as f64 * dispatch_us / 1e3 + megabytes / gb_s + cycles_ms;
+        LaptopProjection {
+            dispatches,
+            megabytes,
+            coarse_cycles,
+            ms: (at(DISPATCH_US.0, BANDWIDTH_GB_S.0), at(DISPATCH_US.1, BANDWIDTH_GB_S.1)),
+        }
+    }
+}
+
+fn projection_line(p: &LaptopProjection) -> String {
+    format!(
+        "PROJECTION for a laptop GPU, not a measurement: {} dispatches × {}–{} µs, {:.1} MB at {}–{} GB/s, \
+         {} coarse cycles × {PHASES_PER_COARSE_CYCLE} barrier phases × {BARRIER_US} µs: {:.1}–{:.1} ms per step ({:.0}–{:.0} steps/s)",
+        p.dispatches,
+        DISPATCH_US.0,
+        DISPATCH_US.1,
+        p.megabytes,
+        BANDWIDTH_GB_S.0,
+        BANDWIDTH_GB_S.1,
+        p.coarse_cycles,
+        p.ms.0,
+        p.ms.1,
+        1e3 / p.ms.1,
+        1e3 / p.ms.0
+    )
 }
 
 #[cfg(test)]
@@ -370,6 +440,17 @@ mod tests {
         assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
         assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
         assert!(median(&[]).is_nan());
+    }
+
+    #[test]
+    fn the_laptop_projection_adds_dispatches_bytes_and_coarse_cycles() {
+        // 100 dispatches at 2–10 µs = 0.2–1.0 ms; 60 MB at 200–60 GB/s = 0.3–1.0 ms;
+        // 10 cycles × 150 phases × 1 µs = 1.5 ms.
+        let p = LaptopProjection::of(100, 60.0, 10);
+        assert!((p.ms.0 - 2.0).abs() < 1e-12 && (p.ms.1 - 3.5).abs() < 1e-12, "{p:?}");
+        let line = projection_line(&p);
+        assert!(line.starts_with("PROJECTION for a laptop GPU, not a measurement"), "{line}");
+        assert!(line.contains("2.0–3.5 ms per step (286–500 steps/s)"), "{line}");
     }
 
     #[test]

@@ -222,6 +222,11 @@ fn storage_before_the_field() -> String {
     "f64".into()
 }
 
+/// The engine of records written before the GPU engine existed.
+fn engine_before_the_field() -> String {
+    crate::run::runner::Engine::Cpu.name().into()
+}
+
 /// What `run.json` records: enough to reproduce the run and to continue it.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RunRecord {
@@ -234,6 +239,10 @@ pub struct RunRecord {
     /// by builds that stored f64.
     #[serde(default = "storage_before_the_field")]
     pub storage: String,
+    /// The engine that steps the run (`runner::Engine`): "cpu", the reference, or "gpu-f32"
+    /// (feature `gpu`). A run continues only on the engine it started on.
+    #[serde(default = "engine_before_the_field")]
+    pub engine: String,
     pub seed: u64,
     /// Steps between frames in the active phase.
     pub frame_interval: u64,
@@ -250,6 +259,7 @@ impl RunRecord {
             format_version: FORMAT_VERSION,
             version: env!("CARGO_PKG_VERSION").into(),
             storage: STORE_NAME.into(),
+            engine: engine_before_the_field(),
             seed,
             frame_interval,
             status: RunStatus::Running,

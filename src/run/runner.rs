@@ -193,6 +193,34 @@ pub fn check_memory(params: &Params) -> Result<(), String> {
     }
 }
 
+/// What steps a run: the CPU core (the reference, the same bits on every machine and thread
+/// count), or the GPU stepper in f32 (`gpu::stepper::GpuRun`, feature `gpu`), whose runs agree
+/// with the CPU's within f32 rounding step by step and are compared with them statistically
+/// (docs/gpu.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Engine {
+    Cpu,
+    Gpu,
+}
+
+impl Engine {
+    /// As `run.json` records it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Engine::Cpu => "cpu",
+            Engine::Gpu => "gpu-f32",
+        }
+    }
+
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "cpu" => Ok(Engine::Cpu),
+            "gpu" | "gpu-f32" => Ok(Engine::Gpu),
+            other => Err(format!("engine {other:?}: must be cpu or gpu")),
+        }
+    }
+}
+
 /// A run directory with its record and the simulation it holds, and the directory's lock: one
 /// writer per directory, for as long as this value lives.
 pub struct RunDir {
@@ -296,6 +324,34 @@ impl RunDir {
         Ok(RunDir { dir: dir.to_path_buf(), record, monolayer, _lock: lock })
     }
 
+    /// The engine that steps this run. A new run (no step taken yet) takes `engine`; a resumed
+    /// one must ask for the engine it started on, which its record names.
+    pub fn with_engine(mut self, engine: Engine) -> Result<Self, String> {
+        let recorded = Engine::parse(&self.record.engine)?;
+        if recorded == engine {
+            return Ok(self);
+        }
+        if self.monolayer.step_count() > 0 || self.record.last_frame_step.is_some() {
+            return Err(format!(
+                "{}: the run was stepped by the {} engine (`engine`), not {}: it would continue on another \
+                 trajectory; resume it with --engine {}",
+                RunRecord::path(&self.dir).display(),
+                recorded.name(),
+                engine.name(),
+                if recorded == Engine::Cpu { "cpu" } else { "gpu" }
+            ));
+        }
+        if engine == Engine::Gpu && !cfg!(feature = "gpu") {
+            return Err(
+                "--engine gpu: this binary was built without the GPU kernels: cargo build --release --features gpu"
+                    .into(),
+            );
+        }
+        self.record.engine = engine.name().into();
+        self.record.save(&self.dir)?;
+        Ok(self)
+    }
+
     /// Steps to the end of the protocol, writing a frame and a checkpoint every frame interval
     /// of the active phase (and a checkpoint when relaxation ends), then records how it ended.
     /// With `analyze`, `DIR/analysis` is brought up to date at every frame.
@@ -304,7 +360,11 @@ impl RunDir {
             true => Some(LiveRun::start(&self.dir, self.monolayer.params(), self.monolayer.step_count())?),
             false => None,
         };
-        let outcome = self.protocol(live.as_mut(), watch);
+        let outcome = match Engine::parse(&self.record.engine) {
+            Ok(Engine::Cpu) => self.protocol(live.as_mut(), watch),
+            Ok(Engine::Gpu) => self.protocol_gpu(live.as_mut(), watch),
+            Err(e) => Err(Stop::Simulation(e)),
+        };
         self.record.status = match &outcome {
             Ok(()) => RunStatus::Finished,
             Err(Stop::Simulation(e)) => RunStatus::Failed(e.clone()),
@@ -352,31 +412,97 @@ impl RunDir {
                 )));
             }
             watch(m, &Event::Step);
-            let s = m.step_count();
-            let frame = s >= p.relax_steps && (s - p.relax_steps).is_multiple_of(record.frame_interval);
-            if frame {
-                m.evaluate_now().map_err(|e| Stop::Simulation(e.to_string()))?;
-                write_frame(m, &frame_path(dir, s)).map_err(Stop::Io)?;
-                if let Some(Err(e)) = live.as_deref_mut().map(|live| live.frame(m)) {
-                    watch(m, &Event::AnalysisFailed(e));
-                }
-            }
-            if frame || s == p.relax_steps {
-                write_checkpoint(m, &checkpoint).map_err(Stop::Io)?;
-                // The record's last frame advances only once the checkpoint of its step is
-                // safely written: a failed checkpoint write (a full disk) leaves the record at the
-                // previous checkpoint, which `--resume` continues from.
-                if frame {
-                    record.last_frame_step = Some(s);
-                }
-                record.save(dir).map_err(Stop::Io)?;
-                if frame {
-                    watch(m, &Event::Frame);
-                }
-            }
+            write_scheduled(m, dir, record, live.as_deref_mut(), watch)?;
         }
         Ok(())
     }
+
+    /// The protocol on the GPU: steps to each step that writes something (the end of the
+    /// relaxation, a frame), the state downloaded there into the run's monolayer, which writes
+    /// it as the CPU's protocol does. A fault stops the run with the state before the failing
+    /// submission as its last good state.
+    #[cfg(feature = "gpu")]
+    fn protocol_gpu(
+        &mut self,
+        mut live: Option<&mut LiveRun>,
+        watch: &mut dyn FnMut(&Monolayer, &Event),
+    ) -> Result<(), Stop> {
+        use crate::gpu::stepper::GpuRun;
+        let p = self.monolayer.params().clone();
+        let total = p.total_steps();
+        let fi = self.record.frame_interval;
+        let ctx = crate::gpu::GpuContext::new().map_err(|e| Stop::Simulation(format!("--engine gpu: {e}")))?;
+        let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
+        let mut run = GpuRun::new(&ctx, m).map_err(|e| Stop::Simulation(format!("--engine gpu: {e}")))?;
+        while run.step_count() < total {
+            if let Some((name, _)) = stop_signal() {
+                return Err(Stop::Signal(name));
+            }
+            let s = run.step_count();
+            // The next step that writes, at most one check's worth of steps ahead (so that a
+            // signal or the progress bar is seen between submissions).
+            let next =
+                if s < p.relax_steps { p.relax_steps } else { p.relax_steps + ((s - p.relax_steps) / fi + 1) * fi };
+            let to = next.min(total).min(s + run.check_every);
+            let stepped = run.advance(&ctx, to - s);
+            *m = run.download_now(&ctx);
+            if let Err(e) = stepped {
+                let last_good = dir.join(LAST_GOOD_STATE);
+                write_checkpoint(m, &last_good).map_err(Stop::Io)?;
+                return Err(Stop::Simulation(format!(
+                    "{e}\n  the last good state is in {} (the last periodic one in {})",
+                    last_good.display(),
+                    checkpoint_path(dir).display()
+                )));
+            }
+            watch(m, &Event::Step);
+            write_scheduled(m, dir, record, live.as_deref_mut(), watch)?;
+        }
+        Ok(())
+    }
+
+    #[cfg(not(feature = "gpu"))]
+    fn protocol_gpu(&mut self, _: Option<&mut LiveRun>, _: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), Stop> {
+        Err(Stop::Simulation(
+            "--engine gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into(),
+        ))
+    }
+}
+
+/// What the protocol writes at the monolayer's step, if anything: a frame every frame interval
+/// of the active phase (with the live analysis), a checkpoint with it and at the end of the
+/// relaxation, and the record.
+fn write_scheduled(
+    m: &mut Monolayer,
+    dir: &Path,
+    record: &mut RunRecord,
+    live: Option<&mut LiveRun>,
+    watch: &mut dyn FnMut(&Monolayer, &Event),
+) -> Result<(), Stop> {
+    let p = m.params().clone();
+    let s = m.step_count();
+    let frame = s >= p.relax_steps && (s - p.relax_steps).is_multiple_of(record.frame_interval);
+    if frame {
+        m.evaluate_now().map_err(|e| Stop::Simulation(e.to_string()))?;
+        write_frame(m, &frame_path(dir, s)).map_err(Stop::Io)?;
+        if let Some(Err(e)) = live.map(|live| live.frame(m)) {
+            watch(m, &Event::AnalysisFailed(e));
+        }
+    }
+    if frame || s == p.relax_steps {
+        write_checkpoint(m, &checkpoint_path(dir)).map_err(Stop::Io)?;
+        // The record's last frame advances only once the checkpoint of its step is safely
+        // written: a failed checkpoint write (a full disk) leaves the record at the previous
+        // checkpoint, which `--resume` continues from.
+        if frame {
+            record.last_frame_step = Some(s);
+        }
+        record.save(dir).map_err(Stop::Io)?;
+        if frame {
+            watch(m, &Event::Frame);
+        }
+    }
+    Ok(())
 }
 
 fn already_a_run(dir: &Path) -> String {

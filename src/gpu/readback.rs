@@ -1,0 +1,61 @@
+//! Reading device buffers back, without blocking where nothing may block: the copy into a
+//! mappable buffer is submitted at once, and the returned future resolves when the browser (or,
+//! natively, a poll of the device) has mapped it. One readback can carry several buffers, since
+//! in a browser each costs milliseconds whatever its size.
+
+use crate::gpu::context::GpuContext;
+use std::future::Future;
+
+/// The contents of `buffers`, as 32-bit words, once every submitted dispatch has finished:
+/// one copy into one mappable buffer, one map. Natively the future blocks on the device when
+/// first polled; in a browser it resolves from the event loop, so it must be awaited there.
+pub fn read_words(ctx: &GpuContext, buffers: &[&wgpu::Buffer]) -> impl Future<Output = Vec<Vec<u32>>> + 'static {
+    let sizes: Vec<u64> = buffers.iter().map(|b| b.size()).collect();
+    let total: u64 = sizes.iter().sum();
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: total.max(4),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+    let mut offset = 0;
+    for (b, &size) in buffers.iter().zip(&sizes) {
+        // Every buffer here holds 32-bit words, so each offset keeps wgpu's 4-byte alignment.
+        encoder.copy_buffer_to_buffer(b, 0, &staging, offset, size);
+        offset += size;
+    }
+    ctx.queue.submit([encoder.finish()]);
+    let (tx, rx) = futures_channel::oneshot::channel();
+    staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        // The receiver is gone only if the future was dropped: nobody wants the words then.
+        let _ = tx.send(r);
+    });
+    let device = ctx.device.clone();
+    async move {
+        #[cfg(not(target_arch = "wasm32"))]
+        device.poll(wgpu::PollType::wait_indefinitely()).expect("the device finishes its work");
+        #[cfg(target_arch = "wasm32")]
+        let _ = device;
+        rx.await.expect("wgpu calls the map callback").expect("the readback buffer maps");
+        let data = staging.get_mapped_range(..).expect("the buffer is mapped");
+        // Copied word by word: a browser's mapped range carries no alignment promise.
+        let words: Vec<u32> = data.chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])).collect();
+        let mut out = Vec::with_capacity(sizes.len());
+        let mut at = 0;
+        for size in sizes {
+            let n = (size / 4) as usize;
+            out.push(words[at..at + n].to_vec());
+            at += n;
+        }
+        drop(data);
+        staging.unmap();
+        out
+    }
+}
+
+/// [`read_words`] of one buffer, blocking (native only).
+#[cfg(not(target_arch = "wasm32"))]
+pub fn read_now(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Vec<u32> {
+    pollster::block_on(read_words(ctx, &[buffer])).pop().expect("one buffer read")
+}
