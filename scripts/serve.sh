@@ -31,8 +31,8 @@ if [ "$(wasm-bindgen --version 2>/dev/null | awk '{print $2}')" != "$WB_VERSION"
   cargo install wasm-bindgen-cli --version "$WB_VERSION"
 fi
 
-say "building the WebAssembly core (release)"
-cargo build --target wasm32-unknown-unknown --lib --no-default-features --release
+say "building the WebAssembly core with its GPU engine (release)"
+cargo build --target wasm32-unknown-unknown --lib --no-default-features --features gpu --release
 say "generating the JS bindings into www/pkg"
 wasm-bindgen --target web --no-typescript --out-dir www/pkg \
   "$TARGET_DIR/wasm32-unknown-unknown/release/monolayer.wasm"

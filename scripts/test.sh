@@ -15,9 +15,9 @@ cargo clippy --all-targets --release --features gpu -- -D warnings
 
 step "lints and build (wasm32-unknown-unknown, the browser's core)"
 cargo clippy --target wasm32-unknown-unknown --lib --no-default-features -- -D warnings
-# The GPU stages compile for the browser too (wgpu's WebGPU backend), ahead of the page using them.
+# The page's build: the core with the GPU engine (wgpu's WebGPU backend, src/web/gpu_engine.rs).
 cargo clippy --target wasm32-unknown-unknown --lib --no-default-features --features gpu -- -D warnings
-cargo build --target wasm32-unknown-unknown --lib --no-default-features --release
+cargo build --target wasm32-unknown-unknown --lib --no-default-features --features gpu --release
 
 step "tests (release; --include-ignored adds the integration tests at the paper's full size)"
 # --features gpu adds tests/gpu.rs: the GPU stages against the CPU on a Vulkan driver (lavapipe,

@@ -4,7 +4,9 @@
 //! - [`view`]: the per-site and per-cell data the shaders draw, built from the core's fields;
 //! - [`measure`]: what the page reads out (holes from void sites, packing fraction);
 //! - `sim` (wasm32): `WebSim`, the simulation object the page drives (step, parameters, brushes);
-//! - `render` (wasm32): `Renderer`, wgpu on WebGPU or WebGL2, with the shaders of `shaders/`.
+//! - `render` (wasm32): `Renderer`, wgpu on WebGPU or WebGL2, with the shaders of `shaders/`;
+//! - `gpu_engine` (wasm32, feature `gpu`): `WebGpuEngine`, the model stepped on WebGPU compute
+//!   (`crate::gpu`), handing its state to a `WebSim` to draw and measure.
 //!
 //! `view` and `measure` are plain Rust, built and unit-tested natively like the rest of the
 //! crate; only the binding and the GPU need the browser.
@@ -15,6 +17,8 @@ pub mod readouts;
 pub mod version;
 pub mod view;
 
+#[cfg(all(target_arch = "wasm32", feature = "gpu"))]
+pub mod gpu_engine;
 #[cfg(target_arch = "wasm32")]
 pub mod player;
 #[cfg(target_arch = "wasm32")]

@@ -81,6 +81,12 @@ impl WebSim {
         Ok(Self::wrap(Monolayer::from_state(p, seed as u64, state).map_err(js_err)?))
     }
 
+    /// The tissue, for the GPU engine's upload.
+    #[cfg(feature = "gpu")]
+    pub(super) fn monolayer(&self) -> &Monolayer {
+        &self.m
+    }
+
     fn wrap(m: Monolayer) -> WebSim {
         let (n, l) = (m.params().n_cells, m.params().box_size);
         let mut log = ReadoutLog::default();
@@ -95,6 +101,21 @@ impl WebSim {
             regions: VoidRegions::default(),
             m,
         }
+    }
+
+    /// Takes the state a GPU engine downloaded (`WebGpuEngine::download`) as this tissue's:
+    /// what is drawn and read out from now on is measured on it, as on the CPU engine's. Its
+    /// cells must be this tissue's (the engine was uploaded from it and steps it).
+    #[cfg(feature = "gpu")]
+    pub fn adopt(&mut self, state: super::gpu_engine::GpuState) -> Result<(), JsError> {
+        let m = state.0;
+        if m.cells().len() != self.m.cells().len() || m.params().box_size != self.m.params().box_size {
+            return Err(JsError::new("adopt: the GPU's state is not this tissue's (upload it again after an edit)"));
+        }
+        self.m = m;
+        self.stats_step = u64::MAX;
+        self.log.record_if_due(&self.m);
+        Ok(())
     }
 
     /// Runs `n` steps. On an error (instability, failed solve) the state before the failing
@@ -207,6 +228,11 @@ impl WebSim {
             self.stats_step = self.m.step_count();
         }
         self.stats
+    }
+
+    /// Σφ on the lattice, row by row (L² values): what tests compare between the engines.
+    pub fn phi_sum(&mut self) -> Vec<f64> {
+        self.m.phi_sum().to_vec()
     }
 
     /// Holes: connected void regions (Σφ < 0.01) larger than πR²/4.

@@ -573,6 +573,67 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await q.close();
     });
 
+    // The GPU engine (issue 26; src/gpu/ stepped from src/web/gpu_engine.rs). With WebGPU
+    // (SwiftShader here) ?engine=gpu steps the tissue on WebGPU compute, and its Σφ after a few
+    // steps from the shipped relaxed state is the CPU engine's within f32 rounding (the native
+    // tests hold it within 10⁻⁴ over 100 full-size steps); the default, auto, keeps the CPU
+    // engine on a software adapter and says why. Without WebGPU (WebGL2) the page falls back to
+    // the CPU engine and says why. SwiftShader takes seconds per step: a few steps only.
+    check('the GPU engine steps where WebGPU compute works, as the CPU engine, and the page names the engine', async () => {
+      const GPU_STEPS = 3;
+      const p = await open(context, base, '/?preset=persistent&engine=gpu&paused', errors);
+      await waitStats(p);
+      const s = await workerStats(p);
+      const label = await p.textContent('#engine');
+      if (modeName !== 'webgpu') {
+        assert.equal(s.engine, 'cpu', `without WebGPU the CPU engine steps: ${label}`);
+        assert(label.startsWith('Engine: CPU (WebAssembly), bit-identical to native') && label.includes('GPU engine not used'),
+          `engine label without WebGPU: ${label}`);
+        await p.close();
+        return;
+      }
+      assert.equal(s.engine, 'gpu', `?engine=gpu with WebGPU: ${label}`);
+      assert(label.startsWith('Engine: GPU (WebGPU compute, f32') && label.includes('33 cells on 80²'), `engine label: ${label}`);
+      const stepped = (q, n) => q.evaluate(async (n) => {
+        const ms = await window.demo.call('step', n);
+        const st = await window.demo.call('stats');
+        return { ms, step: st.step, packing: st.packing, phiSum: Array.from(await window.demo.call('phi_sum')) };
+      }, n);
+      // The page draws the GPU's state (downloaded into the worker's WebSim): paused, the
+      // worker sends a frame only when the state changed, so a frame follows the steps (counted
+      // from before them: it may be drawn before the calls below return).
+      const drawn = await p.evaluate(() => window.demo.drawn);
+      const gpu = await stepped(p, GPU_STEPS);
+      await until(p, 'a frame of the GPU state', (d) => window.demo.drawn > d, drawn);
+      const look = await canvasShot(p, shot('gpu-engine'));
+      assert(look.colours > 20, `the GPU engine's tissue drawn in only ${look.colours} colours`);
+      const q = await open(context, base, '/?preset=persistent&engine=cpu&paused', errors);
+      await waitStats(q);
+      assert.equal((await workerStats(q)).engine, 'cpu');
+      const cpu = await stepped(q, GPU_STEPS);
+      assert.equal(gpu.step, cpu.step);
+      const worst = Math.max(...gpu.phiSum.map((v, i) => Math.abs(v - cpu.phiSum[i])));
+      m.gpuEngine = { steps: GPU_STEPS, msPerStep: gpu.ms / GPU_STEPS, cpuMsPerStep: cpu.ms / GPU_STEPS, maxPhiSumDifference: worst };
+      console.log(`       GPU engine on SwiftShader: ${(gpu.ms / GPU_STEPS).toFixed(0)} ms/step (CPU engine ${(cpu.ms / GPU_STEPS).toFixed(1)}); max |ΣφGPU − ΣφCPU| after ${GPU_STEPS} steps = ${worst.toExponential(2)}`);
+      assert(worst <= 1e-4, `the GPU engine's Σφ is ${worst} from the CPU engine's after ${GPU_STEPS} steps`);
+      assert(Math.abs(gpu.packing - cpu.packing) <= 1e-3, `packing ${gpu.packing} vs ${cpu.packing}`);
+      await q.close();
+      // The chooser switches the engine of the same tissue, which goes on from where it is.
+      await p.evaluate(() => window.demo.setEngine('cpu'));
+      assert.equal((await workerStats(p)).engine, 'cpu');
+      assert((await p.textContent('#engine')).startsWith('Engine: CPU (WebAssembly)'), 'label after switching');
+      assert.equal((await stepped(p, 1)).step, gpu.step + 1);
+      assert.match(p.url(), /engine=cpu/);
+      await p.close();
+      // auto (the default) on a software adapter: the CPU engine, and why.
+      const r = await open(context, base, '/?paused', errors);
+      await waitStats(r);
+      assert.equal((await workerStats(r)).engine, 'cpu');
+      const auto = await r.textContent('#engine');
+      assert(auto.includes('GPU engine not used: WebGPU runs in software here'), `auto on SwiftShader: ${auto}`);
+      await r.close();
+    });
+
     check(`the wasm core's fingerprint equals the native one`, async () => {
       const p = await open(context, base, '/?paused&seed=7', errors);
       await waitStats(p);

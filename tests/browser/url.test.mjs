@@ -6,7 +6,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 
-import { PARAMS, FIELDS, PRESETS, SIZES, parseUrl, toUrl, fieldName, relaxedStateFor } from '../../www/js/state.js';
+import { PARAMS, FIELDS, PRESETS, SIZES, ENGINES, parseUrl, toUrl, fieldName, relaxedStateFor } from '../../www/js/state.js';
 
 // mulberry32: a small, well-mixed 32-bit generator.
 function rng(seed) {
@@ -20,7 +20,7 @@ function rng(seed) {
   };
 }
 
-const KEYS = [...Object.keys(PARAMS), 'preset', 'field', 'embed', 'paused', 'relax', 'size', 'junk', ''];
+const KEYS = [...Object.keys(PARAMS), 'preset', 'field', 'embed', 'paused', 'relax', 'size', 'engine', 'junk', ''];
 const NASTY = ['', 'NaN', 'nan', 'Infinity', '-Infinity', '1e999', '-1e999', '.5', '5.', '0x10', '1e-400', ' 3 ',
   'abc', '%', '%%20', '∞', '🙂', '-0', '4294967296', '-1', '1,5', 'null', 'undefined', '[]', '{}', '&&', '=='];
 
@@ -30,6 +30,7 @@ function value(r) {
   if (k < 0.6) return String((r() - 0.5) * 10 ** Math.floor(r() * 12 - 4));
   if (k < 0.7) return Object.keys(PRESETS)[Math.floor(r() * 5)] ?? 'x';
   if (k < 0.75) return Object.keys(SIZES)[Math.floor(r() * 3)] ?? 'x';
+  if (k < 0.8) return Object.keys(ENGINES)[Math.floor(r() * 4)] ?? 'x';
   if (k < 0.9) return fieldName([...FIELDS.keys()][Math.floor(r() * FIELDS.size)]);
   return String.fromCharCode(...Array.from({ length: Math.floor(r() * 6) }, () => 32 + Math.floor(r() * 0x2fff)));
 }
@@ -54,6 +55,7 @@ function assertValid(state, search) {
   assert.ok(FIELDS.has(state.field), `${search}: field ${state.field} is not a FieldKind`);
   assert.ok(state.preset === null || state.preset in PRESETS, `${search}: preset ${state.preset}`);
   assert.ok(state.size in SIZES, `${search}: size ${state.size}`);
+  assert.ok(state.engine in ENGINES, `${search}: engine ${state.engine}`);
 }
 
 test('any query string parses to a valid state, and its URL round-trips', () => {
@@ -115,4 +117,18 @@ test("the paper's preset is the paper's tissue, and its size survives a changed 
   const bad = parseUrl('?size=huge');
   assert.equal(bad.state.size, 'reduced');
   assert.ok(bad.notices.some((n) => n.startsWith('size=huge')), `${bad.notices}`);
+});
+
+test('the engine is auto unless the URL chooses one, and a bad one is named', () => {
+  assert.equal(parseUrl('').state.engine, 'auto');
+  assert.doesNotMatch(toUrl(parseUrl('').state), /engine/);
+  for (const e of ['cpu', 'gpu']) {
+    const { state, notices } = parseUrl(`?engine=${e}`);
+    assert.deepEqual(notices, []);
+    assert.equal(state.engine, e);
+    assert.equal(parseUrl(toUrl(state)).state.engine, e);
+  }
+  const bad = parseUrl('?engine=tpu');
+  assert.equal(bad.state.engine, 'auto');
+  assert.ok(bad.notices.some((n) => n.startsWith('engine=tpu')), `${bad.notices}`);
 });

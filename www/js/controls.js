@@ -2,7 +2,7 @@
 // the buttons, the keyboard shortcuts and the brushes on the canvas. They only call `actions`
 // (main.js), which change the core, the state and the URL.
 
-import { PARAMS, SLIDERS, FIELDS, PRESETS, fieldName, toSlider, fromSlider } from './state.js';
+import { PARAMS, SLIDERS, FIELDS, PRESETS, ENGINES, fieldName, toSlider, fromSlider } from './state.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -51,6 +51,9 @@ export class Controls {
     preset.addEventListener('change', (e) => {
       if (e.target.value in PRESETS) this.actions.applyPreset(e.target.value);
     });
+    const engine = $('engine-choice');
+    for (const [key, label] of Object.entries(ENGINES)) engine.add(new Option(label, key));
+    engine.addEventListener('change', (e) => this.actions.setEngine(e.target.value));
     const fields = $('fields');
     for (const [kind, f] of FIELDS) {
       const l = document.createElement('label');
@@ -87,6 +90,7 @@ export class Controls {
     }
     $('seed').value = String(state.seed);
     $('preset').value = state.preset ?? 'custom';
+    $('engine-choice').value = state.engine;
     for (const input of document.querySelectorAll('input[name=field]')) {
       input.checked = input.value === fieldName(state.field);
     }

@@ -32,6 +32,16 @@ export const relaxedStateFor = (state) =>
     ? null
     : RELAXED_STATES.find((r) => r.size === state.size && r.seed === state.seed && r.gamma === state.gamma)?.file ?? null;
 
+// Which engine steps the tissue (worker.js): 'auto' is the GPU engine on a hardware adapter
+// with WebGPU compute and the CPU engine elsewhere (on a software adapter such as SwiftShader
+// the CPU engine is the faster); 'cpu' and 'gpu' choose one ('gpu' falls back to the CPU
+// where WebGPU compute is missing, and the page says why).
+export const ENGINES = {
+  auto: 'Auto (GPU on a hardware GPU)',
+  cpu: 'CPU (WebAssembly, bit-identical to native)',
+  gpu: 'GPU (WebGPU compute, f32)',
+};
+
 // Each parameter: label, range, default, and whether its slider is logarithmic. The page makes
 // one slider for each entry with `slider` (in this order); `model` ones are the core's.
 export const PARAMS = {
@@ -128,7 +138,13 @@ export function parseUrl(search, version) {
     paused: q.has('paused'),
     relax: q.has('relax'),
     size: base.size,
+    engine: 'auto',
   };
+  const engine = q.get('engine');
+  if (engine !== null) {
+    if (engine in ENGINES) state.engine = engine;
+    else notices.push(`engine=${engine} is unknown (${Object.keys(ENGINES).join(', ')}): using auto.`);
+  }
   const size = q.get('size');
   if (size !== null) {
     if (size in SIZES) state.size = size;
@@ -166,6 +182,7 @@ export function toUrl(state, version) {
   if (state.embed) q.set('embed', '');
   if (state.paused) q.set('paused', '');
   if (state.relax) q.set('relax', '');
+  if (state.engine !== 'auto') q.set('engine', state.engine);
   if (version !== undefined) q.set('v', version);
   return '?' + q.toString().replace(/=(&|$)/g, '$1');
 }

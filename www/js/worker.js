@@ -2,14 +2,37 @@
 // page plays, whatever the drawing costs; whenever the main thread is ready to draw, it asks
 // for a frame and gets the latest state's view, its arrays transferred (not copied).
 //
-// Messages in: { type: 'new', size, params, seed, relaxed (a relaxed state's URL, or null) }, { type: 'play', on }, { type: 'spf', n },
+// Two engines step the tissue: the CPU core compiled to WebAssembly (`WebSim`, bit-identical to
+// native), and where WebGPU compute works the GPU engine (`WebGpuEngine`, the same model in
+// f32 on WebGPU compute, src/gpu/), which steps without reading back and hands its state to
+// the `WebSim` only when the page draws, measures or edits: everything drawn and read out is
+// measured by the same code either way.
+//
+// Messages in: { type: 'new', size, params, seed, relaxed (a relaxed state's URL, or null),
+// engine ('auto' | 'cpu' | 'gpu') }, { type: 'engine', engine }, { type: 'play', on }, { type: 'spf', n },
 // { type: 'frame', field, dpr }, { type: 'call', id, method, args }.
-// Messages out: { type: 'ready', info }, { type: 'frame', parts, stats }, { type: 'stopped', why,
+// Messages out: { type: 'ready', info }, { type: 'engine', stats }, { type: 'frame', parts, stats }, { type: 'stopped', why,
 // active }, { type: 'result', id, value | error }, { type: 'fatal', message }.
 
-import init, { WebSim, WebPlayback } from '../pkg/monolayer.js';
+import init, { WebSim, WebPlayback, WebGpuEngine } from '../pkg/monolayer.js';
 
 let sim = null;
+// The GPU engine, or null while the CPU engine steps: { engine: WebGpuEngine, adapter,
+// software }; `gpuNote` says why the engine is the one it is (shown by the page).
+let gpu = null;
+let gpuNote = '';
+// The device, asked for once per worker (a promise of { engine } or { error }).
+let gpuDevice = null;
+// The GPU's state is ahead of `sim` (download before drawing or measuring); `sim` was edited
+// since the last upload (upload before stepping).
+let gpuAhead = false;
+let gpuEdited = false;
+// Everything that may touch the GPU engine or replace `sim` runs in turn, one after the other
+// (a submission must be checked before the next, a download must not meet a submission):
+// `exclusive(fn)` queues fn behind the last one. `turnQueued`: a GPU turn is in the queue.
+let queue = Promise.resolve();
+const exclusive = (fn) => (queue = queue.then(fn, fn));
+let turnQueued = false;
 // A run's frames opened in the page instead of the live simulation (null while live):
 // { p: WebPlayback, frames: [{ name, step, file }], index }.
 let playback = null;
@@ -77,6 +100,16 @@ function refill() {
 function pump() {
   scheduled = false;
   if (!sim && !playback) return;
+  if (gpu && sim) {
+    if (!turnQueued) {
+      turnQueued = true;
+      exclusive(gpuTurn).finally(() => {
+        turnQueued = false;
+        if (playing || frameRequest) schedule();
+      });
+    }
+    return;
+  }
   try {
     if (playing && sim) {
       refill();
@@ -94,6 +127,137 @@ function pump() {
     if (playing) {
       if (budget >= 1) schedule();
       else setTimeout(schedule, 1000 / (30 * spf));
+    }
+  } catch (e) {
+    fatal(e);
+  }
+}
+
+// --- the GPU engine --------------------------------------------------------------------------
+// A GPU submission is sized to take about this long, so that frames and calls are answered
+// between submissions.
+const GPU_BATCH_MS = 40;
+
+// Whether an adapter is a software one (SwiftShader, lavapipe): there the CPU engine is faster.
+function isSoftware(info) {
+  const text = [info?.vendor, info?.architecture, info?.description, info?.device].join(' ');
+  return Boolean(info?.isFallbackAdapter) || /swiftshader|llvmpipe|lavapipe|software/i.test(text);
+}
+
+// What WebGPU offers here, asked once: { adapter (its name), software } or { error }.
+let gpuAdapter = null;
+function gpuAdapterOnce() {
+  gpuAdapter ??= (async () => {
+    if (!self.navigator?.gpu) return { error: 'this browser has no WebGPU' };
+    const adapter = await navigator.gpu.requestAdapter().catch(() => null);
+    if (!adapter) return { error: 'WebGPU found no adapter' };
+    const info = adapter.info ?? {};
+    const name = [info.vendor, info.architecture, info.description].filter(Boolean).join(' ') || 'unnamed adapter';
+    return { adapter: name, software: isSoftware(info) };
+  })();
+  return gpuAdapter;
+}
+
+// The GPU engine's device, made once and only when it is to step: { engine, adapter,
+// software } or { error }.
+function gpuDeviceOnce(found) {
+  gpuDevice ??= (async () => {
+    try {
+      const engine = await WebGpuEngine.create();
+      return { engine, adapter: found.adapter, software: found.software || engine.runs_on_cpu() };
+    } catch (e) {
+      return { error: `WebGPU refused a device for compute (${e.message ?? e})` };
+    }
+  })();
+  return gpuDevice;
+}
+
+// Chooses the engine for a new tissue: 'gpu' wherever WebGPU compute works, 'cpu' always, and
+// 'auto' the GPU on a hardware adapter and the CPU on a software one, where it is faster.
+async function chooseEngine(wanted) {
+  gpu = null;
+  gpuAhead = gpuEdited = false;
+  if (wanted === 'cpu') {
+    gpuNote = 'chosen';
+    return;
+  }
+  const found = await gpuAdapterOnce();
+  if (found.error) {
+    gpuNote = `${found.error}: stepping on the CPU engine`;
+    return;
+  }
+  if (wanted === 'auto' && found.software) {
+    gpuNote = `WebGPU runs in software here (${found.adapter}), where the CPU engine is faster`;
+    return;
+  }
+  const d = await gpuDeviceOnce(found);
+  if (d.error) {
+    gpuNote = `${d.error}: stepping on the CPU engine`;
+    return;
+  }
+  try {
+    d.engine.upload(sim);
+  } catch (e) {
+    gpuNote = `the GPU could not take this tissue (${e.message ?? e}): stepping on the CPU engine`;
+    return;
+  }
+  gpu = d;
+  gpuNote = d.software ? `on a software adapter (${d.adapter}), chosen` : d.adapter;
+}
+
+// Brings `sim` level with the GPU (one readback), so that it can be drawn, measured or edited.
+async function gpuDown() {
+  if (!gpuAhead) return;
+  sim.adopt(await gpu.engine.download());
+  gpuAhead = false;
+  changed = true;
+}
+
+// Up to n steps on the GPU, checked; returns the steps taken (0 if they were put back to be
+// taken again with more solve iterations or storage). On a fault of the model the state is
+// the one before the submission, in `sim` too, and the page is told.
+async function gpuSteps(n) {
+  if (gpuEdited) {
+    await gpuDown();
+    gpu.engine.upload(sim);
+    gpuEdited = false;
+  }
+  const k = gpu.engine.submit(n);
+  try {
+    const taken = await gpu.engine.check();
+    gpuAhead = true;
+    return taken ? k : 0;
+  } catch (e) {
+    playing = false;
+    gpuAhead = true;
+    await gpuDown();
+    postMessage({ type: 'stopped', why: String(e.message ?? e), active: sim.active() });
+    return null;
+  }
+}
+
+// One turn of the GPU engine: a submission while playing, then a frame if one is asked for.
+async function gpuTurn() {
+  if (!gpu || !sim) return;
+  try {
+    if (playing) {
+      refill();
+      const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(GPU_BATCH_MS / msPerStep)));
+      if (n >= 1) {
+        const t0 = performance.now();
+        const k = await gpuSteps(n);
+        if (k) {
+          msPerStep = 0.8 * msPerStep + 0.2 * ((performance.now() - t0) / k);
+          budget -= k;
+          changed = true;
+        }
+      } else {
+        await new Promise((r) => setTimeout(r, 1000 / (30 * spf)));
+      }
+    }
+    if (frameRequest) {
+      await gpuDown();
+      sendFrame();
     }
   } catch (e) {
     fatal(e);
@@ -125,8 +289,10 @@ function stats() {
     timeUnitSeconds: sim.time_unit_seconds(),
     msPerStep,
     startedFrom,
-    // The only engine so far: the core compiled to WebAssembly (see main.js, showEngine).
-    engine: 'cpu',
+    // Which engine steps, and why (main.js, showEngine).
+    engine: gpu ? 'gpu' : 'cpu',
+    engineNote: gpuNote,
+    solveIterations: gpu ? gpu.engine.solve_iterations() : null,
   };
 }
 
@@ -152,19 +318,27 @@ function sendFrame() {
 // What the page and the tests may ask of the simulation, beyond stepping.
 const CALLS = {
   // Steps n now and returns the milliseconds it took.
-  step: (n) => {
+  step: async (n) => {
     const t0 = performance.now();
-    if (!takeSteps(n)) return null;
+    if (gpu) {
+      for (let left = n; left > 0;) {
+        const k = await gpuSteps(left);
+        if (k === null) return null;
+        left -= k;
+      }
+      await gpuDown();
+    } else if (!takeSteps(n)) return null;
     return performance.now() - t0;
   },
-  set: (name, value) => sim[`set_${name}`](value),
-  paint_substrate: (...a) => sim.paint_substrate(...a),
-  remove_cell_at: (...a) => sim.remove_cell_at(...a),
+  set: (name, value) => edited(sim[`set_${name}`](value)),
+  paint_substrate: (...a) => edited(sim.paint_substrate(...a)),
+  remove_cell_at: (...a) => edited(sim.remove_cell_at(...a)),
   substrate_at: (...a) => sim.substrate_at(...a),
   cell_at: (...a) => sim.cell_at(...a),
   n_cells: () => sim.n_cells(),
   box_size: () => sim.box_size(),
   fingerprint: () => sim.fingerprint(),
+  phi_sum: () => sim.phi_sum(),
   defects: () => (playback ? playback.p : sim).defects(),
   spiral_cores: () => (playback ? playback.p : sim).spiral_cores(),
   stats: () => stats(),
@@ -179,6 +353,12 @@ const CALLS = {
   open: (files) => openRun(files),
   show: (index) => showFrame(index),
 };
+
+// An edit of `sim` reaches the GPU before its next step.
+function edited(value) {
+  gpuEdited = gpu !== null;
+  return value;
+}
 
 function downloadParts() {
   return {
@@ -232,6 +412,7 @@ async function openRun(files) {
   }
   good.sort((a, b) => a.step - b.step);
   playing = false;
+  gpu = null;
   if (sim) sim.free();
   sim = null;
   if (playback) playback.p.free();
@@ -256,6 +437,42 @@ async function showFrame(index) {
   return { index, step: f.step };
 }
 
+// A new tissue (the 'new' message): from a shipped relaxed state where one fits, else from
+// random disks; then the engine that steps it.
+async function newTissue(m) {
+  if (!sim) await init();
+  gpu = null;
+  if (sim) sim.free();
+  sim = null;
+  if (playback) playback.p.free();
+  playback = null;
+  const { size, params: p, seed } = m;
+  const args = [size.box, size.cells, size.relaxSteps, p.zeta, p.chi, p.gamma, seed];
+  if (m.relaxed) {
+    try {
+      const res = await fetch(m.relaxed);
+      if (!res.ok) throw new Error(`HTTP ${res.status}`);
+      sim = WebSim.from_relaxed(new Uint8Array(await res.arrayBuffer()), ...args);
+      startedFrom = 'snapshot';
+    } catch (err) {
+      // Not fatal: the same tissue comes from relaxing here, only later.
+      console.warn(`relaxing live: the relaxed state ${m.relaxed} was not usable (${err.message ?? err})`);
+    }
+  }
+  try {
+    if (!sim) {
+      sim = new WebSim(...args);
+      startedFrom = 'disks';
+    }
+  } catch (err) {
+    postMessage({ type: 'fatal', message: `Could not start the simulation: ${err.message ?? err}` });
+    return;
+  }
+  await chooseEngine(m.engine ?? 'auto');
+  changed = true;
+  postMessage({ type: 'ready', stats: stats() });
+}
+
 // Messages are handled one after the other, each after the last one's awaits (the core's
 // instantiation, a relaxed state's download): a call or a second 'new' never meets a
 // half-made simulation.
@@ -267,35 +484,16 @@ onmessage = (e) => {
 async function handle(m) {
   try {
     if (m.type === 'new') {
-      if (!sim) await init();
-      if (sim) sim.free();
-      sim = null;
-      if (playback) playback.p.free();
-      playback = null;
-      const { size, params: p, seed } = m;
-      const args = [size.box, size.cells, size.relaxSteps, p.zeta, p.chi, p.gamma, seed];
-      if (m.relaxed) {
-        try {
-          const res = await fetch(m.relaxed);
-          if (!res.ok) throw new Error(`HTTP ${res.status}`);
-          sim = WebSim.from_relaxed(new Uint8Array(await res.arrayBuffer()), ...args);
-          startedFrom = 'snapshot';
-        } catch (err) {
-          // Not fatal: the same tissue comes from relaxing here, only later.
-          console.warn(`relaxing live: the relaxed state ${m.relaxed} was not usable (${err.message ?? err})`);
-        }
-      }
-      try {
-        if (!sim) {
-          sim = new WebSim(...args);
-          startedFrom = 'disks';
-        }
-      } catch (err) {
-        postMessage({ type: 'fatal', message: `Could not start the simulation: ${err.message ?? err}` });
-        return;
-      }
-      changed = true;
-      postMessage({ type: 'ready', stats: stats() });
+      await exclusive(() => newTissue(m));
+    } else if (m.type === 'engine') {
+      // Another engine for the same tissue: it goes on from the state it has now.
+      await exclusive(async () => {
+        if (!sim) return;
+        if (gpu) await gpuDown();
+        await chooseEngine(m.engine);
+        changed = true;
+        postMessage({ type: 'engine', stats: stats() });
+      });
     } else if (m.type === 'play') {
       playing = m.on;
     } else if (m.type === 'spf') {
@@ -304,7 +502,11 @@ async function handle(m) {
       frameRequest = m;
     } else if (m.type === 'call') {
       try {
-        const value = await CALLS[m.method](...(m.args ?? []));
+        // Level with the GPU first: a call reads or edits the tissue as it is now.
+        const value = await exclusive(async () => {
+          if (gpu && sim) await gpuDown();
+          return CALLS[m.method](...(m.args ?? []));
+        });
         changed = true; // cheap to assume: a call may have edited the tissue
         postMessage({ type: 'result', id: m.id, value });
       } catch (err) {

@@ -1,0 +1,137 @@
+//! `WebGpuEngine`: the page's GPU engine, the model stepped on WebGPU compute in f32 by
+//! [`crate::gpu::stepper::GpuRun`] (the kernels the native tests compare with the CPU core
+//! stage by stage). It runs in the page's worker, steps without reading back, and hands the
+//! state to the worker's [`WebSim`] only when the page draws or measures, so that everything
+//! drawn and read out comes from the same `analysis` code as on the CPU engine.
+//!
+//! The worker's loop: `submit(n)` records up to n steps in one submission (at most
+//! `check_every`, none across the switch to activity); `check()` resolves once they ran and
+//! their faults were read (one small readback, awaited from the event loop: a browser cannot
+//! block); `download()` resolves to the state, which `WebSim::adopt` takes. An edit of the
+//! tissue (a slider, a brush, a removed cell) is made on the `WebSim` and uploaded again.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use wasm_bindgen::prelude::*;
+
+use super::sim::WebSim;
+use crate::gpu::stepper::{GpuRun, GpuRunError};
+use crate::gpu::GpuContext;
+use crate::Monolayer;
+
+fn js_err(e: impl std::fmt::Display) -> JsError {
+    JsError::new(&e.to_string())
+}
+
+struct Engine {
+    ctx: GpuContext,
+    run: RefCell<Option<GpuRun>>,
+}
+
+impl Engine {
+    fn with_run<T>(&self, f: impl FnOnce(&mut GpuRun) -> T) -> Result<T, JsError> {
+        let mut run = self.run.borrow_mut();
+        let run = run.as_mut().ok_or_else(|| JsError::new("the GPU engine has no tissue yet: upload one"))?;
+        Ok(f(run))
+    }
+}
+
+/// The state a [`WebGpuEngine`] downloaded, for [`WebSim::adopt`].
+#[wasm_bindgen]
+pub struct GpuState(pub(super) Monolayer);
+
+#[wasm_bindgen]
+impl GpuState {
+    pub fn step_count(&self) -> f64 {
+        self.0.step_count() as f64
+    }
+}
+
+#[wasm_bindgen]
+pub struct WebGpuEngine(Rc<Engine>);
+
+#[wasm_bindgen]
+impl WebGpuEngine {
+    /// A WebGPU device for compute, in a window or a worker. Rejects, saying why, where WebGPU
+    /// is missing or refuses a device (the page then steps on the CPU engine).
+    pub async fn create() -> Result<WebGpuEngine, JsError> {
+        let ctx = GpuContext::request().await.map_err(js_err)?;
+        Ok(WebGpuEngine(Rc::new(Engine { ctx, run: RefCell::new(None) })))
+    }
+
+    /// The adapter's name, backend, device type and driver.
+    pub fn adapter(&self) -> String {
+        self.0.ctx.describe()
+    }
+
+    /// Whether the adapter is a CPU device (SwiftShader): its speed is a CPU's.
+    pub fn runs_on_cpu(&self) -> bool {
+        self.0.ctx.runs_on_cpu()
+    }
+
+    /// Uploads the simulation's tissue (its parameters, substrate and cells), compiling the
+    /// kernels the first time. Throws, naming the device limit, for a tissue too large for it.
+    pub fn upload(&self, sim: &WebSim) -> Result<(), JsError> {
+        let m = sim.monolayer();
+        let mut run = self.0.run.borrow_mut();
+        match run.as_mut() {
+            Some(r) => r.upload(&self.0.ctx, m).map_err(js_err),
+            None => {
+                *run = Some(GpuRun::new(&self.0.ctx, m).map_err(js_err)?);
+                Ok(())
+            }
+        }
+    }
+
+    /// Records up to `n` steps in one submission and returns how many (at most `check_every`,
+    /// none across the switch to activity); `check` must settle them before the next.
+    pub fn submit(&self, n: u32) -> Result<u32, JsError> {
+        self.0.with_run(|r| r.submit(&self.0.ctx, n as u64) as u32)
+    }
+
+    /// Steps between checks: the most one submission takes.
+    pub fn set_check_every(&self, n: u32) -> Result<(), JsError> {
+        self.0.with_run(|r| r.check_every = n.max(1) as u64)
+    }
+
+    /// Resolves once the submitted steps ran and their faults were read: to true if they were
+    /// taken, false if they were put back to be taken again (a solve needed more recorded
+    /// iterations, or a cell more storage: both are then given). Rejects on a fault of the model
+    /// (φ out of range, a cell lost), the state back at the start of the submission, naming
+    /// the steps and the cell.
+    pub async fn check(&self) -> Result<bool, JsError> {
+        let engine = self.0.clone();
+        let faults = engine.with_run(|r| r.read_faults(&engine.ctx))?.await;
+        let settled = engine.with_run(|r| r.settle(&engine.ctx, &faults))?;
+        match settled {
+            Ok(taken) => Ok(taken),
+            Err(GpuRunError::BeyondCapacity { .. }) => {
+                // The state of the start of the submission, uploaded again with room for the
+                // patches it has now (GpuRun::regrow, which blocks, natively).
+                let m = engine.with_run(|r| r.download(&engine.ctx))?.await;
+                engine.with_run(|r| r.upload(&engine.ctx, &m))?.map_err(js_err)?;
+                Ok(false)
+            }
+            Err(e) => Err(js_err(e)),
+        }
+    }
+
+    /// Resolves to the state on the device (φ rounded from f32), for `WebSim::adopt`: one
+    /// readback. Only between a `check` and the next `submit`.
+    pub async fn download(&self) -> Result<GpuState, JsError> {
+        let engine = self.0.clone();
+        let pending = engine.with_run(|r| r.download(&engine.ctx))?;
+        Ok(GpuState(pending.await))
+    }
+
+    /// Steps taken and checked.
+    pub fn step_count(&self) -> Result<f64, JsError> {
+        self.0.with_run(|r| r.step_count() as f64)
+    }
+
+    /// The CG iterations recorded per friction solve now (they follow what the solves need).
+    pub fn solve_iterations(&self) -> Result<u32, JsError> {
+        self.0.with_run(|r| r.gpu().solve_iterations as u32)
+    }
+}
