@@ -578,7 +578,8 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     // steps from the shipped relaxed state is the CPU engine's within f32 rounding (the native
     // tests hold it within 10⁻⁴ over 100 full-size steps); the default, auto, keeps the CPU
     // engine on a software adapter and says why. Without WebGPU (WebGL2) the page falls back to
-    // the CPU engine and says why. SwiftShader takes seconds per step: a few steps only.
+    // the CPU engine and says why. SwiftShader takes seconds per step: a few steps only, and one
+    // of the paper's full-size tissue.
     check('the GPU engine steps where WebGPU compute works, as the CPU engine, and the page names the engine', async () => {
       const GPU_STEPS = 3;
       const p = await open(context, base, '/?preset=persistent&engine=gpu&paused', errors);
@@ -625,6 +626,19 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert.equal((await stepped(p, 1)).step, gpu.step + 1);
       assert.match(p.url(), /engine=cpu/);
       await p.close();
+      // The paper's tissue on the GPU engine: the shipped full-size state uploaded within
+      // WebGPU's default limits, one step taken on it (about 20 s on SwiftShader).
+      const paper = await open(context, base, '/?preset=paper&engine=gpu&paused', errors);
+      await waitStats(paper);
+      const before = await workerStats(paper);
+      assert(before.engine === 'gpu' && before.l === 140 && before.cells === 100 && before.step === 10000,
+        `the paper's preset on the GPU engine: ${JSON.stringify(before)}`);
+      assert((await paper.textContent('#engine')).includes('100 cells on 140²'), 'paper engine label');
+      const one = await stepped(paper, 1);
+      assert.equal(one.step, 10001);
+      m.gpuEngine.paperMsPerStep = one.ms;
+      assert(Math.abs(one.packing - before.packing) < 0.01, `packing ${before.packing} → ${one.packing} in one step`);
+      await paper.close();
       // auto (the default) on a software adapter: the CPU engine, and why.
       const r = await open(context, base, '/?paused', errors);
       await waitStats(r);
