@@ -781,6 +781,8 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
     );
     assert!(text.contains("PROJECTION for a laptop GPU, not a measurement"), "{text}");
     assert!(text.contains("a GPU run (GpuRun, checked every 50 steps)"), "{text}");
+    let stages = text.lines().find(|l| l.starts_with("dispatches recorded per step by stage")).expect("the stages");
+    assert!(stages.contains("gather.wgsl") && !stages.contains('?'), "a kernel without its shader file: {stages}");
 }
 
 /// The median wall time of submitting `kernels` and waiting for them, after one warm-up.

@@ -241,6 +241,23 @@ impl Kernel {
     }
 
     /// The stage's WGSL file and the kernel's entry point in it.
+    /// The file of `shaders/` the kernel is in: its stage, named like the CPU module.
+    pub fn shader_file(self) -> &'static str {
+        let files = [
+            (GATHER_WGSL, "gather.wgsl"),
+            (FREE_ENERGY_WGSL, "free_energy.wgsl"),
+            (SHAPE_WGSL, "shape.wgsl"),
+            (FORCES_WGSL, "forces.wgsl"),
+            (MOTION_WGSL, "motion.wgsl"),
+            (MONOLAYER_WGSL, "monolayer.wgsl"),
+            (FRICTION_WGSL, "friction.wgsl"),
+            (MULTIGRID_WGSL, "multigrid.wgsl"),
+            (CELL_WGSL, "cell.wgsl"),
+        ];
+        let text = self.source().0;
+        files.iter().find(|(t, _)| std::ptr::eq(*t, text)).map_or("?", |(_, name)| name)
+    }
+
     fn source(self) -> (&'static str, &'static str) {
         match self {
             Kernel::MgCoarsenFine => (MULTIGRID_WGSL, "mg_coarsen_fine"),

@@ -374,6 +374,15 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
          the recorded CG iterations went from {recorded} to {adapted} per solve, {recorded_now} dispatches recorded per step",
         run.check_every
     );
+    let mut per_stage: Vec<(&str, usize)> = Vec::new();
+    for k in Kernel::step(run.gpu().solve()).into_iter().chain(Kernel::MOVE_PATCHES) {
+        match per_stage.iter_mut().find(|(f, _)| *f == k.shader_file()) {
+            Some((_, n)) => *n += 1,
+            None => per_stage.push((k.shader_file(), 1)),
+        }
+    }
+    let stages: Vec<String> = per_stage.iter().map(|(f, n)| format!("{f} {n}")).collect();
+    println!("dispatches recorded per step by stage (shaders/): {}", stages.join(", "));
     // Every recorded dispatch is launched, the ones after convergence too; the bytes and the
     // coarse cycles are those of the dispatches that work.
     println!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, coarse_cycles)));

@@ -95,14 +95,22 @@ impl ReadoutLog {
         }
     }
 
+    /// Steps from `step` to the next state due a row: the end of the relaxation, then every
+    /// [`ROW_EVERY`] active steps (the GPU engine stops its submissions there).
+    pub fn steps_to_next_row(step: u64, relax: u64) -> u64 {
+        if step < relax {
+            relax - step
+        } else {
+            ROW_EVERY - (step - relax) % ROW_EVERY
+        }
+    }
+
     /// Runs `n` steps of `m`, stopping at each state due a row to record it. On an error the
     /// state before the failing step is kept, with the rows up to it.
     pub fn advance(&mut self, m: &mut Monolayer, n: u64) -> Result<(), SimError> {
         let mut left = n;
         while left > 0 {
-            let (step, relax) = (m.step_count(), m.params().relax_steps);
-            let to_next = if step < relax { relax - step } else { ROW_EVERY - (step - relax) % ROW_EVERY };
-            let k = left.min(to_next);
+            let k = left.min(Self::steps_to_next_row(m.step_count(), m.params().relax_steps));
             m.advance(k)?;
             left -= k;
             self.record_if_due(m);

@@ -130,6 +130,13 @@ impl WebSim {
         self.log.csv(&self.m)
     }
 
+    /// Steps from `step` (the GPU engine's, which may be ahead of this tissue) to the next state
+    /// due a readout row: the GPU engine ends its submissions there and hands that state over,
+    /// so that its readouts have the CPU engine's rows.
+    pub fn steps_to_next_row(&self, step: f64) -> f64 {
+        ReadoutLog::steps_to_next_row(step as u64, self.m.params().relax_steps) as f64
+    }
+
     /// Rows recorded so far.
     pub fn readout_rows(&self) -> usize {
         self.log.rows.len()

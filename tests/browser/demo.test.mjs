@@ -574,14 +574,14 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     // The GPU engine (issue 26; src/gpu/ stepped from src/web/gpu_engine.rs). With WebGPU
-    // (SwiftShader here) ?engine=gpu steps the tissue on WebGPU compute, and its Σφ after a few
+    // (SwiftShader here) ?engine=gpu steps the tissue on WebGPU compute, and its Σφ after 10
     // steps from the shipped relaxed state is the CPU engine's within f32 rounding (the native
     // tests hold it within 10⁻⁴ over 100 full-size steps); the default, auto, keeps the CPU
     // engine on a software adapter and says why. Without WebGPU (WebGL2) the page falls back to
     // the CPU engine and says why. SwiftShader takes seconds per step: a few steps only, and one
     // of the paper's full-size tissue.
     check('the GPU engine steps where WebGPU compute works, as the CPU engine, and the page names the engine', async () => {
-      const GPU_STEPS = 3;
+      const GPU_STEPS = 10;
       const p = await open(context, base, '/?preset=persistent&engine=gpu&paused', errors);
       await waitStats(p);
       const s = await workerStats(p);
@@ -598,7 +598,8 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       const stepped = (q, n) => q.evaluate(async (n) => {
         const ms = await window.demo.call('step', n);
         const st = await window.demo.call('stats');
-        return { ms, step: st.step, packing: st.packing, phiSum: Array.from(await window.demo.call('phi_sum')) };
+        const rows = await window.demo.call('readout_rows');
+        return { ms, step: st.step, packing: st.packing, rows, phiSum: Array.from(await window.demo.call('phi_sum')) };
       }, n);
       // The page draws the GPU's state (downloaded into the worker's WebSim): paused, the
       // worker sends a frame only when the state changed, so a frame follows the steps (counted
@@ -613,6 +614,10 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert.equal((await workerStats(q)).engine, 'cpu');
       const cpu = await stepped(q, GPU_STEPS);
       assert.equal(gpu.step, cpu.step);
+      // The readouts (the Download button's CSV) have the same rows on both engines: one every
+      // 10 active steps, the GPU engine handing over each of those states.
+      assert.equal(gpu.rows, cpu.rows, `readout rows: GPU ${gpu.rows}, CPU ${cpu.rows}`);
+      assert.equal(gpu.rows, 2, 'rows at steps 1500 and 1510');
       const worst = Math.max(...gpu.phiSum.map((v, i) => Math.abs(v - cpu.phiSum[i])));
       m.gpuEngine = { steps: GPU_STEPS, msPerStep: gpu.ms / GPU_STEPS, cpuMsPerStep: cpu.ms / GPU_STEPS, maxPhiSumDifference: worst };
       console.log(`       GPU engine on SwiftShader: ${(gpu.ms / GPU_STEPS).toFixed(0)} ms/step (CPU engine ${(cpu.ms / GPU_STEPS).toFixed(1)}); max |ΣφGPU − ΣφCPU| after ${GPU_STEPS} steps = ${worst.toExponential(2)}`);

@@ -242,7 +242,10 @@ async function gpuTurn() {
   try {
     if (playing) {
       refill();
-      const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(GPU_BATCH_MS / msPerStep)));
+      // A submission ends where the readouts are due a row (every 10 active steps), and that
+      // state is handed to `sim`, which records the row, as the CPU engine's steps do.
+      const toRow = sim.steps_to_next_row(gpu.engine.step_count());
+      const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(GPU_BATCH_MS / msPerStep)), toRow);
       if (n >= 1) {
         const t0 = performance.now();
         const k = await gpuSteps(n);
@@ -250,6 +253,7 @@ async function gpuTurn() {
           msPerStep = 0.8 * msPerStep + 0.2 * ((performance.now() - t0) / k);
           budget -= k;
           changed = true;
+          if (k === toRow) await gpuDown();
         }
       } else {
         await new Promise((r) => setTimeout(r, 1000 / (30 * spf)));
@@ -322,9 +326,11 @@ const CALLS = {
     const t0 = performance.now();
     if (gpu) {
       for (let left = n; left > 0;) {
-        const k = await gpuSteps(left);
+        const toRow = sim.steps_to_next_row(gpu.engine.step_count());
+        const k = await gpuSteps(Math.min(left, toRow));
         if (k === null) return null;
         left -= k;
+        if (k === toRow) await gpuDown();
       }
       await gpuDown();
     } else if (!takeSteps(n)) return null;
