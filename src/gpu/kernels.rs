@@ -104,6 +104,15 @@ pub enum Preconditioner {
 }
 
 impl Preconditioner {
+    /// CG iterations recorded per solve unless set otherwise ([`SOLVE_ITERATIONS`],
+    /// [`JACOBI_ITERATIONS`]).
+    pub fn default_iterations(self) -> usize {
+        match self {
+            Preconditioner::Multigrid => SOLVE_ITERATIONS,
+            Preconditioner::Jacobi => JACOBI_ITERATIONS,
+        }
+    }
+
     /// The kernels of one application, z = M r with its partial sums of r·z.
     pub fn kernels(self) -> &'static [Kernel] {
         match self {
@@ -240,7 +249,6 @@ impl Kernel {
         out
     }
 
-    /// The stage's WGSL file and the kernel's entry point in it.
     /// The file of `shaders/` the kernel is in: its stage, named like the CPU module.
     pub fn shader_file(self) -> &'static str {
         let files = [
@@ -258,6 +266,7 @@ impl Kernel {
         files.iter().find(|(t, _)| std::ptr::eq(*t, text)).map_or("?", |(_, name)| name)
     }
 
+    /// The stage's WGSL file and the kernel's entry point in it.
     fn source(self) -> (&'static str, &'static str) {
         match self {
             Kernel::MgCoarsenFine => (MULTIGRID_WGSL, "mg_coarsen_fine"),
@@ -584,10 +593,7 @@ impl GpuMonolayer {
     /// Sets the preconditioner, with its default recorded iterations.
     pub fn set_preconditioner(&mut self, pc: Preconditioner) {
         self.preconditioner = pc;
-        self.solve_iterations = match pc {
-            Preconditioner::Multigrid => SOLVE_ITERATIONS,
-            Preconditioner::Jacobi => JACOBI_ITERATIONS,
-        };
+        self.solve_iterations = pc.default_iterations();
     }
 
     /// The kernels of one Heun step in the uploaded phase ([`Kernel::step`]).

@@ -10,7 +10,7 @@
 
 use crate::gpu::buffers::{patch_storage, GpuPatch, Layout, PatchFault, Slot, SolveScalars, NO_FAULT};
 use crate::gpu::context::{GpuContext, GpuError};
-use crate::gpu::kernels::{GpuMonolayer, Kernel, Preconditioner, JACOBI_ITERATIONS, SOLVE_ITERATIONS};
+use crate::gpu::kernels::{GpuMonolayer, Kernel};
 use crate::gpu::readback::read_words;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::{Monolayer, Phase, State};
@@ -67,6 +67,13 @@ impl Faults {
 /// The per-cell and lattice buffers a step changes, of which a copy keeps the state at the
 /// start of each submission.
 const KEPT: [Slot; 3] = [Slot::Phi, Slot::Patches, Slot::MeanVelocity];
+
+/// Which way [`GpuRun::copy_kept`] copies.
+#[derive(Clone, Copy)]
+enum Keep {
+    Store,
+    Restore,
+}
 
 /// A monolayer stepped on the GPU from a CPU state.
 pub struct GpuRun {
@@ -188,9 +195,7 @@ impl GpuRun {
             return 0;
         }
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
-        for (&slot, kept) in KEPT.iter().zip(&self.kept) {
-            encoder.copy_buffer_to_buffer(self.gpu.state().buffer(slot), 0, kept, 0, kept.size());
-        }
+        self.copy_kept(&mut encoder, Keep::Store);
         let one = [self.gpu.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat();
         for _ in 0..steps {
             self.gpu.encode(&mut encoder, &one);
@@ -198,6 +203,18 @@ impl GpuRun {
         ctx.queue.submit([encoder.finish()]);
         self.pending = Some((self.step, self.step + steps));
         steps
+    }
+
+    /// Copies the state aside (before a submission) or back (after a fault).
+    fn copy_kept(&self, encoder: &mut wgpu::CommandEncoder, keep: Keep) {
+        for (&slot, kept) in KEPT.iter().zip(&self.kept) {
+            let live = self.gpu.state().buffer(slot);
+            let (from, to) = match keep {
+                Keep::Store => (live, kept),
+                Keep::Restore => (kept, live),
+            };
+            encoder.copy_buffer_to_buffer(from, 0, to, 0, kept.size());
+        }
     }
 
     /// The sticky faults once every submitted step has finished: one readback.
@@ -220,7 +237,7 @@ impl GpuRun {
     pub fn settle(&mut self, ctx: &GpuContext, faults: &Faults) -> Result<bool, GpuRunError> {
         let Some((from, to)) = self.pending.take() else { return Ok(true) };
         self.gpu.state().reset_faults(ctx);
-        let (default, recorded) = (self.default_iterations(), self.gpu.solve_iterations);
+        let (default, recorded) = (self.gpu.preconditioner.default_iterations(), self.gpu.solve_iterations);
         let fewest = ((default as f64 * FEWEST_ITERATIONS) as usize).max(1);
         let error = match faults.error(from, to) {
             None => {
@@ -238,19 +255,9 @@ impl GpuRun {
             Some(e) => Some(e),
         };
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("restore") });
-        for (&slot, kept) in KEPT.iter().zip(&self.kept) {
-            encoder.copy_buffer_to_buffer(kept, 0, self.gpu.state().buffer(slot), 0, kept.size());
-        }
+        self.copy_kept(&mut encoder, Keep::Restore);
         ctx.queue.submit([encoder.finish()]);
         error.map_or(Ok(false), Err)
-    }
-
-    /// The recorded iterations the preconditioner starts from.
-    fn default_iterations(&self) -> usize {
-        match self.gpu.preconditioner {
-            Preconditioner::Multigrid => SOLVE_ITERATIONS,
-            Preconditioner::Jacobi => JACOBI_ITERATIONS,
-        }
     }
 
     /// The state on the device as a CPU monolayer (φ rounded from f32), once every submitted

@@ -212,6 +212,14 @@ impl Engine {
         }
     }
 
+    /// As `--engine` takes it.
+    pub fn flag(self) -> &'static str {
+        match self {
+            Engine::Cpu => "cpu",
+            Engine::Gpu => "gpu",
+        }
+    }
+
     pub fn parse(s: &str) -> Result<Self, String> {
         match s {
             "cpu" => Ok(Engine::Cpu),
@@ -338,7 +346,7 @@ impl RunDir {
                 RunRecord::path(&self.dir).display(),
                 recorded.name(),
                 engine.name(),
-                if recorded == Engine::Cpu { "cpu" } else { "gpu" }
+                recorded.flag()
             ));
         }
         if engine == Engine::Gpu && !cfg!(feature = "gpu") {
@@ -396,20 +404,13 @@ impl RunDir {
     ) -> Result<(), Stop> {
         let p = self.monolayer.params().clone();
         let total = p.total_steps();
-        let checkpoint = checkpoint_path(&self.dir);
         let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
         while m.step_count() < total {
             if let Some((name, _)) = stop_signal() {
                 return Err(Stop::Signal(name));
             }
             if let Err(e) = m.step() {
-                let last_good = dir.join(LAST_GOOD_STATE);
-                write_checkpoint(m, &last_good).map_err(Stop::Io)?;
-                return Err(Stop::Simulation(format!(
-                    "{e}\n  the last good state is in {} (the last periodic one in {})",
-                    last_good.display(),
-                    checkpoint.display()
-                )));
+                return Err(unstable(m, dir, &e));
             }
             watch(m, &Event::Step);
             write_scheduled(m, dir, record, live.as_deref_mut(), watch)?;
@@ -447,13 +448,7 @@ impl RunDir {
             let stepped = run.advance(&ctx, to - s);
             *m = run.download_now(&ctx);
             if let Err(e) = stepped {
-                let last_good = dir.join(LAST_GOOD_STATE);
-                write_checkpoint(m, &last_good).map_err(Stop::Io)?;
-                return Err(Stop::Simulation(format!(
-                    "{e}\n  the last good state is in {} (the last periodic one in {})",
-                    last_good.display(),
-                    checkpoint_path(dir).display()
-                )));
+                return Err(unstable(m, dir, &e));
             }
             watch(m, &Event::Step);
             write_scheduled(m, dir, record, live.as_deref_mut(), watch)?;
@@ -467,6 +462,20 @@ impl RunDir {
             "--engine gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into(),
         ))
     }
+}
+
+/// A run that went unstable: `m` (its last good state) is written to `last_good_state.npz`
+/// and the error names it beside the last periodic checkpoint.
+fn unstable(m: &Monolayer, dir: &Path, e: &dyn std::fmt::Display) -> Stop {
+    let last_good = dir.join(LAST_GOOD_STATE);
+    if let Err(io) = write_checkpoint(m, &last_good) {
+        return Stop::Io(io);
+    }
+    Stop::Simulation(format!(
+        "{e}\n  the last good state is in {} (the last periodic one in {})",
+        last_good.display(),
+        checkpoint_path(dir).display()
+    ))
 }
 
 /// What the protocol writes at the monolayer's step, if anything: a frame every frame interval

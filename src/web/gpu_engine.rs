@@ -15,14 +15,12 @@ use std::rc::Rc;
 
 use wasm_bindgen::prelude::*;
 
+use super::js_err;
+
 use super::sim::WebSim;
 use crate::gpu::stepper::{GpuRun, GpuRunError};
 use crate::gpu::GpuContext;
 use crate::Monolayer;
-
-fn js_err(e: impl std::fmt::Display) -> JsError {
-    JsError::new(&e.to_string())
-}
 
 struct Engine {
     ctx: GpuContext,

@@ -26,6 +26,12 @@ pub mod render;
 #[cfg(target_arch = "wasm32")]
 pub mod sim;
 
+/// An error of the core as the exception a binding throws to the page.
+#[cfg(target_arch = "wasm32")]
+pub(crate) fn js_err(e: impl std::fmt::Display) -> wasm_bindgen::JsError {
+    wasm_bindgen::JsError::new(&e.to_string())
+}
+
 /// Runs once when the module is instantiated: a Rust panic then reaches the console with its
 /// message, and the page (which wraps every call) shows it instead of freezing silently.
 #[cfg(target_arch = "wasm32")]

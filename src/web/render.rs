@@ -10,6 +10,8 @@ use std::sync::{Arc, Mutex};
 
 use bytemuck::Zeroable;
 use wasm_bindgen::prelude::*;
+
+use super::js_err;
 use web_sys::HtmlCanvasElement;
 use wgpu::util::DeviceExt;
 
@@ -148,10 +150,6 @@ pub struct Renderer {
     layout: Layout,
     /// Validation errors and device loss, reported asynchronously by wgpu; the page polls them.
     errors: Arc<Mutex<Vec<String>>>,
-}
-
-fn js_err(e: impl std::fmt::Display) -> JsError {
-    JsError::new(&e.to_string())
 }
 
 #[wasm_bindgen]

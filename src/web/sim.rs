@@ -4,6 +4,8 @@
 
 use wasm_bindgen::prelude::*;
 
+use super::js_err;
+
 use super::measure::{tissue_stats, TissueStats};
 use super::readouts::{frame_file_name, run_record_json, ReadoutLog};
 use super::render::WebView;
@@ -12,10 +14,6 @@ use crate::analysis::frame_file::encode_frame;
 use crate::analysis::holes::VoidRegions;
 use crate::model::snapshot;
 use crate::{Monolayer, Params};
-
-fn js_err(e: impl std::fmt::Display) -> JsError {
-    JsError::new(&e.to_string())
-}
 
 /// The page's parameters: its size and the three sliders; every other one is the native default.
 fn page_params(box_size: usize, n_cells: usize, relax_steps: u32, zeta: f64, chi: f64, gamma: f64) -> Params {

@@ -236,24 +236,29 @@ async function gpuSteps(n) {
   }
 }
 
+// gpuSteps, ending the submission where the readouts are due a row (every 10 active steps)
+// and handing that state to `sim`, which records the row, as the CPU engine's steps do.
+async function gpuStepsToRow(n) {
+  const toRow = sim.steps_to_next_row(gpu.engine.step_count());
+  const k = await gpuSteps(Math.min(n, toRow));
+  if (k === toRow) await gpuDown();
+  return k;
+}
+
 // One turn of the GPU engine: a submission while playing, then a frame if one is asked for.
 async function gpuTurn() {
   if (!gpu || !sim) return;
   try {
     if (playing) {
       refill();
-      // A submission ends where the readouts are due a row (every 10 active steps), and that
-      // state is handed to `sim`, which records the row, as the CPU engine's steps do.
-      const toRow = sim.steps_to_next_row(gpu.engine.step_count());
-      const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(GPU_BATCH_MS / msPerStep)), toRow);
+      const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(GPU_BATCH_MS / msPerStep)));
       if (n >= 1) {
         const t0 = performance.now();
-        const k = await gpuSteps(n);
+        const k = await gpuStepsToRow(n);
         if (k) {
           msPerStep = 0.8 * msPerStep + 0.2 * ((performance.now() - t0) / k);
           budget -= k;
           changed = true;
-          if (k === toRow) await gpuDown();
         }
       } else {
         await new Promise((r) => setTimeout(r, 1000 / (30 * spf)));
@@ -326,11 +331,9 @@ const CALLS = {
     const t0 = performance.now();
     if (gpu) {
       for (let left = n; left > 0;) {
-        const toRow = sim.steps_to_next_row(gpu.engine.step_count());
-        const k = await gpuSteps(Math.min(left, toRow));
+        const k = await gpuStepsToRow(left);
         if (k === null) return null;
         left -= k;
-        if (k === toRow) await gpuDown();
       }
       await gpuDown();
     } else if (!takeSteps(n)) return null;
