@@ -6,6 +6,10 @@ the numbers docs/figures.md quotes for runs made outside `monolayer figures`:
 - Figs. 1c-d, S2 and the mechanism's pair angle and -1/2 distance: the mean over nucleations of
   each precursor measure, k frames before nucleation, with its standard error, beside the same
   measure about the random sites of the same frames (the chance line);
+- the seed spread of each precursor measure: per run with a nucleation, its mean over its
+  nucleations minus its chance mean (same run, same frames before), and in how many runs the
+  difference has the sign of the paper's claim (nearer than chance for distances, above chance
+  for the strain rate and the pair angle);
 - tangential alignment: per run, the mean angle (degrees) between the elongation axis and the
   hole's edge of cells bordering a hole, and of cells away from holes;
 - Fig. 2: P(hole | strain rate) pooled over the runs, fitted as P = A exp(b eps) by binomial
@@ -80,6 +84,31 @@ def report_precursors(dirs):
         print(f"  {c}: " + " | ".join(cells))
 
 
+# The sign of (measure - chance) that the paper's claim predicts.
+CLAIMED_SIGN = {
+    "spiral_core_distance_over_r": -1,
+    "plus_half_distance_over_r": -1,
+    "second_plus_half_distance_over_r": -1,
+    "max_strain_rate_within_r_half_over_max": 1,
+    "plus_half_pair_angle": 1,
+    "minus_half_distance_over_r": 1,
+}
+
+
+def report_seed_spread(dirs):
+    """Per run: mean over its nucleations minus its chance mean, k frames before."""
+    per_run = [(pooled_precursors([d], "hole_precursors.csv"), pooled_precursors([d], "hole_precursors_chance.csv")) for d in dirs]
+    print("seed spread: per run with a nucleation, (mean - chance); runs with the claimed sign / runs")
+    for c in PRECURSORS:
+        cells = []
+        for k in FRAMES_BEFORE:
+            diffs = [statistics.mean(h[k][c]) - statistics.mean(ch[k][c]) for h, ch in per_run if h[k][c] and ch[k][c]]
+            if diffs:
+                agree = sum(1 for x in diffs if x * CLAIMED_SIGN[c] > 0)
+                cells.append(f"{k}: {statistics.median(diffs):+.2f} [{min(diffs):+.2f}, {max(diffs):+.2f}] {agree}/{len(diffs)}")
+        print(f"  {c}: " + " | ".join(cells))
+
+
 def report_alignment(dirs):
     near, far = [], []
     for d in dirs:
@@ -100,8 +129,12 @@ def report_alignment(dirs):
 
 
 def report_hole_probability(dirs):
-    import numpy as np
-    from scipy.optimize import minimize
+    try:
+        import numpy as np
+        from scipy.optimize import minimize
+    except ImportError:
+        print("P(hole | eps): not fitted (needs numpy and scipy: pip install numpy scipy)")
+        return
 
     pooled = defaultdict(lambda: [0, 0])
     for d in dirs:
@@ -139,6 +172,7 @@ def main(args):
             print(f"error: {d}: no {', '.join(missing)} (run `monolayer analyze RUN --out {d}` first)", file=sys.stderr)
             return 2
     report_precursors(dirs)
+    report_seed_spread(dirs)
     report_alignment(dirs)
     report_hole_probability(dirs)
     return 0

@@ -422,7 +422,8 @@ impl LaptopProjection {
     }
 }
 
-fn projection_line(p: &LaptopProjection) -> String {
+/// The line `bench --gpu` prints, labelled as a projection.
+pub fn projection_line(p: &LaptopProjection) -> String {
     format!(
         "PROJECTION for a laptop GPU, not a measurement: {} dispatches × {}–{} µs, {:.1} MB at {}–{} GB/s, \
          {} coarse cycles × {PHASES_PER_COARSE_CYCLE} barrier phases × {BARRIER_US} µs: {:.1}–{:.1} ms per step ({:.0}–{:.0} steps/s)",

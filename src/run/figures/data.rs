@@ -225,32 +225,44 @@ fn csv(base: &Path, suffix: &str, text: &str, made: &mut Made) -> Result<(), Str
 /// Figs. 1c, 1d and S2: a precursor measure against frames before nucleation, one curve per χ,
 /// averaged over every hole of every run at that χ.
 fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
-    type Column = fn(&Precursor) -> Option<f64>;
-    let columns: Vec<(&str, &str, Column)> = match figure {
+    // Each measure with the sign of (measure − chance) the paper's claim predicts.
+    let columns: Vec<(&str, &str, Column, f64)> = match figure {
         Figure::Fig1c => {
-            vec![("spiral_core_distance_over_r", "distance to the nearest spiral core / R", |p| p.spiral_core)]
+            vec![("spiral_core_distance_over_r", "distance to the nearest spiral core / R", |p| p.spiral_core, -1.0)]
         }
-        Figure::Fig1d => vec![("max_strain_rate_within_r_half_over_max", "max ε̇ within R/2 / max ε̇", |p| {
-            Some(p.strain_rate).filter(|v| v.is_finite())
-        })],
+        Figure::Fig1d => vec![(
+            "max_strain_rate_within_r_half_over_max",
+            "max ε̇ within R/2 / max ε̇",
+            |p| Some(p.strain_rate).filter(|v| v.is_finite()),
+            1.0,
+        )],
         Figure::Mechanism => vec![
-            ("plus_half_pair_angle_degrees", "angle between the two nearest +½ orientations (°)", |p| {
-                p.plus_half_angle.map(f64::to_degrees)
-            }),
-            ("nearest_minus_half_distance_over_r", "distance to the nearest −½ defect / R", |p| p.minus_half),
+            (
+                "plus_half_pair_angle_degrees",
+                "angle between the two nearest +½ orientations (°)",
+                |p| p.plus_half_angle.map(f64::to_degrees),
+                1.0,
+            ),
+            // The claim is that holes do not open at −½ defects: not nearer than chance.
+            ("nearest_minus_half_distance_over_r", "distance to the nearest −½ defect / R", |p| p.minus_half, 1.0),
         ],
         _ => vec![
-            ("nearest_plus_half_distance_over_r", "distance to the nearest +½ defect / R", |p| p.plus_half[0]),
-            ("second_plus_half_distance_over_r", "distance to the second nearest +½ defect / R", |p| p.plus_half[1]),
+            ("nearest_plus_half_distance_over_r", "distance to the nearest +½ defect / R", |p| p.plus_half[0], -1.0),
+            (
+                "second_plus_half_distance_over_r",
+                "distance to the second nearest +½ defect / R",
+                |p| p.plus_half[1],
+                -1.0,
+            ),
         ],
     };
     let mut text = String::from("chi,frames_before,holes");
-    for (name, _, _) in &columns {
+    for (name, _, _, _) in &columns {
         let _ = write!(text, ",{name}_samples,{name}_mean,{name}_sem,{name}_chance_mean,{name}_chance_sem");
     }
     text.push('\n');
     let mut panels: Vec<Panel> =
-        columns.iter().map(|(_, desc, _)| Panel::new("", "frames before nucleation (t − t_hole)", desc)).collect();
+        columns.iter().map(|(_, desc, _, _)| Panel::new("", "frames before nucleation (t − t_hole)", desc)).collect();
     for (k, chi) in CHI_REGIMES.into_iter().enumerate() {
         let sel = select(plan, runs, figure, |p| is_chi(p, chi));
         if sel.is_empty() {
@@ -258,7 +270,7 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
         }
         let holes: usize = sel.iter().map(|r| r.precursors.iter().filter(|p| p.frames_before == 0).count()).sum();
         let mut line = Vec::new();
-        for (c, (_, _, column)) in columns.iter().enumerate() {
+        for (c, (_, _, column, _)) in columns.iter().enumerate() {
             let mut series = Series::new(format!("χ = {chi} ({holes} holes)"), k);
             series.line = true;
             // Chance: the same measure about random sites of the same frames.
@@ -306,40 +318,8 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
             text += &l;
             text.push('\n');
         }
-        let at0: Vec<String> = columns
-            .iter()
-            .map(|(_, desc, column)| {
-                let v: Vec<f64> = sel
-                    .iter()
-                    .flat_map(|r| r.precursors.iter())
-                    .filter(|p| p.frames_before == 0)
-                    .filter_map(column)
-                    .collect();
-                let far: Vec<f64> = sel
-                    .iter()
-                    .flat_map(|r| r.precursors.iter())
-                    .filter(|p| p.frames_before == DEPTH)
-                    .filter_map(column)
-                    .collect();
-                let (m0, e0) = mean_sem(&v);
-                let (m1, _) = mean_sem(&far);
-                let base: Vec<f64> = sel
-                    .iter()
-                    .flat_map(|r| r.chance.iter())
-                    .filter(|p| p.frames_before <= DEPTH)
-                    .filter_map(column)
-                    .collect();
-                let (mb, eb) = mean_sem(&base);
-                format!(
-                    "{desc}: {} ± {} at nucleation, {} {DEPTH} frames before; chance (random sites of the same frames) {} ± {}",
-                    fmt(m0),
-                    fmt(e0),
-                    fmt(m1),
-                    fmt(mb),
-                    fmt(eb)
-                )
-            })
-            .collect();
+        let at0: Vec<String> =
+            columns.iter().map(|(_, desc, column, sign)| precursor_line(&sel, desc, *column, *sign)).collect();
         made.measured.push(if holes == 0 {
             format!("χ = {chi}: no hole nucleated in {} runs (drawn at zero, as in the paper)", sel.len())
         } else {
@@ -364,6 +344,46 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
     csv(base, "", &text, made)?;
     made.files.extend(draw::panels(base, &panels, None)?);
     Ok(())
+}
+
+type Column = fn(&Precursor) -> Option<f64>;
+
+/// One measure's values over `rows` at `before` frames before nucleation.
+fn at_frame(rows: &[Precursor], column: Column, before: usize) -> Vec<f64> {
+    rows.iter().filter(|p| p.frames_before == before).filter_map(column).collect()
+}
+
+/// The report's line for one precursor measure over the runs `sel`: mean ± s.e. over
+/// nucleations beside chance at 0, 1 and [`DEPTH`] frames before, and the seed spread: in how
+/// many runs (each its own mean against its own chance, one frame before) the difference has
+/// the sign the paper's claim predicts (`sign`: −1 nearer, +1 larger than chance).
+fn precursor_line(sel: &[&RunData], desc: &str, column: Column, sign: f64) -> String {
+    let pooled = |before: usize, chance: bool| {
+        let v: Vec<f64> =
+            sel.iter().flat_map(|r| at_frame(if chance { &r.chance } else { &r.precursors }, column, before)).collect();
+        mean_sem(&v)
+    };
+    let frame = |before: usize| {
+        let ((m, e), (c, ec)) = (pooled(before, false), pooled(before, true));
+        format!("{} ± {} (chance {} ± {})", fmt(m), fmt(e), fmt(c), fmt(ec))
+    };
+    let diffs: Vec<f64> = sel
+        .iter()
+        .filter_map(|r| {
+            let (m, _) = mean_sem(&at_frame(&r.precursors, column, 1));
+            let (c, _) = mean_sem(&at_frame(&r.chance, column, 1));
+            Some(m - c).filter(|d| d.is_finite())
+        })
+        .collect();
+    let agree = diffs.iter().filter(|d| **d * sign > 0.0).count();
+    format!(
+        "{desc}: {} at nucleation, {} one frame before, {} {DEPTH} frames before; one frame before, {} than chance in {agree} of {} runs with a nucleation",
+        frame(0),
+        frame(1),
+        frame(DEPTH),
+        if sign < 0.0 { "nearer" } else { "larger" },
+        diffs.len()
+    )
 }
 
 /// The mechanism's tangential alignment: per χ, the mean angle between a cell's elongation axis
@@ -800,5 +820,45 @@ mod tests {
         let s = survival(vec![(3.0, true), (1.0, true), (2.0, false)]);
         assert_eq!(s.len(), 2);
         assert!((s[0].3 - 2.0 / 3.0).abs() < 1e-12 && s[1].3 == 0.0, "{s:?}");
+    }
+
+    fn run_with_spiral_cores(at_hole: &[(usize, f64)], at_random: &[(usize, f64)]) -> RunData {
+        let row = |&(frames_before, d): &(usize, f64)| Precursor {
+            hole: 0,
+            frames_before,
+            spiral_core: Some(d),
+            plus_half: [None, None],
+            plus_half_angle: None,
+            minus_half: None,
+            strain_rate: f64::NAN,
+        };
+        RunData {
+            status: RunStatus::Finished,
+            frames: 100,
+            active_time: 1e4,
+            box_area: 1.96e4,
+            holes: Vec::new(),
+            precursors: at_hole.iter().map(row).collect(),
+            chance: at_random.iter().map(row).collect(),
+            alignment: (Vec::new(), Vec::new()),
+            probability: BTreeMap::new(),
+            correlations: (Vec::new(), Vec::new()),
+        }
+    }
+
+    #[test]
+    fn precursor_line_counts_runs_by_their_own_chance_one_frame_before() {
+        // Run a: the core is nearer than its chance one frame before (1 against 5); run b: farther
+        // (6 against 5), though it is nearer at nucleation; run c has no nucleation.
+        let a = run_with_spiral_cores(&[(0, 0.5), (1, 1.0)], &[(0, 5.0), (1, 4.0), (1, 6.0)]);
+        let b = run_with_spiral_cores(&[(0, 0.5), (1, 6.0)], &[(0, 5.0), (1, 5.0)]);
+        let c = run_with_spiral_cores(&[], &[]);
+        let line = precursor_line(&[&a, &b, &c, &a], "d", |p| p.spiral_core, -1.0);
+        assert!(line.contains("nearer than chance in 2 of 3 runs"), "{line}");
+        let larger = precursor_line(&[&a, &b, &a], "d", |p| p.spiral_core, 1.0);
+        assert!(larger.contains("larger than chance in 1 of 3 runs"), "{larger}");
+        // Pooled one frame before: (1 + 6) / 2 against (4 + 6 + 5) / 3.
+        let pooled = precursor_line(&[&a, &b], "d", |p| p.spiral_core, -1.0);
+        assert!(pooled.contains("3.500 ± 2.500 (chance 5.000 ± 0.577) one frame before"), "{pooled}");
     }
 }
