@@ -596,13 +596,13 @@ fn a_full_disk_at_any_write_resumes_to_the_same_bits() {
 }
 
 /// Issue 24, item 2: the estimate steps a stable stand-in where the plan's first job blows up
-/// (S3's γ = 0.04 does within 22 steps), and `--dry-run` needs no `--slurm`.
+/// (at γ = 0.04 the φ guard stops every run within 22 steps), and `--dry-run` needs no `--slurm`.
 #[test]
 fn the_estimate_survives_a_plan_whose_first_job_blows_up() {
     use monolayer::run::figures::{Figure, Plan, Scale, Speed};
-    let plan = Plan::new(Scale::Smoke, &[Figure::FigS3], &[]).unwrap();
+    let plan = Plan::new(Scale::Smoke, &[Figure::Fig1c], &["gamma=0.04".to_string()]).unwrap();
     let first = &plan.jobs[0];
-    assert_eq!(first.params.gamma, 0.04, "S3's first job is the unstable γ = 0.04");
+    assert_eq!(first.params.gamma, 0.04, "the first job is the unstable γ = 0.04");
     let speed = Speed::measure(&[first], 100, 30).unwrap();
     assert_eq!(speed.sizes.len(), 1);
     assert!(speed.sizes[0].1 .0 > 0.0 && speed.sizes[0].1 .1 > 0.0, "{:?}", speed.sizes);

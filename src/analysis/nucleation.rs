@@ -185,6 +185,37 @@ pub fn binomial_fit(bins: &[(f64, u64, u64)]) -> Option<ExponentialFit> {
     None
 }
 
+/// How well the exponential's coefficients b of several (χ, ζ) collapse on one curve of
+/// x = χ^a/ζ (the paper's inset: a = 0.1): the standard deviation of ln b about the least-squares
+/// line in ln x (ln x = a ln χ − ln ζ), with two degrees of freedom taken by the line. A power
+/// law b ∝ x^k collapses to zero; `None` with fewer than three points or one x for all.
+pub fn collapse_scatter(points: &[(f64, f64, f64)], a: f64) -> Option<f64> {
+    let xy: Vec<(f64, f64)> = points.iter().map(|&(chi, zeta, b)| (a * chi.ln() - zeta.ln(), b.ln())).collect();
+    let n = xy.len() as f64;
+    if xy.len() < 3 {
+        return None;
+    }
+    let (mx, my) = (xy.iter().map(|p| p.0).sum::<f64>() / n, xy.iter().map(|p| p.1).sum::<f64>() / n);
+    let sxx: f64 = xy.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let k = xy.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx;
+    let ss: f64 = xy.iter().map(|p| (p.1 - my - k * (p.0 - mx)).powi(2)).sum();
+    Some((ss / (n - 2.0)).sqrt())
+}
+
+/// The exponent a of χ^a/ζ, on a grid of steps of 0.01 over [0, 1], whose collapse scatters
+/// least ([`collapse_scatter`]), with that scatter.
+pub fn best_collapse_exponent(points: &[(f64, f64, f64)]) -> Option<(f64, f64)> {
+    (0..=100)
+        .filter_map(|k| {
+            let a = k as f64 / 100.0;
+            collapse_scatter(points, a).map(|s| (a, s))
+        })
+        .min_by(|p, q| p.1.total_cmp(&q.1))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -216,5 +247,23 @@ mod tests {
         assert!(ml.se_b.is_finite() && ml.se_b > 0.0);
         assert_eq!(least_squares_fit(&bins[..2]), None);
         assert_eq!(binomial_fit(&[(0.0, 10, 0), (0.1, 10, 0)]), None);
+    }
+
+    #[test]
+    fn the_collapse_finds_the_exponent_of_a_power_law_in_chi_to_the_a_over_zeta() {
+        // b = 900 (χ^0.25/ζ)^1.5 on a 3 × 3 grid: a = 0.25 collapses exactly, the paper's 0.1
+        // and ζ alone do not.
+        let mut points = Vec::new();
+        for chi in [0.01f64, 0.005, 0.001] {
+            for zeta in [0.3f64, 0.4, 0.5] {
+                points.push((chi, zeta, 900.0 * (chi.powf(0.25) / zeta).powf(1.5)));
+            }
+        }
+        assert!(collapse_scatter(&points, 0.25).unwrap() < 1e-12);
+        let (s0, s1) = (collapse_scatter(&points, 0.0).unwrap(), collapse_scatter(&points, 0.1).unwrap());
+        assert!(s0 > s1 && s1 > 0.05, "{s0} {s1}");
+        let (a, s) = best_collapse_exponent(&points).unwrap();
+        assert!((a - 0.25).abs() < 1e-9 && s < 1e-12, "{a} {s}");
+        assert_eq!(collapse_scatter(&points[..2], 0.1), None);
     }
 }

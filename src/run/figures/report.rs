@@ -64,7 +64,7 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
         Figure::FigS3 => (
             "Fig. S3: largest hole area and number of holes against γ",
             "“as γ increases, both the average number and the average maximum area of holes decrease.” χ = 0.001, ζ = 0.3.",
-            format!("γ ∈ {GAMMAS_S3:?} (the paper gives no values: the default 0.06 and a range about it), χ = 0.001, ζ = 0.3; normalised as Fig. 3a."),
+            format!("γ ∈ {GAMMAS_S3:?} (the paper gives no values; its text increases γ: the default 0.06 and above), χ = 0.001, ζ = 0.3; normalised as Fig. 3a."),
         ),
     }
 }
