@@ -342,7 +342,7 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
         panels.push(alignment_panel(plan, runs, base, made)?);
     }
     csv(base, "", &text, made)?;
-    made.files.extend(draw::panels(base, &panels, None)?);
+    made.files.extend(draw::panels(base, &panels)?);
     Ok(())
 }
 
@@ -449,8 +449,8 @@ pub fn fmt(x: f64) -> String {
     }
 }
 
-/// Fig. 2: P(hole | ε̇) per (χ, ζ), pooled over runs, with exponential fits; inset: the fitted
-/// coefficient against χ^0.1/ζ.
+/// Fig. 2: P(hole | ε̇) per (χ, ζ), pooled over runs, with exponential fits; beside it the
+/// paper's inset: the fitted coefficient against χ^0.1/ζ.
 fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
     use crate::analysis::nucleation::{
         best_collapse_exponent, binomial_fit, collapse_scatter, least_squares_fit, STRAIN_RATE_BIN,
@@ -464,7 +464,8 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
     );
     let mut panel = Panel::new("Fig. 2: P(hole | ε̇)", "strain rate ε̇", "P(hole | ε̇)");
     panel.log_y = true;
-    let mut inset = Panel::new("", "χ^0.1 / ζ", "coefficient (binomial ML)");
+    // The paper's inset, drawn beside the main panel, where it hides no points.
+    let mut inset = Panel::new("Fig. 2 inset: the coefficient b", "χ^0.1 / ζ", "b (binomial ML) ± s.e.");
     let mut inset_series = Series::new("", 0);
     // (χ, ζ, b) of each fit, binomial and least squares, for the collapse.
     let mut coefficients: [Vec<(f64, f64, f64)>; 2] = [Vec::new(), Vec::new()];
@@ -552,7 +553,7 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
     }
     csv(base, "", &text, made)?;
     csv(base, "_fits", &fits, made)?;
-    made.files.extend(draw::panels(base, &[panel], Some(inset))?);
+    made.files.extend(draw::panels(base, &[panel, inset])?);
     Ok(())
 }
 
@@ -637,7 +638,7 @@ fn fig3c(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<
     }
     csv(base, "", &text, made)?;
     csv(base, "_fits", &fits, made)?;
-    made.files.extend(draw::panels(base, &[panel], None)?);
+    made.files.extend(draw::panels(base, &[panel])?);
     Ok(())
 }
 
@@ -755,7 +756,7 @@ fn holes_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made
         count.series.push(sc);
     }
     csv(base, "", &text, made)?;
-    made.files.extend(draw::panels(base, &[area, count], None)?);
+    made.files.extend(draw::panels(base, &[area, count])?);
     Ok(())
 }
 
@@ -825,7 +826,7 @@ fn fig_s1(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result
     }
     csv(base, "", &text, made)?;
     csv(base, "_lengths", &lengths, made)?;
-    made.files.extend(draw::panels(base, &[cv_panel, cq_panel], None)?);
+    made.files.extend(draw::panels(base, &[cv_panel, cq_panel])?);
     Ok(())
 }
 

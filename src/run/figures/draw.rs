@@ -1,5 +1,5 @@
-//! The figures' plots: one or two panels of series (points with error bars, lines), an optional
-//! inset, and the regime map; PNG and SVG through [`crate::run::plots`] (embedded font, atomic).
+//! The figures' plots: one or two panels of series (points with error bars, lines), and the
+//! regime map; PNG and SVG through [`crate::run::plots`] (embedded font, atomic).
 
 use std::path::{Path, PathBuf};
 
@@ -83,10 +83,10 @@ impl Panel {
 
     /// The axes' ranges, with room at the top for the legend (drawn in the upper right, where it
     /// would otherwise hide the points there).
-    fn ranges(&self, legend: bool) -> ((f64, f64), (f64, f64)) {
+    fn ranges(&self) -> ((f64, f64), (f64, f64)) {
         let entries = self.series.iter().filter(|s| !s.label.is_empty()).count() + self.hline.is_some() as usize;
         // The legend's share of a 500-pixel-high panel's plotting area, about 400 pixels.
-        let share = if legend && entries > 0 { ((entries * 17 + 14) as f64 / 400.0).min(0.6) } else { 0.0 };
+        let share = if entries > 0 { ((entries * 17 + 14) as f64 / 400.0).min(0.6) } else { 0.0 };
         let room = share / (1.0 - share);
         let fold = |f: fn(&(f64, f64, f64)) -> f64, g: fn(f64, f64) -> f64, init| self.shown().map(f).fold(init, g);
         let (mut x0, mut x1) = (fold(|p| p.0, f64::min, f64::MAX), fold(|p| p.0, f64::max, f64::MIN));
@@ -129,14 +129,11 @@ fn colour(s: &Series) -> RGBColor {
     PALETTE[s.colour % PALETTE.len()]
 }
 
-fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, small: bool) -> Result<(), String> {
-    let ((x0, x1), (y0, y1)) = p.ranges(!small);
-    let (caption, label) = if small { (12, 12) } else { (20, 14) };
+fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> Result<(), String> {
+    let ((x0, x1), (y0, y1)) = p.ranges();
+    let (caption, label) = (20, 14);
     let mut builder = ChartBuilder::on(area);
-    builder
-        .margin(if small { 6 } else { 12 })
-        .x_label_area_size(if small { 28 } else { 40 })
-        .y_label_area_size(if small { 44 } else { 64 });
+    builder.margin(12).x_label_area_size(40).y_label_area_size(64);
     if !p.title.is_empty() {
         builder.caption(&p.title, (FONT, caption));
     }
@@ -148,8 +145,8 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, smal
                 .x_desc(p.x.as_str())
                 .y_desc(p.y.as_str())
                 .label_style((FONT, label))
-                .x_labels(if small { 4 } else { 10 })
-                .y_labels(if small { 4 } else { 10 })
+                .x_labels(10)
+                .y_labels(10)
                 .y_label_formatter(&|v: &f64| {
                     if p.log_y {
                         format!("{v:.0e}")
@@ -198,9 +195,7 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, smal
                     Marker::Faint => c.mix(0.35).filled(),
                     Marker::Empty => c.stroke_width(2),
                 };
-                let a = chart
-                    .draw_series(pts.iter().map(|q| Circle::new((q.0, q.1), if small { 3 } else { 4 }, style)))
-                    .map_err(plot_err)?;
+                let a = chart.draw_series(pts.iter().map(|q| Circle::new((q.0, q.1), 4, style))).map_err(plot_err)?;
                 if !s.label.is_empty() {
                     labelled = true;
                     a.label(&s.label).legend(move |(x, y)| Circle::new((x + 10, y), 4, style));
@@ -212,7 +207,7 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, smal
                     .draw_series(std::iter::once(Text::new("no data at this scale", (cx, cy), (FONT, 16))))
                     .map_err(plot_err)?;
             }
-            if labelled && !small {
+            if labelled {
                 chart
                     .configure_series_labels()
                     .position(SeriesLabelPosition::UpperRight)
@@ -234,7 +229,6 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, smal
 
 struct Panels<'a> {
     panels: &'a [Panel],
-    inset: Option<Panel>,
 }
 
 impl Draw for Panels<'_> {
@@ -242,26 +236,16 @@ impl Draw for Panels<'_> {
         root.fill(&WHITE).map_err(plot_err)?;
         let areas = root.split_evenly((1, self.panels.len().max(1)));
         for (area, p) in areas.iter().zip(self.panels) {
-            draw_panel(area, p, false)?;
-        }
-        if let Some(inset) = &self.inset {
-            // Lower left of the first panel, where P(hole | ε̇) has few points.
-            let (w, h) = areas[0].dim_in_pixel();
-            let area = areas[0].margin(0, 0, 0, 0).shrink(
-                ((w as f64 * 0.14) as u32, (h as f64 * 0.52) as u32),
-                ((w as f64 * 0.36) as u32, (h as f64 * 0.33) as u32),
-            );
-            area.fill(&WHITE).map_err(plot_err)?;
-            draw_panel(&area, inset, true)?;
+            draw_panel(area, p)?;
         }
         Ok(())
     }
 }
 
-/// One or more panels side by side (and an inset in the first): `base.png`, `base.svg`.
-pub fn panels(base: &Path, panels: &[Panel], inset: Option<Panel>) -> Result<Vec<PathBuf>, String> {
+/// One or more panels side by side: `base.png`, `base.svg`.
+pub fn panels(base: &Path, panels: &[Panel]) -> Result<Vec<PathBuf>, String> {
     let w = 640 * panels.len().max(1) as u32;
-    both_of(base, (w, 500), &Panels { panels, inset })
+    both_of(base, (w, 500), &Panels { panels })
 }
 
 struct RegimeMap<'a>(&'a [(f64, f64, Regime, bool)]);
