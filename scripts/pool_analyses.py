@@ -14,7 +14,8 @@ the numbers docs/figures.md quotes for runs made outside `monolayer figures`:
   hole's edge of cells bordering a hole, and of cells away from holes;
 - Fig. 2: P(hole | strain rate) pooled over the runs, fitted as P = A exp(b eps) by binomial
   maximum likelihood (the standard error treats sites as independent, which they are not: a
-  hole opens many neighbouring sites at once, so it is a lower bound).
+  hole opens many neighbouring sites at once, so it is a lower bound), and with three runs or
+  more the jackknife standard error over runs (leave one run with a hole site out at a time).
 
     python3 scripts/pool_analyses.py DIR/analysis ...     # e.g. runs/*/analysis
 
@@ -128,20 +129,22 @@ def report_alignment(dirs):
         )
 
 
-def report_hole_probability(dirs):
-    try:
-        import numpy as np
-        from scipy.optimize import minimize
-    except ImportError:
-        print("P(hole | eps): not fitted (needs numpy and scipy: pip install numpy scipy)")
-        return
-
+def pooled_probability(dirs):
+    """{bin centre: [sites, sites opening into a new hole]} summed over `dirs`."""
     pooled = defaultdict(lambda: [0, 0])
     for d in dirs:
         for r in rows(d / "hole_probability.csv"):
             eps = 0.5 * (float(r["strain_rate_bin_low"]) + float(r["strain_rate_bin_high"]))
             pooled[eps][0] += int(r["sites"])
             pooled[eps][1] += int(r["sites_opening_into_a_new_hole"])
+    return pooled
+
+
+def binomial_fit(pooled):
+    """(ln A, b, s.e. of b from the curvature) of P = A exp(b eps) by binomial likelihood."""
+    import numpy as np
+    from scipy.optimize import minimize
+
     x = np.array(sorted(pooled))
     n = np.array([pooled[e][0] for e in x], dtype=float)
     k = np.array([pooled[e][1] for e in x], dtype=float)
@@ -153,8 +156,28 @@ def report_hole_probability(dirs):
     fit = minimize(nll, [-12.0, 1000.0], method="Nelder-Mead", options={"maxiter": 20000, "xatol": 1e-8, "fatol": 1e-10})
     h = 1e-3 * abs(fit.x[1]) + 1e-3
     curvature = (nll(fit.x + [0, h]) - 2 * nll(fit.x) + nll(fit.x - [0, h])) / h**2
-    se = 1 / math.sqrt(curvature) if curvature > 0 else math.nan
-    print(f"P(hole | eps): {int(n.sum())} sites, {int(k.sum())} opened; b = {fit.x[1]:.0f} ± {se:.0f}, P(0) = {math.exp(fit.x[0]):.2e}")
+    return fit.x[0], fit.x[1], (1 / math.sqrt(curvature) if curvature > 0 else math.nan), x, n, k
+
+
+def report_hole_probability(dirs):
+    try:
+        import numpy  # noqa: F401
+        import scipy  # noqa: F401
+    except ImportError:
+        print("P(hole | eps): not fitted (needs numpy and scipy: pip install numpy scipy)")
+        return
+    ln_a, b, se, x, n, k = binomial_fit(pooled_probability(dirs))
+    print(f"P(hole | eps): {int(n.sum())} sites, {int(k.sum())} opened; b = {b:.0f} ± {se:.0f}, P(0) = {math.exp(ln_a):.2e}")
+    if len(dirs) >= 3:
+        # The curvature's error treats sites as independent; leaving out one run at a time
+        # measures the spread between runs (jackknife over the runs with a hole site).
+        with_holes = [d for d in dirs if any(int(r["sites_opening_into_a_new_hole"]) for r in rows(d / "hole_probability.csv"))]
+        if len(with_holes) >= 3:
+            rest = [d for d in dirs if d not in with_holes]
+            bs = [binomial_fit(pooled_probability(rest + with_holes[:i] + with_holes[i + 1 :]))[1] for i in range(len(with_holes))]
+            m = statistics.mean(bs)
+            jack = math.sqrt((len(bs) - 1) / len(bs) * sum((v - m) ** 2 for v in bs))
+            print(f"  jackknife over the {len(with_holes)} runs with a hole site: s.e. of b = {jack:.0f}")
     for lo, hi in [(-1, 0), (0, 0.001), (0.001, 0.002), (0.002, 0.004), (0.004, 1)]:
         m = (x >= lo) & (x < hi)
         if n[m].sum():

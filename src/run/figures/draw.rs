@@ -174,9 +174,11 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> R
                     .filter(|q| q.0.is_finite() && q.1.is_finite() && (!p.log_y || q.1 > 0.0))
                     .collect();
                 if s.line {
-                    let a = chart
-                        .draw_series(LineSeries::new(pts.iter().map(|q| (q.0, q.1)), c.stroke_width(2)))
-                        .map_err(plot_err)?;
+                    // A faint series (a chance line) is drawn faint and thin, so it reads apart
+                    // from the measured curve of the same colour.
+                    let style = if s.marker == Marker::Faint { c.mix(0.45).stroke_width(1) } else { c.stroke_width(2) };
+                    let a =
+                        chart.draw_series(LineSeries::new(pts.iter().map(|q| (q.0, q.1)), style)).map_err(plot_err)?;
                     if !s.label.is_empty() && s.marker == Marker::None {
                         labelled = true;
                         a.label(&s.label)
