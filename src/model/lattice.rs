@@ -76,8 +76,9 @@ impl Patch {
     }
 
     /// Every run of the patch, row by row.
-    pub fn runs(&self, l: usize) -> impl Iterator<Item = Run> + '_ {
-        (0..self.h).flat_map(move |b| self.row_runs(b, l).into_iter().flatten())
+    #[inline]
+    pub fn runs(&self, l: usize) -> Runs<'_> {
+        Runs { patch: self, l, b: 0, pending: None }
     }
 
     /// Whether lattice row gy falls in the patch, and at which patch row.
@@ -85,6 +86,35 @@ impl Patch {
     pub fn row_of(&self, gy: usize, l: usize) -> Option<usize> {
         let b = (gy + l - self.y0) % l;
         (b < self.h).then_some(b)
+    }
+}
+
+/// The runs of a patch row by row ([`Patch::runs`]). A plain iterator rather than a `flat_map`
+/// over [`Patch::row_runs`]: the per-cell stages take it once per run, and the flattening
+/// adapter was not inlined (9.6 % of a relaxation step in `perf`).
+pub struct Runs<'a> {
+    patch: &'a Patch,
+    l: usize,
+    b: usize,
+    /// The second run of the last row, where it wraps around the lattice edge.
+    pending: Option<Run>,
+}
+
+impl Iterator for Runs<'_> {
+    type Item = Run;
+
+    #[inline]
+    fn next(&mut self) -> Option<Run> {
+        if let Some(r) = self.pending.take() {
+            return Some(r);
+        }
+        if self.b >= self.patch.h {
+            return None;
+        }
+        let [first, second] = self.patch.row_runs(self.b, self.l);
+        self.b += 1;
+        self.pending = second;
+        first
     }
 }
 
@@ -203,6 +233,9 @@ mod tests {
         }
         assert_eq!(count, 20);
         assert!(hits.iter().all(|&h| h <= 1));
+        // Row by row, a wrapped row's two runs in order: the order the per-cell sums keep.
+        let order: Vec<(usize, usize)> = p.runs(l).map(|r| (r.b, r.a0)).collect();
+        assert_eq!(order, [(0, 0), (0, 3), (1, 0), (1, 3), (2, 0), (2, 3), (3, 0), (3, 3)]);
         assert_eq!(p.row_of(8, l), Some(0));
         assert_eq!(p.row_of(1, l), Some(3));
         assert_eq!(p.row_of(2, l), None);
