@@ -90,6 +90,28 @@ pub fn least_squares_fit(bins: &[(f64, u64, u64)]) -> Option<ExponentialFit> {
         .filter(|b| b.1 > 0 && b.2 > 0)
         .map(|&(x, n, h)| (x, (h as f64 / n as f64).ln(), h as f64))
         .collect();
+    let line = weighted_line(&pts)?;
+    Some(ExponentialFit {
+        ln_a: line.intercept,
+        b: line.slope,
+        se_ln_a: (1.0 / line.weight + line.mean_x * line.mean_x / line.sxx).sqrt(),
+        se_b: (1.0 / line.sxx).sqrt(),
+    })
+}
+
+/// A straight line y = intercept + slope·x fitted by weighted least squares.
+struct WeightedLine {
+    intercept: f64,
+    slope: f64,
+    /// The weighted mean of x, the sum of the weights and Σ w (x − x̄)²: the fit's errors.
+    mean_x: f64,
+    weight: f64,
+    sxx: f64,
+}
+
+/// The weighted least-squares line through (x, y, weight) points; None with fewer than two
+/// points or one x for all.
+fn weighted_line(pts: &[(f64, f64, f64)]) -> Option<WeightedLine> {
     if pts.len() < 2 {
         return None;
     }
@@ -101,8 +123,8 @@ pub fn least_squares_fit(bins: &[(f64, u64, u64)]) -> Option<ExponentialFit> {
         return None;
     }
     let sxy: f64 = pts.iter().map(|p| p.2 * (p.0 - mx) * (p.1 - my)).sum();
-    let b = sxy / sxx;
-    Some(ExponentialFit { ln_a: my - b * mx, b, se_ln_a: (1.0 / sw + mx * mx / sxx).sqrt(), se_b: (1.0 / sxx).sqrt() })
+    let slope = sxy / sxx;
+    Some(WeightedLine { intercept: my - slope * mx, slope, mean_x: mx, weight: sw, sxx })
 }
 
 /// Binomial maximum likelihood over every bin: N_hole,ε̇ of N_ε̇ sites opened, each with
@@ -190,19 +212,14 @@ pub fn binomial_fit(bins: &[(f64, u64, u64)]) -> Option<ExponentialFit> {
 /// line in ln x (ln x = a ln χ − ln ζ), with two degrees of freedom taken by the line. A power
 /// law b ∝ x^k collapses to zero; `None` with fewer than three points or one x for all.
 pub fn collapse_scatter(points: &[(f64, f64, f64)], a: f64) -> Option<f64> {
-    let xy: Vec<(f64, f64)> = points.iter().map(|&(chi, zeta, b)| (a * chi.ln() - zeta.ln(), b.ln())).collect();
-    let n = xy.len() as f64;
-    if xy.len() < 3 {
+    if points.len() < 3 {
         return None;
     }
-    let (mx, my) = (xy.iter().map(|p| p.0).sum::<f64>() / n, xy.iter().map(|p| p.1).sum::<f64>() / n);
-    let sxx: f64 = xy.iter().map(|p| (p.0 - mx).powi(2)).sum();
-    if sxx <= 0.0 {
-        return None;
-    }
-    let k = xy.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx;
-    let ss: f64 = xy.iter().map(|p| (p.1 - my - k * (p.0 - mx)).powi(2)).sum();
-    Some((ss / (n - 2.0)).sqrt())
+    let pts: Vec<(f64, f64, f64)> =
+        points.iter().map(|&(chi, zeta, b)| (a * chi.ln() - zeta.ln(), b.ln(), 1.0)).collect();
+    let line = weighted_line(&pts)?;
+    let ss: f64 = pts.iter().map(|p| (p.1 - line.intercept - line.slope * p.0).powi(2)).sum();
+    Some((ss / (pts.len() as f64 - 2.0)).sqrt())
 }
 
 /// The exponent a of χ^a/ζ, on a grid of steps of 0.01 over [0, 1], whose collapse scatters

@@ -397,25 +397,8 @@ impl RunDir {
         }
     }
 
-    fn protocol(
-        &mut self,
-        mut live: Option<&mut LiveRun>,
-        watch: &mut dyn FnMut(&Monolayer, &Event),
-    ) -> Result<(), Stop> {
-        let p = self.monolayer.params().clone();
-        let total = p.total_steps();
-        let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
-        while m.step_count() < total {
-            if let Some((name, _)) = stop_signal() {
-                return Err(Stop::Signal(name));
-            }
-            if let Err(e) = m.step() {
-                return Err(unstable(m, dir, &e));
-            }
-            watch(m, &Event::Step);
-            write_scheduled(m, dir, record, live.as_deref_mut(), watch)?;
-        }
-        Ok(())
+    fn protocol(&mut self, live: Option<&mut LiveRun>, watch: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), Stop> {
+        self.drive(live, watch, |m| m.step().map_err(|e| e.to_string()))
     }
 
     /// The protocol on the GPU: steps to each step that writes something (the end of the
@@ -425,7 +408,7 @@ impl RunDir {
     #[cfg(feature = "gpu")]
     fn protocol_gpu(
         &mut self,
-        mut live: Option<&mut LiveRun>,
+        live: Option<&mut LiveRun>,
         watch: &mut dyn FnMut(&Monolayer, &Event),
     ) -> Result<(), Stop> {
         use crate::gpu::stepper::GpuRun;
@@ -433,12 +416,8 @@ impl RunDir {
         let total = p.total_steps();
         let fi = self.record.frame_interval;
         let ctx = crate::gpu::GpuContext::new().map_err(|e| Stop::Simulation(format!("--engine gpu: {e}")))?;
-        let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
-        let mut run = GpuRun::new(&ctx, m).map_err(|e| Stop::Simulation(format!("--engine gpu: {e}")))?;
-        while run.step_count() < total {
-            if let Some((name, _)) = stop_signal() {
-                return Err(Stop::Signal(name));
-            }
+        let mut run = GpuRun::new(&ctx, &self.monolayer).map_err(|e| Stop::Simulation(format!("--engine gpu: {e}")))?;
+        self.drive(live, watch, |m| {
             let s = run.step_count();
             // The next step that writes, at most one check's worth of steps ahead (so that a
             // signal or the progress bar is seen between submissions).
@@ -447,7 +426,26 @@ impl RunDir {
             let to = next.min(total).min(s + run.check_every);
             let stepped = run.advance(&ctx, to - s);
             *m = run.download_now(&ctx);
-            if let Err(e) = stepped {
+            stepped.map_err(|e| e.to_string())
+        })
+    }
+
+    /// The protocol's loop, whichever engine steps: `advance` takes the monolayer one or more
+    /// steps, leaving in it the state to write (on a failure, the last good one); between calls
+    /// a signal stops the run, and every frame or checkpoint due is written.
+    fn drive(
+        &mut self,
+        mut live: Option<&mut LiveRun>,
+        watch: &mut dyn FnMut(&Monolayer, &Event),
+        mut advance: impl FnMut(&mut Monolayer) -> Result<(), String>,
+    ) -> Result<(), Stop> {
+        let total = self.monolayer.params().total_steps();
+        let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
+        while m.step_count() < total {
+            if let Some((name, _)) = stop_signal() {
+                return Err(Stop::Signal(name));
+            }
+            if let Err(e) = advance(m) {
                 return Err(unstable(m, dir, &e));
             }
             watch(m, &Event::Step);

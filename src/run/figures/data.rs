@@ -278,20 +278,9 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
             chance.line = true;
             chance.marker = Marker::Faint;
             for before in 0..=DEPTH {
-                let v: Vec<f64> = sel
-                    .iter()
-                    .flat_map(|r| r.precursors.iter())
-                    .filter(|p| p.frames_before == before)
-                    .filter_map(column)
-                    .collect();
+                let v = pooled_at(&sel, *column, before, false);
                 let (m, e) = mean_sem(&v);
-                let w: Vec<f64> = sel
-                    .iter()
-                    .flat_map(|r| r.chance.iter())
-                    .filter(|p| p.frames_before == before)
-                    .filter_map(column)
-                    .collect();
-                let (mc, ec) = mean_sem(&w);
+                let (mc, ec) = mean_sem(&pooled_at(&sel, *column, before, true));
                 if c == 0 {
                     line.push(format!("{chi},{before},{holes}"));
                 }
@@ -353,16 +342,17 @@ fn at_frame(rows: &[Precursor], column: Column, before: usize) -> Vec<f64> {
     rows.iter().filter(|p| p.frames_before == before).filter_map(column).collect()
 }
 
+/// The same over every nucleation of the runs `sel` (`chance`: over their random sites).
+fn pooled_at(sel: &[&RunData], column: Column, before: usize, chance: bool) -> Vec<f64> {
+    sel.iter().flat_map(|r| at_frame(if chance { &r.chance } else { &r.precursors }, column, before)).collect()
+}
+
 /// The report's line for one precursor measure over the runs `sel`: mean ± s.e. over
 /// nucleations beside chance at 0, 1 and [`DEPTH`] frames before, and the seed spread: in how
 /// many runs (each its own mean against its own chance, one frame before) the difference has
 /// the sign the paper's claim predicts (`sign`: −1 nearer, +1 larger than chance).
 fn precursor_line(sel: &[&RunData], desc: &str, column: Column, sign: f64) -> String {
-    let pooled = |before: usize, chance: bool| {
-        let v: Vec<f64> =
-            sel.iter().flat_map(|r| at_frame(if chance { &r.chance } else { &r.precursors }, column, before)).collect();
-        mean_sem(&v)
-    };
+    let pooled = |before: usize, chance: bool| mean_sem(&pooled_at(sel, column, before, chance));
     let frame = |before: usize| {
         let ((m, e), (c, ec)) = (pooled(before, false), pooled(before, true));
         format!("{} ± {} (chance {} ± {})", fmt(m), fmt(e), fmt(c), fmt(ec))
