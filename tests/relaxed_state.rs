@@ -110,3 +110,51 @@ fn the_command_writes_a_state_that_continues_bit_for_bit() {
     assert!(stderr(&o).contains("n_cells"), "{}", stderr(&o));
     assert!(!bad.exists());
 }
+
+/// The browser test waits for the page's default preset (seed 1, from its shipped relaxed state)
+/// to open its first hole at `FIRST_HOLE_STEP` (tests/browser/demo.test.mjs). The core steps the
+/// same bits natively, so the step is found here one step at a time, with the page's own hole
+/// count; a change of the physics or of its arithmetic that moves it fails here first, with the
+/// new step.
+#[test]
+fn the_default_preset_opens_its_first_hole_where_the_browser_test_expects() {
+    const DEMO_TEST: &str = include_str!("browser/demo.test.mjs");
+    let expected: u64 = DEMO_TEST
+        .split("const FIRST_HOLE_STEP = Number(process.env.FIRST_HOLE_STEP ?? ")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .expect("FIRST_HOLE_STEP in demo.test.mjs")
+        .parse()
+        .expect("FIRST_HOLE_STEP is a number");
+    let preset = STATE_JS.split("export const DEFAULT_PRESET = '").nth(1).unwrap().split('\'').next().unwrap();
+    let line = STATE_JS
+        .lines()
+        .map(str::trim_start)
+        .find(|l| l.starts_with(&format!("{preset}:")) || l.starts_with(&format!("'{preset}':")))
+        .unwrap_or_else(|| panic!("preset {preset} in state.js"));
+    let size = line.split("size: '").nth(1).unwrap().split('\'').next().unwrap();
+    let (zeta, chi, gamma) =
+        (number_after_in(line, "zeta"), number_after_in(line, "chi"), number_after_in(line, "gamma"));
+    let (relaxed, seed, _, file) = page()
+        .into_iter()
+        .find(|(p, seed, g, _)| *seed == 1 && *g == gamma && *p == page_size(size))
+        .unwrap_or_else(|| panic!("no shipped relaxed state for preset {preset}"));
+    let mut p = Params { zeta, gamma, ..relaxed };
+    p.set_chi(chi);
+    let state = snapshot::decode_relaxed(&std::fs::read(&file).unwrap(), &p, seed).unwrap();
+    let mut m = Monolayer::from_state(p.clone(), seed, state).unwrap();
+    let mut regions = monolayer::analysis::holes::VoidRegions::default();
+    let holes = |m: &mut Monolayer, regions: &mut _| {
+        monolayer::web::measure::tissue_stats(m.phi_sum(), p.box_size, p.radius, regions).holes
+    };
+    while holes(&mut m, &mut regions) == 0 && m.step_count() <= expected + 2_000 {
+        m.step().unwrap();
+    }
+    assert_eq!(
+        m.step_count(),
+        expected,
+        "preset {preset} opens its first hole at step {} (relaxation included): set FIRST_HOLE_STEP in \
+         tests/browser/demo.test.mjs to it",
+        m.step_count()
+    );
+}

@@ -9,6 +9,7 @@
 use crate::model::lattice::{Neighbourhood, Patch};
 use crate::model::params::{Laplacian, Params};
 use crate::model::precision::{load, Real};
+use crate::model::sum::sum_of;
 
 /// The coefficients of μ_i, derived once from the parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -82,9 +83,9 @@ pub fn laplacian<T: Real>(kind: Laplacian, f: &Neighbourhood<T>, k: usize) -> f6
     }
 }
 
-/// A_i = Σ φ_i² over the patch.
+/// A_i = Σ φ_i² over the patch (in the lanes of `sum`).
 pub fn area<T: Real>(phi: &[T]) -> f64 {
-    phi.iter().map(|&v| load(v) * load(v)).sum()
+    sum_of(phi, |v| load(v) * load(v))
 }
 
 /// The free energy of one cell alone (F_CH + F_area, no repulsion), with the gradient squared

@@ -29,6 +29,7 @@ use num_complex::Complex64 as C64;
 use crate::model::lattice::{neighbour_sum8, neighbour_sum8_row};
 use crate::model::multigrid::{CycleWork, Multigrid, Real};
 use crate::model::par;
+use crate::model::sum::{combine, sum_pairs, LANES};
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 
@@ -270,16 +271,13 @@ impl Component {
 
     /// rhs = part(F) and x = part(u) on the sites in the solve, 0 elsewhere; returns ‖F‖² over
     /// those sites, both parts (each component computes it, so that neither waits for the
-    /// other: the sums are made in site order, the same bits in both).
+    /// other: the same sum in the same order in both, the same bits).
     fn load(&mut self, force: &[C64], u: &[C64], diag: &[f64], part: fn(C64) -> f64) -> f64 {
-        let (mut re2, mut im2) = (0.0, 0.0);
-        for (x, (rhs, sol)) in self.rhs.iter_mut().zip(self.x.iter_mut()).enumerate() {
-            let (f, guess) = if diag[x] > 0.0 { (force[x], u[x]) } else { (ZERO, ZERO) };
-            (*rhs, *sol) = (part(f), part(guess));
-            re2 += f.re * f.re;
-            im2 += f.im * f.im;
+        let sites = self.rhs.iter_mut().zip(self.x.iter_mut()).zip(force.iter().zip(u)).zip(diag);
+        for (((rhs, sol), (&f, &guess)), &d) in sites {
+            (*rhs, *sol) = if d > 0.0 { (part(f), part(guess)) } else { (0.0, 0.0) };
         }
-        re2 + im2
+        sum_pairs(force, diag, |f, d| if d > 0.0 { f.norm_sqr() } else { 0.0 })
     }
 
     /// Conjugate gradients on C x = rhs, preconditioned by one multigrid cycle, until
@@ -322,16 +320,29 @@ impl Component {
     }
 }
 
-/// r ← r − α q, and r in the cycle's precision, in one pass; returns ‖r‖².
+/// r ← r − α q, and r in the cycle's precision, in one pass; returns ‖r‖² (summed in the
+/// lanes of `sum`).
 #[inline]
 fn subtract_scaled(r: &mut [f64], r_cycle: &mut [Real], q: &[f64], alpha: f64) -> f64 {
-    let mut rr = 0.0;
-    for ((r, rc), q) in r.iter_mut().zip(r_cycle.iter_mut()).zip(q) {
+    let mut acc = [0.0; LANES];
+    let whole = r.len() - r.len() % LANES;
+    let (r_whole, r_tail) = r.split_at_mut(whole);
+    let (rc_whole, rc_tail) = r_cycle.split_at_mut(whole);
+    let (q_whole, q_tail) = q.split_at(whole);
+    let lanes = r_whole.chunks_exact_mut(LANES).zip(rc_whole.chunks_exact_mut(LANES)).zip(q_whole.chunks_exact(LANES));
+    for ((r, rc), q) in lanes {
+        for k in 0..LANES {
+            r[k] -= q[k] * alpha;
+            acc[k] += r[k] * r[k];
+            rc[k] = r[k] as Real;
+        }
+    }
+    for (k, ((r, rc), q)) in r_tail.iter_mut().zip(rc_tail).zip(q_tail).enumerate() {
         *r -= q * alpha;
-        rr += *r * *r;
+        acc[k] += *r * *r;
         *rc = *r as Real;
     }
-    rr
+    combine(acc)
 }
 
 /// Σ a·b in site order.

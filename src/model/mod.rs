@@ -9,7 +9,7 @@
 //! [`lattice`] and [`cell`] hold the geometry, [`counters`] the time per stage, [`par`] the
 //! deterministic parallel loops, [`error`] what can go wrong, [`snapshot`] a state as bytes
 //! (the browser demo's confluent start), [`precision`] the type the cells' per-site fields are
-//! stored in. Nothing here touches files,
+//! stored in, [`sum`] the order of every sum over sites. Nothing here touches files,
 //! clocks or threads directly (threads only through [`par`], behind the `parallel` feature), so
 //! the core compiles for `wasm32-unknown-unknown` with the same bits. It imports nothing from
 //! `analysis`, `run` or `web` (tested by `tests/layers.rs`).
@@ -30,3 +30,4 @@ pub mod params;
 pub mod precision;
 pub mod shape;
 pub mod snapshot;
+pub mod sum;

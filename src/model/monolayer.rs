@@ -757,8 +757,8 @@ mod tests {
         m.advance(1800).unwrap();
         assert_eq!(m.step_count(), 1800);
         let expected = match crate::model::precision::STORE_NAME {
-            "f64" => "a766996f3a18dcef",
-            _ => "58945a12315b76c6",
+            "f64" => "fd19eca7b2e73648",
+            _ => "19326c8ce51af5a9",
         };
         assert_eq!(format!("{:016x}", m.fingerprint()), expected);
     }

@@ -31,6 +31,8 @@
 
 use std::ops::{Add, Mul, Sub};
 
+use crate::model::sum::sum_pairs;
+
 /// The precision of the multigrid cycle (see the module's notes).
 pub type Real = f32;
 
@@ -633,7 +635,7 @@ impl Multigrid {
         let mut dot = 0.0;
         for (j, row) in out.chunks_mut(m).enumerate() {
             weights_row(&w.n, &w.diag, w.xi_c, v, m, j, row, column);
-            dot += row.iter().zip(row_of(v, j, m)).map(|(a, b)| a * b).sum::<f64>();
+            dot += sum_pairs(row, row_of(v, j, m), |a, b| a * b);
         }
         dot
     }
@@ -646,7 +648,7 @@ impl Multigrid {
         let (rr, mut zz) = (std::mem::take(&mut work.r), std::mem::take(&mut work.z));
         let mut fine = std::mem::take(&mut work.levels[0]);
         self.cycle(work, 0, &mut zz, &rr, &mut fine.t, &mut fine.column);
-        let dot = zz.iter().zip(&rr).map(|(z, r)| *z as f64 * *r as f64).sum();
+        let dot = sum_pairs(&zz, &rr, |z, r| z as f64 * r as f64);
         (work.r, work.z, work.levels[0]) = (rr, zz, fine);
         dot
     }
@@ -817,7 +819,8 @@ mod tests {
         // The returned ⟨r, M r⟩ is the product of the z the work space holds with r as the
         // cycle saw it (in its precision).
         let rounded = |v: &[f64]| -> Vec<f64> { v.iter().map(|&x| x as Real as f64).collect() };
-        assert_eq!((aa, bb), (dot(&ma, &rounded(&a)), dot(&mb, &rounded(&b))));
+        let lane_dot = |a: &[f64], b: &[f64]| sum_pairs(a, b, |x, y| x * y);
+        assert_eq!((aa, bb), (lane_dot(&ma, &rounded(&a)), lane_dot(&mb, &rounded(&b))));
         // Symmetric up to the cycle's f32 rounding, which adds up over the levels (4e-5 here);
         // CG does not mind: it takes as many iterations as with the cycle in f64.
         assert!((ab - ba).abs() < 2e-4 * ab.abs().max(1.0), "⟨Ma, b⟩ = {ab}, ⟨a, Mb⟩ = {ba}");

@@ -11,6 +11,7 @@
 
 use crate::model::lattice::{row_neighbourhood, Patch};
 use crate::model::precision::{load, Real};
+use crate::model::sum::{combine, LANES};
 
 /// Central-difference gradient of a padded field (row stride s) at padded index i.
 #[inline(always)]
@@ -20,17 +21,28 @@ pub fn gradient<T: Real>(f: &[T], i: usize, s: usize) -> (f64, f64) {
 
 /// (Q_xx, Q_xy) of Eq. 5 over the patch (central differences).
 pub fn shape_tensor<T: Real>(patch: Patch, phi: &[T]) -> [f64; 2] {
-    // Two partial sums per component (even and odd sites), so that the loop runs in SIMD lanes;
-    // the order is fixed, so the bits are too.
-    let (mut qxx, mut qxy) = ([0.0; 2], [0.0; 2]);
+    // LANES partial sums per component, site k of every row going to partial sum k mod LANES
+    // (`sum`), so that the loop runs in SIMD lanes; the order is fixed, so the bits are too.
+    let (mut qxx, mut qxy) = ([0.0; LANES], [0.0; LANES]);
+    let mut add = |k: usize, (gx, gy): (f64, f64)| {
+        qxx[k] -= 0.5 * (gx * gx - gy * gy);
+        qxy[k] -= gx * gy;
+    };
     for b in 0..patch.h {
         let f = row_neighbourhood(phi, patch, b);
-        for (k, (gx, gy)) in f.gradients().enumerate() {
-            qxx[k % 2] -= 0.5 * (gx * gx - gy * gy);
-            qxy[k % 2] -= gx * gy;
+        let (xp, xm, yp, ym) = (f.xp, f.xm, f.yp, f.ym);
+        let whole = xp.len() - xp.len() % LANES;
+        let gradient = |k: usize| (0.5 * (load(xp[k]) - load(xm[k])), 0.5 * (load(yp[k]) - load(ym[k])));
+        for c in (0..whole).step_by(LANES) {
+            for k in 0..LANES {
+                add(k, gradient(c + k));
+            }
+        }
+        for k in whole..xp.len() {
+            add(k - whole, gradient(k));
         }
     }
-    [qxx[0] + qxx[1], qxy[0] + qxy[1]]
+    [combine(qxx), combine(qxy)]
 }
 
 /// Q̂ = m Q / √(|Q|² + ε²).
