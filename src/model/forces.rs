@@ -7,6 +7,8 @@
 //! With ζ > 0 (extensile) and Q̂ along the long axis, the active force at a tip points outwards:
 //! at the right tip of a cell elongated along x, ∂_xφ < 0 and f^a_x = −ζ Q̂_xx ∂_xφ > 0.
 
+use multiversion::multiversion;
+
 use crate::model::lattice::{row_mut, row_neighbourhood, Patch};
 use crate::model::params::PassiveForce;
 use crate::model::precision::{load, Real};
@@ -14,6 +16,7 @@ use crate::model::precision::{load, Real};
 /// f_i = f^p_i + f^a_i at every site of the patch. μ is read with zero outside the patch (its
 /// halo), where φ_i is below the presence threshold by the patch margin.
 #[allow(clippy::too_many_arguments)]
+#[multiversion(targets("x86_64+avx2"))]
 pub fn force_density<T: Real>(
     patch: Patch,
     phi: &[T],

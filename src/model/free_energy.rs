@@ -6,6 +6,8 @@
 //!
 //! with A_i = ∫ φ_i², the area term read as squared, and c = `repulsion_factor` (4 as printed).
 
+use multiversion::multiversion;
+
 use crate::model::lattice::{Neighbourhood, Patch};
 use crate::model::params::{Laplacian, Params};
 use crate::model::precision::{load, Real};
@@ -52,20 +54,36 @@ impl FreeEnergy {
         mu: &mut [T],
     ) {
         let area_term = self.area * (1.0 - area / self.target_area);
-        let (bulk, gradient, repulsion, kind) = (self.bulk, self.gradient, self.repulsion, self.laplacian);
-        for run in patch.runs(l) {
-            let len = run.len;
-            let f = Neighbourhood::new(phi, patch, run.b, run.a0, len);
-            let g = &sum_phi2[run.global..][..len];
-            let out = &mut mu[run.padded..][..len];
-            for k in 0..len {
-                let c = load(f.c[k]);
-                let lap = laplacian(kind, &f, k);
-                out[k] = T::from_f64(
-                    bulk * c * (1.0 - c) * (1.0 - 2.0 * c) - gradient * lap - area_term * c
-                        + repulsion * c * (g[k] - c * c),
-                );
-            }
+        let coefficients = [self.bulk, self.gradient, area_term, self.repulsion];
+        chemical_potential_on_runs(coefficients, self.laplacian, patch, phi, sum_phi2, l, mu);
+    }
+}
+
+/// μ_i on every run of the patch, given (bulk, gradient, area term, repulsion): the loop of
+/// [`FreeEnergy::chemical_potential`], compiled also for AVX2 (`multiversion`: the same bits,
+/// docs/performance.md).
+#[multiversion(targets("x86_64+avx2"))]
+fn chemical_potential_on_runs<T: Real>(
+    [bulk, gradient, area_term, repulsion]: [f64; 4],
+    kind: Laplacian,
+    patch: Patch,
+    phi: &[T],
+    sum_phi2: &[f64],
+    l: usize,
+    mu: &mut [T],
+) {
+    for run in patch.runs(l) {
+        let len = run.len;
+        let f = Neighbourhood::new(phi, patch, run.b, run.a0, len);
+        let g = &sum_phi2[run.global..][..len];
+        let out = &mut mu[run.padded..][..len];
+        for k in 0..len {
+            let c = load(f.c[k]);
+            let lap = laplacian(kind, &f, k);
+            out[k] = T::from_f64(
+                bulk * c * (1.0 - c) * (1.0 - 2.0 * c) - gradient * lap - area_term * c
+                    + repulsion * c * (g[k] - c * c),
+            );
         }
     }
 }

@@ -7,6 +7,7 @@
 //!
 //! During relaxation ξ_c = 0 and ξ_s is replaced by ξ_relax, so v_i = f_i / ξ_relax.
 
+use multiversion::multiversion;
 use num_complex::Complex64 as C64;
 
 use crate::model::lattice::{Neighbourhood, Patch};
@@ -54,6 +55,7 @@ pub struct MotionFields<'a, T = f64> {
 }
 
 /// v_i (if kept) and ∂_t φ_i at every site of the patch.
+#[multiversion(targets("x86_64+avx2"))]
 pub fn velocity_and_rate<T: Real>(
     patch: Patch,
     c: MotionFields<T>,
