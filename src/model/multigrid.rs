@@ -419,11 +419,52 @@ impl Level {
         }
     }
 
+    /// Row j's diagonal coefficients, and its bonds to x + FORWARD[k] as `bonds[k]`: the values
+    /// of [`Self::diagonal`] and [`Self::forward_bond`], a row at a time.
+    fn bond_rows(&self, j: usize, diag: &mut [f64], bonds: &mut [Vec<f64>; 4]) {
+        let m = self.m;
+        match &self.weights {
+            Some(w) => {
+                diag.copy_from_slice(row_of(&w.diag, j, m));
+                let (here, above) = (row_of(&w.n, j, m), row_of(&w.n, next(j, m), m));
+                // Each bond as forward_bond forms it: (−ξ_c n(x)) n(x′).
+                let bond = |i: usize, far: f64| -w.xi_c * here[i] * far;
+                let [east, north_west, north, north_east] = bonds;
+                for i in 0..m {
+                    let (left, right) = (prev(i, m), next(i, m));
+                    east[i] = bond(i, here[right]);
+                    north_west[i] = bond(i, above[left]);
+                    north[i] = bond(i, above[i]);
+                    north_east[i] = bond(i, above[right]);
+                }
+            }
+            None => {
+                for (i, s) in row_of(&self.stencil, j, m).iter().enumerate() {
+                    diag[i] = s[DIAG];
+                    for (k, b) in bonds.iter_mut().enumerate() {
+                        b[i] = s[1 + k];
+                    }
+                }
+            }
+        }
+    }
+
     /// The Galerkin coarse level Pᵀ A P, P constant on 2×2 aggregates: every fine bond lands
     /// on its aggregate's diagonal (both ends inside: twice, once from each end) or on the
     /// coarse bond between the two aggregates it joins. Forward fine bonds never point down a
     /// row, so those of coarse row jc land in coarse row jc: the rows are independent.
     fn coarsen(&self, coarse: &mut Level) {
+        if self.m.is_multiple_of(2) {
+            self.coarsen_even(coarse);
+        } else {
+            self.coarsen_any(coarse);
+        }
+        coarse.finish();
+    }
+
+    /// [`Self::coarsen`] for any side, site by site: each fine bond's place on the coarse
+    /// level found from where it points (the reference; odd sides take it).
+    fn coarsen_any(&self, coarse: &mut Level) {
         let (m, mc) = (self.m, self.coarse_side());
         // Whether a step d from offset p inside an aggregate of width w leaves it.
         let leaves = |p: usize, d: isize, w: usize| -> isize {
@@ -454,7 +495,48 @@ impl Level {
                 }
             }
         }
-        coarse.finish();
+    }
+
+    /// [`Self::coarsen`] for an even side, where every aggregate is 2×2: each coarse
+    /// coefficient written out as the sum of the fine diagonals and bonds that land on it, in
+    /// the order [`Self::coarsen_any`] adds them (rows, then sites, then FORWARD's bonds), so
+    /// the bits are the same; the aggregates of a row are then independent, a straight loop.
+    /// Site (p, q) of an aggregate has diagonal d_pq and bonds E_pq, NW_pq, N_pq, NE_pq; a bond
+    /// inside the aggregate lands twice on its diagonal, the others on the coarse bond between
+    /// the two aggregates (NW_00 on the east bond of the aggregate to the west).
+    fn coarsen_even(&self, coarse: &mut Level) {
+        let (m, mc) = (self.m, self.m / 2);
+        let mut diag = [vec![0.0; m], vec![0.0; m]];
+        let mut bonds: [[Vec<f64>; 4]; 2] = std::array::from_fn(|_| std::array::from_fn(|_| vec![0.0; m]));
+        for (jc, row) in coarse.stencil.chunks_mut(mc).enumerate() {
+            for q in 0..2 {
+                self.bond_rows(2 * jc + q, &mut diag[q], &mut bonds[q]);
+            }
+            let ([d0, d1], [[e0, nw0, n0, ne0], [e1, nw1, n1, ne1]]) = (&diag, &bonds);
+            for (ic, out) in row.iter_mut().enumerate() {
+                let (a, z) = (2 * ic, 2 * ic + 1);
+                let diagonal = 0.0
+                    + d0[a]
+                    + 2.0 * e0[a]
+                    + 2.0 * n0[a]
+                    + 2.0 * ne0[a]
+                    + d0[z]
+                    + 2.0 * nw0[z]
+                    + 2.0 * n0[z]
+                    + d1[a]
+                    + 2.0 * e1[a]
+                    + d1[z];
+                // The next aggregate's NW_00 comes after this one's sites in its row, except
+                // across the periodic edge, where it is the row's first site.
+                let east = if ic + 1 < mc {
+                    0.0 + e0[z] + ne0[z] + nw0[z + 1] + e1[z]
+                } else {
+                    0.0 + nw0[0] + e0[z] + ne0[z] + e1[z]
+                };
+                let north = 0.0 + n1[a] + ne1[a] + nw1[z] + n1[z];
+                *out = [diagonal, east, 0.0 + nw1[a], north, 0.0 + ne1[z]];
+            }
+        }
     }
 
     /// Copies the stencil into one array per coefficient and sets the Jacobi steps.
@@ -781,6 +863,30 @@ mod tests {
             if coarse.in_solve(c) {
                 assert!((got[c] - expected[c]).abs() < 1e-12, "aggregate {c}: {} vs {}", got[c], expected[c]);
             }
+        }
+    }
+
+    /// On an even side the coarse level is written out per aggregate (`coarsen_even`); it must
+    /// be the site-by-site construction's bit for bit, from C's own form (the finest level) and
+    /// from a stencil (the level below), across the periodic edges and with a hole.
+    #[test]
+    fn even_sides_coarsen_to_the_same_bits() {
+        // Weights and ξ_c whose products round, so that an order of addition shows in the bits.
+        let l = 40;
+        let n: Vec<f64> = edge_network(l).iter().zip(field(l, 5)).map(|(n, r)| n * (1.0 + 0.3 * r)).collect();
+        let mut nn = vec![0.0; l * l];
+        crate::model::lattice::neighbour_sum8(&n, &mut nn, l);
+        let mut mg = Multigrid::new(l);
+        mg.setup(&n, &nn, &field(l, 6).iter().map(|r| 0.001 * (1.5 + r)).collect::<Vec<_>>(), 0.7);
+        for k in 0..2 {
+            let (fine, coarse) = (&mg.levels[k], &mg.levels[k + 1]);
+            assert!(fine.m.is_multiple_of(2));
+            assert_eq!(fine.weights.is_some(), k == 0);
+            let mut reference = Level::with_side(coarse.m);
+            fine.coarsen_any(&mut reference);
+            let bits = |l: &Level| l.stencil.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(coarse), bits(&reference), "level {k} to {}", k + 1);
+            assert!(coarse.stencil.iter().any(|s| s[DIAG] == 0.0), "the hole reaches level {}", k + 1);
         }
     }
 
