@@ -54,24 +54,24 @@ impl FreeEnergy {
         mu: &mut [T],
     ) {
         let area_term = self.area * (1.0 - area / self.target_area);
-        let coefficients = [self.bulk, self.gradient, area_term, self.repulsion];
-        chemical_potential_on_runs(coefficients, self.laplacian, patch, phi, sum_phi2, l, mu);
+        chemical_potential_on_runs(self, area_term, patch, phi, sum_phi2, l, mu);
     }
 }
 
-/// μ_i on every run of the patch, given (bulk, gradient, area term, repulsion): the loop of
-/// [`FreeEnergy::chemical_potential`], compiled also for AVX2 (`multiversion`: the same bits,
-/// docs/performance.md).
+/// The loop of [`FreeEnergy::chemical_potential`] over the patch's runs, given the cell's area
+/// term; a free function so that it can be compiled also for AVX2 (`multiversion`, which takes
+/// no methods: the same bits, docs/performance.md).
 #[multiversion(targets("x86_64+avx2"))]
 fn chemical_potential_on_runs<T: Real>(
-    [bulk, gradient, area_term, repulsion]: [f64; 4],
-    kind: Laplacian,
+    fe: &FreeEnergy,
+    area_term: f64,
     patch: Patch,
     phi: &[T],
     sum_phi2: &[f64],
     l: usize,
     mu: &mut [T],
 ) {
+    let (bulk, gradient, repulsion, kind) = (fe.bulk, fe.gradient, fe.repulsion, fe.laplacian);
     for run in patch.runs(l) {
         let len = run.len;
         let f = Neighbourhood::new(phi, patch, run.b, run.a0, len);

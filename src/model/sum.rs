@@ -11,20 +11,10 @@
 /// hide the addition's latency.
 pub const LANES: usize = 8;
 
-/// Σ_k term(a_k) in the lanes' order.
+/// Σ_k term(a_k) in the lanes' order ([`sum_pairs`] of the slice with itself).
 #[inline(always)]
 pub fn sum_of<A: Copy>(a: &[A], term: impl Fn(A) -> f64) -> f64 {
-    let mut acc = [0.0f64; LANES];
-    let (whole, tail) = a.split_at(a.len() - a.len() % LANES);
-    for c in whole.chunks_exact(LANES) {
-        for k in 0..LANES {
-            acc[k] += term(c[k]);
-        }
-    }
-    for (k, &x) in tail.iter().enumerate() {
-        acc[k] += term(x);
-    }
-    combine(acc)
+    sum_pairs(a, a, |x, _| term(x))
 }
 
 /// Σ_k term(a_k, b_k) over two slices of one length, in the lanes' order.
