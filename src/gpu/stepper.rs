@@ -276,8 +276,10 @@ impl GpuRun {
                 .map(|p| (p.patch(), patch_storage(*p, &phi).iter().map(|&v| f32::from_bits(v) as f64).collect()))
                 .collect();
             let u: Vec<f32> = u.into_iter().map(f32::from_bits).collect();
-            let warm_start = u.chunks_exact(2).map(|c| C64::new(c[0] as f64, c[1] as f64)).collect();
-            let state = State { step, cells, warm_start, substrate };
+            let warm_start: Vec<C64> = u.chunks_exact(2).map(|c| C64::new(c[0] as f64, c[1] as f64)).collect();
+            // The GPU's corrector starts from its predictor's solution alone (docs/gpu.md).
+            let corrector_shift = vec![C64::new(0.0, 0.0); warm_start.len()];
+            let state = State { step, cells, warm_start, corrector_shift, substrate };
             Monolayer::from_state(params, seed, state).expect("the GPU's state is a valid state")
         }
     }

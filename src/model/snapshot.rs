@@ -11,7 +11,8 @@
 //! Layout, little-endian: `MAGIC`, `VERSION` (u32), key (u64), step (u64), L (u32), N (u32);
 //! per cell x0, y0, w, h (u32) and its padded φ ((w + 2)(h + 2) f64); a flags byte (bit 0: the
 //! solver's warm start follows as L² pairs of f64, else it is zero; bit 1: the substrate map
-//! follows as L² f64, else it is 1 everywhere); then FNV-1a 64 of every byte before it.
+//! follows as L² f64, else it is 1 everywhere; bit 2: the corrector shift follows as L² pairs
+//! of f64, else it is zero); then FNV-1a 64 of every byte before it.
 
 use num_complex::Complex64 as C64;
 
@@ -25,6 +26,7 @@ const MAGIC: &[u8; 8] = b"MLSTATE\0";
 const VERSION: u32 = 1;
 const HAS_WARM_START: u8 = 1;
 const HAS_SUBSTRATE: u8 = 2;
+const HAS_CORRECTOR_SHIFT: u8 = 4;
 
 /// The offset basis of 64-bit FNV-1a, the hash of no bytes.
 pub(crate) const FNV1A_START: u64 = 0xcbf2_9ce4_8422_2325;
@@ -101,14 +103,22 @@ pub fn encode(state: &State, key: u64) -> Vec<u8> {
         }
         phi.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
     }
-    let warm = state.warm_start.iter().any(|u| u.re != 0.0 || u.im != 0.0);
+    let nonzero = |field: &[C64]| field.iter().any(|u| u.re != 0.0 || u.im != 0.0);
+    let (warm, shift) = (nonzero(&state.warm_start), nonzero(&state.corrector_shift));
     let substrate = state.substrate.iter().any(|&s| s != 1.0);
-    out.push(if warm { HAS_WARM_START } else { 0 } | if substrate { HAS_SUBSTRATE } else { 0 });
-    if warm {
-        state.warm_start.iter().for_each(|u| {
+    let flag = |present, bit| if present { bit } else { 0 };
+    out.push(flag(warm, HAS_WARM_START) | flag(substrate, HAS_SUBSTRATE) | flag(shift, HAS_CORRECTOR_SHIFT));
+    let mut complex = |field: &[C64]| {
+        field.iter().for_each(|u| {
             out.extend_from_slice(&u.re.to_le_bytes());
             out.extend_from_slice(&u.im.to_le_bytes());
-        });
+        })
+    };
+    if warm {
+        complex(&state.warm_start);
+    }
+    if shift {
+        complex(&state.corrector_shift);
     }
     if substrate {
         state.substrate.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
@@ -162,11 +172,18 @@ pub fn decode(bytes: &[u8], key: u64, l: usize) -> Result<State, SimError> {
         cells.push((patch, phi));
     }
     let flags = r.u8()?;
-    let warm_start = if flags & HAS_WARM_START != 0 {
-        r.f64s(2 * l * l)?.chunks_exact(2).map(|c| C64::new(c[0], c[1])).collect()
-    } else {
-        vec![C64::new(0.0, 0.0); l * l]
+    if flags & !(HAS_WARM_START | HAS_SUBSTRATE | HAS_CORRECTOR_SHIFT) != 0 {
+        return Err(bad(format!("flags {flags:#04x} name a field this core does not know")));
+    }
+    let mut complex = |bit| -> Result<Vec<C64>, SimError> {
+        Ok(if flags & bit != 0 {
+            r.f64s(2 * l * l)?.chunks_exact(2).map(|c| C64::new(c[0], c[1])).collect()
+        } else {
+            vec![C64::new(0.0, 0.0); l * l]
+        })
     };
+    let warm_start = complex(HAS_WARM_START)?;
+    let corrector_shift = complex(HAS_CORRECTOR_SHIFT)?;
     let substrate = if flags & HAS_SUBSTRATE != 0 { r.f64s(l * l)? } else { vec![1.0; l * l] };
     if r.at != body.len() {
         return Err(bad(format!("{} bytes left over after the state", body.len() - r.at)));
@@ -175,13 +192,17 @@ pub fn decode(bytes: &[u8], key: u64, l: usize) -> Result<State, SimError> {
     if cells.iter().any(|(_, phi)| phi.iter().any(|v| !v.is_finite())) {
         return Err(nan("φ"));
     }
-    if warm_start.iter().any(|c: &C64| !c.re.is_finite() || !c.im.is_finite()) {
+    let finite = |field: &[C64]| field.iter().all(|c| c.re.is_finite() && c.im.is_finite());
+    if !finite(&warm_start) {
         return Err(nan("the warm start"));
+    }
+    if !finite(&corrector_shift) {
+        return Err(nan("the corrector shift"));
     }
     if substrate.iter().any(|&v| !(v.is_finite() && v > 0.0)) {
         return Err(bad("the substrate map holds a value that is not a finite friction > 0".into()));
     }
-    Ok(State { step, cells, warm_start, substrate })
+    Ok(State { step, cells, warm_start, corrector_shift, substrate })
 }
 
 struct Reader<'a> {
@@ -242,17 +263,27 @@ mod tests {
     }
 
     #[test]
-    fn warm_start_and_substrate_are_kept_when_not_trivial() {
+    fn warm_start_corrector_shift_and_substrate_are_kept_when_not_trivial() {
         let p = small();
         let mut m = relaxed(&p, 1);
         let mut map = vec![1.0; 40 * 40];
         map[17] = 0.25;
         m.set_substrate(&map).unwrap();
-        m.advance(3).unwrap(); // active: the solver's warm start is no longer zero
+        m.advance(3).unwrap(); // active: the solver's warm start and shift are no longer zero
         let s = m.state();
         assert!(s.warm_start.iter().any(|u| u.re != 0.0));
+        assert!(s.corrector_shift.iter().any(|u| u.re != 0.0));
         let bytes = encode(&s, 9);
         assert_eq!(decode(&bytes, 9, 40).unwrap(), s);
+        // Each field on its own, the others trivial.
+        let zero = vec![C64::new(0.0, 0.0); 40 * 40];
+        for only in [
+            State { warm_start: zero.clone(), ..s.clone() },
+            State { corrector_shift: zero.clone(), ..s.clone() },
+            State { substrate: vec![1.0; 40 * 40], ..s.clone() },
+        ] {
+            assert_eq!(decode(&encode(&only, 9), 9, 40).unwrap(), only);
+        }
     }
 
     #[test]

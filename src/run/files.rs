@@ -374,7 +374,8 @@ pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
     write_atomic(path, |w| w.write_all(&bytes).map_err(|x| err(path, x)))
 }
 
-/// Writes the exact state (f64 bits, padded patches, the solver's warm start).
+/// Writes the exact state (f64 bits, padded patches, the solver's warm start and corrector
+/// shift).
 pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     let s = m.state();
     let l = m.params().box_size;
@@ -387,6 +388,7 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
         offsets.push(phi.len() as i64);
     }
     let warm = complex_field(&s.warm_start, l);
+    let shift = complex_field(&s.corrector_shift, l);
     let substrate = Array2::from_shape_vec((l, l), s.substrate.clone()).expect("L×L");
     write_npz(path, |z| {
         z.add_array("step", &arr0(s.step as i64))?;
@@ -394,6 +396,7 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
         z.add_array("phi_padded", &Array1::from(phi))?;
         z.add_array("phi_offsets", &Array1::from(offsets))?;
         z.add_array("warm_start", &warm)?;
+        z.add_array("corrector_shift", &shift)?;
         z.add_array("substrate", &substrate)
     })
 }
@@ -419,8 +422,14 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     let phi: Array1<f64> = z.by_name("phi_padded").map_err(e("phi_padded"))?;
     let offsets: Array1<i64> = z.by_name("phi_offsets").map_err(e("phi_offsets"))?;
     let warm: Array3<f64> = z.by_name("warm_start").map_err(e("warm_start"))?;
+    // Checkpoints written before the corrector shift was kept (2026-12-04) have none: the
+    // next corrector starts from the predictor's solution alone, as those runs did.
+    let has_shift =
+        z.names().map_err(|x| err(path, x))?.iter().any(|n| n.trim_end_matches(".npy") == "corrector_shift");
+    let shift: Array3<f64> =
+        if has_shift { z.by_name("corrector_shift").map_err(e("corrector_shift"))? } else { Array3::zeros((l, l, 2)) };
     let substrate: Array2<f64> = z.by_name("substrate").map_err(e("substrate"))?;
-    if warm.dim() != (l, l, 2) || substrate.dim() != (l, l) {
+    if warm.dim() != (l, l, 2) || shift.dim() != (l, l, 2) || substrate.dim() != (l, l) {
         return Err(err(path, format!("lattice arrays are not {l}×{l}")));
     }
     let n = patches.nrows();
@@ -433,6 +442,7 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     }
     finite(path, "phi_padded", phi.iter())?;
     finite(path, "warm_start", warm.iter())?;
+    finite(path, "corrector_shift", shift.iter())?;
     finite(path, "substrate", substrate.iter())?;
     if let Some((k, v)) = substrate.iter().enumerate().find(|(_, &v)| v <= 0.0) {
         return Err(err(path, format!("array `substrate` holds {v} at index {k}: a friction map is > 0")));
@@ -452,7 +462,13 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
         cells.push((p, phi.slice(ndarray::s![a..b]).to_vec()));
     }
     let complex = |a: &Array3<f64>| (0..l * l).map(|k| C64::new(a[[k / l, k % l, 0]], a[[k / l, k % l, 1]])).collect();
-    Ok(State { step: step as u64, cells, warm_start: complex(&warm), substrate: substrate.iter().copied().collect() })
+    Ok(State {
+        step: step as u64,
+        cells,
+        warm_start: complex(&warm),
+        corrector_shift: complex(&shift),
+        substrate: substrate.iter().copied().collect(),
+    })
 }
 
 pub use super::config::load_params;

@@ -98,6 +98,7 @@ impl Playback {
             step: f.step,
             cells: f.cells.clone(),
             warm_start: vec![Default::default(); l * l],
+            corrector_shift: vec![Default::default(); l * l],
             substrate: vec![1.0; l * l],
         };
         let mut m = Monolayer::from_state(params, seed, state).map_err(|e| format!("{name}: {e}"))?;

@@ -35,7 +35,7 @@ pub fn with_cells(params: Params, cells: Vec<(Patch, Vec<f64>)>, step: u64) -> M
         })
         .collect();
     let zero = vec![C64::new(0.0, 0.0); l * l];
-    let state = State { step, cells, warm_start: zero, substrate: vec![1.0; l * l] };
+    let state = State { step, cells, warm_start: zero.clone(), corrector_shift: zero, substrate: vec![1.0; l * l] };
     Monolayer::from_state(params, 1, state).expect("valid hand-made state")
 }
 
