@@ -38,8 +38,32 @@ pub struct WebSim {
     log: ReadoutLog,
 }
 
+/// A copy of a tissue's core, stepped without the page's readouts (a row of measurements every
+/// 10 active steps, 8–10 % of the page's step): the same steps, bit for bit, as the native core
+/// times, so that the tests compare like with like (docs/performance.md, "wasm against
+/// native"). Stepping it leaves the page's tissue as it was.
+#[wasm_bindgen]
+pub struct CoreCopy(Monolayer);
+
+#[wasm_bindgen]
+impl CoreCopy {
+    /// Runs `n` steps.
+    pub fn step(&mut self, n: u32) -> Result<(), JsError> {
+        self.0.advance(n as u64).map_err(js_err)
+    }
+
+    pub fn step_count(&self) -> f64 {
+        self.0.step_count() as f64
+    }
+}
+
 #[wasm_bindgen]
 impl WebSim {
+    /// A copy of the tissue's core, to time without the readouts ([`CoreCopy`]).
+    pub fn core_copy(&self) -> CoreCopy {
+        CoreCopy(self.m.clone())
+    }
+
     /// A new tissue from random disks: the protocol's relaxation (ζ = 0, no cell friction)
     /// for `relax_steps`, then activity ζ at friction ratio χ = ξ_s/ξ_cell and surface tension γ.
     /// Every other parameter keeps the native default.

@@ -339,6 +339,23 @@ const CALLS = {
     } else if (!takeSteps(n)) return null;
     return performance.now() - t0;
   },
+  // The CPU core's own milliseconds per step, without the readouts: the fastest of `batches`
+  // batches of n steps of a copy of the tissue (the tests' wasm/native report). The tissue shown
+  // does not move.
+  core_ms_per_step: (n, batches) => {
+    const copy = sim.core_copy();
+    try {
+      let best = Infinity;
+      for (let b = 0; b < batches; b++) {
+        const t0 = performance.now();
+        copy.step(n);
+        best = Math.min(best, (performance.now() - t0) / n);
+      }
+      return best;
+    } finally {
+      copy.free();
+    }
+  },
   set: (name, value) => edited(sim[`set_${name}`](value)),
   paint_substrate: (...a) => edited(sim.paint_substrate(...a)),
   remove_cell_at: (...a) => edited(sim.remove_cell_at(...a)),
