@@ -419,3 +419,37 @@ fn heun_steps_converge_at_second_order() {
     let ratio = coarse / fine;
     assert!((3.3..4.7).contains(&ratio), "error ratio {ratio} ({coarse:.2e} → {fine:.2e}): not second order");
 }
+
+/// Heun's corrector counts the friction weights n = Σ_j w_j at φ* for the readings that depend
+/// on φ, and keeps the predictor's n for subdomain weights, which depend only on the patches
+/// (they move between steps, not within one). Both halves checked on one tissue over fixed
+/// patches: for subdomain weights a recount at the new φ gives n's bits again; for φ weights
+/// the corrector's n is not the predictor's (a corrector that kept it would leave it so).
+#[test]
+fn the_correctors_friction_weights_follow_phi_unless_they_count_patches() {
+    let (l, w, h) = (64, 30, 30);
+    let cells = || {
+        vec![
+            (Patch { x0: 10, y0: 10, w, h }, ellipse(w, h, 8.0, 6.0, 0.3)),
+            (Patch { x0: 22, y0: 15, w, h }, ellipse(w, h, 7.0, 6.0, -0.5)),
+        ]
+    };
+    let tissue = |weights| {
+        let p = Params { xi_substrate: 0.05, xi_cell: 0.7, zeta: 0.4, friction_weights: weights, ..small(2, l) };
+        with_cells(p, cells(), 0)
+    };
+
+    let mut m = tissue(FrictionWeights::Subdomain);
+    m.evaluate_now().unwrap();
+    let before = m.lattice().weight.clone();
+    m.step_on_fixed_patches().unwrap();
+    assert!(m.lattice().weight == before, "subdomain weights: the corrector's n is not the predictor's");
+    m.evaluate_now().unwrap();
+    assert!(m.lattice().weight == before, "subdomain weights: n moved with φ on fixed patches");
+
+    let mut m = tissue(FrictionWeights::Phi);
+    m.evaluate_now().unwrap();
+    let predictor_n = m.lattice().weight.clone();
+    m.step_on_fixed_patches().unwrap();
+    assert!(m.lattice().weight != predictor_n, "φ weights: the corrector kept the predictor's n");
+}

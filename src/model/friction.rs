@@ -30,7 +30,7 @@ use num_complex::Complex64 as C64;
 use crate::model::lattice::{neighbour_sum8, neighbour_sum8_row};
 use crate::model::multigrid::{CycleWork, Multigrid, Real};
 use crate::model::par;
-use crate::model::sum::{combine, sum_pairs, LANES};
+use crate::model::sum::{combine, LANES};
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 
@@ -310,11 +310,37 @@ impl Component {
     /// other: the same sum in the same order in both, the same bits).
     #[inline(always)]
     fn load(&mut self, force: &[C64], u: &[C64], diag: &[f64], part: impl Fn(C64) -> f64) -> f64 {
-        let sites = self.rhs.iter_mut().zip(self.x.iter_mut()).zip(force.iter().zip(u)).zip(diag);
-        for (((rhs, sol), (&f, &guess)), &d) in sites {
-            (*rhs, *sol) = if d > 0.0 { (part(f), part(guess)) } else { (0.0, 0.0) };
+        // One pass, in blocks of the sum's lanes: site k adds to lane k mod LANES, as
+        // `sum_pairs` does, so the norm has its bits; each site's values are selected, not
+        // branched on, so that the block runs in SIMD lanes.
+        let site = |rhs: &mut f64, sol: &mut f64, f: C64, guess: C64, d: f64| {
+            let inside = d > 0.0;
+            *rhs = if inside { part(f) } else { 0.0 };
+            *sol = if inside { part(guess) } else { 0.0 };
+            if inside {
+                f.norm_sqr()
+            } else {
+                0.0
+            }
+        };
+        let mut acc = [0.0; LANES];
+        let n = diag.len();
+        let whole = n - n % LANES;
+        let (rhs, x) = (&mut self.rhs[..n], &mut self.x[..n]);
+        let blocks = rhs[..whole].chunks_exact_mut(LANES).zip(x[..whole].chunks_exact_mut(LANES));
+        let inputs =
+            force[..whole].chunks_exact(LANES).zip(u[..whole].chunks_exact(LANES)).zip(diag.chunks_exact(LANES));
+        for ((rhs, x), ((f, g), d)) in blocks.zip(inputs) {
+            for k in 0..LANES {
+                acc[k] += site(&mut rhs[k], &mut x[k], f[k], g[k], d[k]);
+            }
         }
-        sum_pairs(force, diag, |f, d| if d > 0.0 { f.norm_sqr() } else { 0.0 })
+        let tail = (rhs[whole..].iter_mut().zip(&mut x[whole..]))
+            .zip(force[whole..n].iter().zip(&u[whole..n]).zip(&diag[whole..]));
+        for (acc, ((rhs, x), ((&f, &g), &d))) in acc.iter_mut().zip(tail) {
+            *acc += site(rhs, x, f, g, d);
+        }
+        combine(acc)
     }
 
     /// Conjugate gradients on C x = rhs, preconditioned by one multigrid cycle, until
@@ -390,6 +416,32 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Loading a component keeps each part on the sites in the solve and 0 elsewhere, and its
+    /// ‖F‖² has the bits of the lanes' sum (`sum_pairs`), on a lattice whose site count leaves a
+    /// tail after the lanes' blocks (6² = 4·8 + 4) as on one that does not (4²).
+    #[test]
+    fn loading_masks_the_parts_and_sums_the_norm_in_the_lanes_order() {
+        for l in [6, 4] {
+            let mg = Multigrid::new(l);
+            let mut c = Component::new(l, &mg);
+            let k = l * l;
+            let force: Vec<C64> = (0..k).map(|i| C64::new(1.0 / (3.0 + i as f64), 1.1 * (i as f64).sqrt())).collect();
+            let u: Vec<C64> = (0..k).map(|i| C64::new(-(i as f64), 0.5 * i as f64)).collect();
+            let diag: Vec<f64> = (0..k).map(|i| if i % 3 == 1 { 0.0 } else { 1.0 + i as f64 }).collect();
+            let term = |f: C64, d: f64| if d > 0.0 { f.norm_sqr() } else { 0.0 };
+            let norm = c.load(&force, &u, &diag, |z| z.im);
+            let expected = crate::model::sum::sum_pairs(&force, &diag, term);
+            assert_eq!(norm.to_bits(), expected.to_bits(), "l = {l}");
+            // The fixture tells orders apart: summed one term after another it rounds otherwise.
+            let sequential = force.iter().zip(&diag).fold(0.0, |s, (&f, &d)| s + term(f, d));
+            assert_ne!(norm.to_bits(), sequential.to_bits(), "l = {l}: pick terms that round");
+            for i in 0..k {
+                let (rhs, x) = if diag[i] > 0.0 { (force[i].im, u[i].im) } else { (0.0, 0.0) };
+                assert_eq!((c.rhs[i], c.x[i]), (rhs, x), "l = {l}, site {i}");
+            }
+        }
+    }
 
     fn problem_fields(l: usize, with_hole: bool) -> (Vec<f64>, Vec<C64>) {
         let mut n = vec![1.0; l * l];

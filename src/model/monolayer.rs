@@ -535,7 +535,10 @@ impl Monolayer {
                     add_each(n, c.phi[r].iter().map(|&p| friction_weight(kind, load(p), threshold)));
                 })
             };
-            match (friction, weights) {
+            // With subdomain weights n counts the patches over each site, and the patches move
+            // only between steps: the corrector keeps the predictor's n.
+            let n_is_current = matches!(then, Then::Correct { .. }) && weights == FrictionWeights::Subdomain;
+            match (friction && !n_is_current, weights) {
                 (false, _) => {
                     gather(phi2, 0.0, cells, l, |c, r, out| add_each(out, c.phi[r].iter().map(|&p| load(p) * load(p))))
                 }
