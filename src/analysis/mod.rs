@@ -78,6 +78,18 @@ pub struct FrameSummary {
     pub mean_speed: f64,
 }
 
+/// How much of a frame to measure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Detail {
+    /// Everything.
+    Full,
+    /// What the page's readouts show (holes and void area, packing, mean speed, ±½ defects,
+    /// spiral cores): the cells' aspect ratios and axes, ∇·f^a and the correlations are left
+    /// out (about half the cost at full size, docs/performance.md), and reported as not measured
+    /// (`None` in [`FrameSummary`], NaN in `active_force_divergence`, empty vectors).
+    Tissue,
+}
+
 /// Every measurement of one frame, with the buffers it needs (allocated once per lattice size).
 #[derive(Debug)]
 pub struct Analysis {
@@ -157,6 +169,11 @@ impl Analysis {
     /// active force is the run's ζ times −Q̂_i·∇φ_i, also while relaxing (where the dynamics
     /// has it off), so that it shows where activity would pull.
     pub fn measure(&mut self, m: &Monolayer) {
+        self.measure_in(m, Detail::Full);
+    }
+
+    /// [`Self::measure`] to the given detail.
+    pub fn measure_in(&mut self, m: &Monolayer, detail: Detail) {
         assert_eq!(m.params().box_size, self.l, "analysis built for another lattice size");
         self.zeta = m.params().zeta;
         self.raw.clear();
@@ -165,10 +182,12 @@ impl Analysis {
         for c in m.cells() {
             let (vx, vy) = c.velocity();
             self.raw.add_cell(c.patch(), c.phi().data, c.q_hat(), self.zeta, Some((vx.data, vy.data)));
-            self.aspect_ratios.extend(cell_aspect_ratio(c.patch(), c.phi().data));
-            self.push_axis(c.patch(), c.phi().data);
+            if detail == Detail::Full {
+                self.aspect_ratios.extend(cell_aspect_ratio(c.patch(), c.phi().data));
+                self.push_axis(c.patch(), c.phi().data);
+            }
         }
-        self.derive();
+        self.derive(detail);
     }
 
     /// Measures cells given as (patch, φ on the padded patch, Q̂) with the coarse-grained
@@ -184,7 +203,7 @@ impl Analysis {
             self.push_axis(patch, phi);
         }
         self.raw.set_velocity(velocity);
-        self.derive();
+        self.derive(Detail::Full);
     }
 
     fn push_axis<T: Real>(&mut self, patch: Patch, phi: &[T]) {
@@ -194,7 +213,7 @@ impl Analysis {
     }
 
     /// Everything that follows from the raw fields and the cells' aspect ratios.
-    fn derive(&mut self) {
+    fn derive(&mut self, detail: Detail) {
         let l = self.l;
         self.aspect_sorted.clear();
         self.aspect_sorted.extend_from_slice(&self.aspect_ratios);
@@ -202,7 +221,11 @@ impl Analysis {
         self.smooth.smooth_from(&self.raw, self.half_window, &mut self.row, &mut self.tmp);
         let s = &self.smooth;
         strain_rate(&s.vx, &s.vy, &mut self.strain_rate, l);
-        divergence(&s.fx, &s.fy, &mut self.active_force_divergence, l, 1.0);
+        if detail == Detail::Full {
+            divergence(&s.fx, &s.fy, &mut self.active_force_divergence, l, 1.0);
+        } else {
+            self.active_force_divergence.fill(f64::NAN);
+        }
         self.defect_finder.find(&s.qxx, &s.qxy, l, &mut self.defects);
         self.spiral_finder.find(&s.vx, &s.vy, &self.strain_rate, l, &mut self.plus_ones);
         // ε̇ of the +1 points is compared with the field's own typical |ε̇|.
@@ -212,8 +235,13 @@ impl Analysis {
             p.divergence *= 2.0;
         }
         self.voids.find(&self.raw.phi_sum, l);
-        self.correlator.correlate(&self.raw.vx, &self.raw.vy, &mut self.velocity_correlation);
-        self.correlator.correlate(&self.raw.qxx, &self.raw.qxy, &mut self.nematic_correlation);
+        if detail == Detail::Full {
+            self.correlator.correlate(&self.raw.vx, &self.raw.vy, &mut self.velocity_correlation);
+            self.correlator.correlate(&self.raw.qxx, &self.raw.qxy, &mut self.nematic_correlation);
+        } else {
+            self.velocity_correlation.clear();
+            self.nematic_correlation.clear();
+        }
     }
 
     /// The spiral cores: +1 points of the smoothed velocity with ∇·v > 0.
@@ -244,5 +272,46 @@ impl Analysis {
             aspect_ratio_p90: aspect.map(|a| a.1),
             mean_speed: if mass > 0.0 { flux / mass } else { 0.0 },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The page's readouts' detail measures what it keeps to the bits of the full analysis,
+    /// and reports what it leaves out as not measured rather than as a stale value.
+    #[test]
+    fn the_tissue_detail_keeps_its_measures_and_marks_the_rest_unmeasured() {
+        let p = Params { box_size: 60, n_cells: 18, relax_steps: 300, zeta: 1.0, ..Params::default() };
+        let mut m = Monolayer::new(p, 3).unwrap();
+        m.advance(500).unwrap(); // active: velocities, defects
+        m.evaluate_now().unwrap();
+        let mut full = Analysis::new(m.params());
+        full.measure(&m);
+        let f = full.summary();
+        // The same buffers, measured in full first, so that a stale value would show.
+        let mut lean = Analysis::new(m.params());
+        lean.measure(&m);
+        lean.measure_in(&m, Detail::Tissue);
+        let t = lean.summary();
+        assert_eq!(
+            (t.packing_fraction, t.void_fraction, t.void_regions, t.holes, t.largest_void),
+            (f.packing_fraction, f.void_fraction, f.void_regions, f.holes, f.largest_void)
+        );
+        assert_eq!(
+            (t.plus_half_defects, t.minus_half_defects, t.spiral_cores),
+            (f.plus_half_defects, f.minus_half_defects, f.spiral_cores)
+        );
+        assert_eq!(
+            (t.mean_speed.to_bits(), t.max_strain_rate.to_bits()),
+            (f.mean_speed.to_bits(), f.max_strain_rate.to_bits())
+        );
+        assert!(f.plus_half_defects + f.minus_half_defects > 0, "no defect: the test proves little");
+        assert!(f.aspect_ratio_mean.is_some() && f.velocity_correlation_length.is_some());
+        assert_eq!((t.aspect_ratio_mean, t.aspect_ratio_p90), (None, None));
+        assert_eq!((t.velocity_correlation_length, t.nematic_correlation_length), (None, None));
+        assert!(lean.cell_axes.is_empty() && lean.aspect_ratios.is_empty());
+        assert!(lean.active_force_divergence.iter().all(|d| d.is_nan()));
     }
 }

@@ -4,7 +4,7 @@
 //! seed and the parameters. With it the page writes the current state as a frame file
 //! ([`crate::analysis::frame_file::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
 
-use crate::analysis::Analysis;
+use crate::analysis::{Analysis, Detail};
 use crate::model::error::SimError;
 use crate::Monolayer;
 
@@ -66,7 +66,7 @@ impl ReadoutLog {
             self.analysis = Some(Analysis::new(p));
         }
         let a = self.analysis.as_mut().expect("made above");
-        a.measure(m);
+        a.measure_in(m, Detail::Tissue);
         let s = a.summary();
         let time = m.step_count().saturating_sub(p.relax_steps) as f64 * p.dt;
         Row {
