@@ -157,4 +157,10 @@ fn the_default_preset_opens_its_first_hole_where_the_browser_test_expects() {
          tests/browser/demo.test.mjs to it",
         m.step_count()
     );
+    // The browser test reads the step from the page's readouts, a row every ROW_EVERY active
+    // steps: the hole must still be open at the first row after it opens.
+    let every = monolayer::web::readouts::ROW_EVERY;
+    let row = p.relax_steps + (expected - p.relax_steps).div_ceil(every) * every;
+    m.advance(row - m.step_count()).unwrap();
+    assert!(holes(&mut m, &mut regions) > 0, "the first hole closed before the readout row at step {row}");
 }
