@@ -6,7 +6,8 @@
 //! run sequentially.
 //!
 //! What is worth a parallel loop: starting one wakes the other workers, which costs tens of
-//! microseconds (docs/performance.md has the measurement). Passes over the lattice that take
+//! microseconds (docs/performance.md has the measurement), unless they are kept awake for a whole
+//! step by [`with_workers_spinning`], as `Monolayer::step` and `advance` do. Passes that take
 //! that long run on one thread, or inside a parallel loop that runs anyway: the multigrid setup
 //! runs beside the per-cell force stage, each velocity component's loading inside its own CG.
 //! The per-cell stages, the gathers onto the lattice, the two components of the friction solve
