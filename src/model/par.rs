@@ -95,10 +95,15 @@ pub fn with_workers_spinning<R: Send>(f: impl FnOnce() -> R + Send) -> R {
         use std::sync::Mutex;
         // One spinning call at a time, in the whole process: two at once on one pool could each
         // take a thread and spin there, each above a frame of the other's work that it waits
-        // for (a join's wait runs a pending broadcast). Any other caller meanwhile, and a
-        // one-thread pool, runs `f` plainly.
+        // for (a join's wait runs a pending broadcast). Any other caller meanwhile runs `f`
+        // plainly, and so does a pool of one thread, or of more threads than cores, where a
+        // spinner would take the core that the thread running `f` is waiting for.
         static IN_FLIGHT: AtomicBool = AtomicBool::new(false);
-        if rayon::current_num_threads() < 2
+        static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+        let cores = *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        let threads = rayon::current_num_threads();
+        if threads < 2
+            || threads > cores
             || IN_FLIGHT.compare_exchange(false, true, Ordering::Acquire, Ordering::Relaxed).is_err()
         {
             return f();
