@@ -207,9 +207,7 @@ struct RunArgs {
     /// Steps between frames in the active phase.
     #[arg(long, default_value_t = 1000)]
     frame_interval: u64,
-    /// Worker threads (results do not depend on it); default: all cores. Up to the number of
-    /// cores, the threads stay busy for the whole run (an idle one spins through each step
-    /// rather than sleep between its parallel loops).
+    /// Worker threads (results do not depend on it); default: all cores.
     #[arg(long)]
     threads: Option<usize>,
     /// Continue the run in this directory from its last checkpoint (with its own parameters,

@@ -438,20 +438,14 @@ impl Monolayer {
 
     /// Runs `n` steps, stopping at the first error.
     pub fn advance(&mut self, n: u64) -> Result<(), SimError> {
-        par::with_workers_spinning(|| {
-            for _ in 0..n {
-                self.one_step()?;
-            }
-            Ok(())
-        })
+        for _ in 0..n {
+            self.step()?;
+        }
+        Ok(())
     }
 
     /// One Heun step of the protocol.
     pub fn step(&mut self) -> Result<(), SimError> {
-        par::with_workers_spinning(|| self.one_step())
-    }
-
-    fn one_step(&mut self) -> Result<(), SimError> {
         let phase = self.phase();
         self.heun(phase)?;
         self.step += 1;
