@@ -18,6 +18,7 @@ import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
+import { parseReadouts } from './readouts.mjs';
 
 import { parseUrl, toUrl } from '../../www/js/state.js';
 
@@ -148,21 +149,19 @@ describe(`the page as an instrument (Chromium, ${WEBGPU ? 'WebGPU' : 'WebGL2'})`
     // The CSV: a header naming the code version, the seed and the parameters; rows that parse.
     const csv = await readFile(saved[info.csvName], 'utf8');
     await writeFile(path.join(OUT, 'viewer-download.csv'), csv);
-    const header = csv.split('\n').filter((l) => l.startsWith('#')).join('\n');
+    const { header, rowEvery, columns, rows } = parseReadouts(csv);
     assert(header.includes(`code version ${version}`), header);
     assert(header.includes('# seed 1'), header);
     const params = JSON.parse(header.match(/parameters at download[^:]*: (\{.*\})/)[1]);
     assert.equal(params.box_size, stats.l);
     assert.equal(params.zeta, stats.zeta);
-    const lines = csv.trim().split('\n').filter((l) => !l.startsWith('#'));
-    const columns = lines[0].split(',');
     for (const c of ['step', 'time', 'time_s', 'holes', 'void_area', 'packing', 'mean_speed', 'plus_half_defects', 'minus_half_defects']) {
       assert(columns.includes(c), `no column ${c}: ${columns}`);
     }
-    const rows = lines.slice(1).map((l) => Object.fromEntries(l.split(',').map((v, i) => [columns[i], Number(v)])));
     assert(rows.length >= 4, `${rows.length} rows`);
     for (const r of rows) for (const [k, v] of Object.entries(r)) assert(Number.isFinite(v), `${k} = ${v}`);
-    for (const r of rows.slice(0, -1)) assert.equal((r.step - params.relax_steps) % 10, 0, `row at step ${r.step}`);
+    assert.equal(rowEvery, 10, 'the header states a row every 10 active steps');
+    for (const r of rows.slice(0, -1)) assert.equal((r.step - params.relax_steps) % rowEvery, 0, `row at step ${r.step}`);
     assert.equal(rows[0].step, params.relax_steps, 'rows start with activity');
     assert.equal(rows[0].time, 0);
     // Its last row is the state the page shows: the same readouts.
