@@ -49,6 +49,28 @@ enum Command {
     /// beside its CSV, and DIR/figures.md; here (one run per core, resumable) or with --slurm as a
     /// job array and an aggregation job. See README "Reproduce the paper".
     Figures(FiguresArgs),
+    /// Do holes come from collective motion or from a tissue that thinned first? For runs of
+    /// several seeds: each nucleation's thinning, the precursors against sites of the same
+    /// thinning, and a forecast of where a hole opens next (strain rate, spiral core, thinning,
+    /// and their combination) scored on each seed's runs with the combination fitted on the other
+    /// seeds. Tables and the ROC figure to --out (docs/figures.md).
+    Forecast(ForecastArgs),
+}
+
+#[derive(Args)]
+struct ForecastArgs {
+    /// Run directories (as given to `run --out`, or a sweep's OUT/runs/*), at least two seeds.
+    #[arg(required = true, value_name = "RUN_DIR")]
+    dirs: Vec<PathBuf>,
+    /// Where to write the tables and the figure.
+    #[arg(long)]
+    out: PathBuf,
+    /// Also score runs that have not finished (their frames so far).
+    #[arg(long)]
+    partial: bool,
+    /// No line per run read.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -335,6 +357,7 @@ fn main() -> ExitCode {
         Command::Sweep(a) => sweep(&a),
         Command::Analyze(a) => with_threads(Some(1), || analyze(&a)),
         Command::Figures(a) => figures(a),
+        Command::Forecast(a) => with_threads(Some(1), || forecast(&a)),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -655,6 +678,20 @@ fn bench_gpu(params: &Params, a: &BenchArgs) -> Result<(), String> {
 #[cfg(not(feature = "gpu"))]
 fn bench_gpu(_: &Params, _: &BenchArgs) -> Result<(), String> {
     Err("--gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into())
+}
+
+/// `forecast DIR… --out OUT`.
+fn forecast(a: &ForecastArgs) -> Result<(), String> {
+    let quiet = a.quiet;
+    let written = monolayer::run::forecast::forecast(&a.dirs, &a.out, a.partial, |line| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    })?;
+    for path in written {
+        println!("{}", path.display());
+    }
+    Ok(())
 }
 
 /// `analyze DIR`, or with --bench the timings of the measurements at full size.

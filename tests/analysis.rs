@@ -372,11 +372,39 @@ fn hole_probability_counts_the_sites_that_open_next() {
     let bin = (0.0011 / STRAIN_RATE_BIN).floor() as i64;
     assert_eq!(p.bins[&bin], (a_sites, a_sites), "every strained site opened into hole A");
     let all = (l * l) as u64;
-    assert_eq!(p.bins[&0], (2 * all - a_sites, 0), "no unstrained site did; hole B was not counted");
+    assert_eq!(
+        p.bins[&0],
+        (2 * all - 2 * a_sites, 0),
+        "no unstrained site did; hole B was not counted, nor hole A's sites, void in frame 1"
+    );
     assert_eq!(p.bins.len(), 2);
     let rows: Vec<_> = p.table().collect();
     assert_eq!(rows[1].3, 1.0);
     assert!((rows[1].0 - bin as f64 * STRAIN_RATE_BIN).abs() < 1e-15);
+}
+
+/// A site already void in its frame is not counted: a sub-threshold void that grows into a hole
+/// in the next frame would otherwise count as strained sites that "opened", at P → 1.
+#[test]
+fn hole_probability_does_not_count_sites_already_void() {
+    let l = 140;
+    let seed_void = (40.0, 40.0, 2.0); // 13 sites: below πR²/4 ≈ 50, not a hole
+    let hole = (40.0, 40.0, 5.0);
+    let strained: Vec<f64> =
+        tissue_with_holes(l, &[hole]).iter().map(|&s| if s == 0.0 { 0.0011 } else { 0.0 }).collect();
+    let mut voids = VoidRegions::default();
+    let mut tracker = HoleTracker::new(8.0);
+    let mut p = HoleProbability::default();
+    for (t, disks) in [vec![seed_void], vec![hole]].iter().enumerate() {
+        voids.find(&tissue_with_holes(l, disks), l);
+        tracker.update(&voids, t as f64);
+        p.push(&strained, &voids, &tracker, 8.0);
+    }
+    let hole_sites = strained.iter().filter(|&&e| e > 0.0).count() as u64;
+    let already = tissue_with_holes(l, &[seed_void]).iter().filter(|&&s| s == 0.0).count() as u64;
+    assert_eq!(already, 13);
+    let bin = (0.0011 / STRAIN_RATE_BIN).floor() as i64;
+    assert_eq!(p.bins[&bin], (hole_sites - already, hole_sites - already));
 }
 
 /// Fig. 2's exclusion as the paper words it: once a hole has grown above half a cell, no frame

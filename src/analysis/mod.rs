@@ -18,6 +18,9 @@
 //! - [`alignment`]: the mechanism's unmeasured claims: antiparallel +½ pairs, cells tangential
 //!   to a hole's edge, no holes at −½ defects.
 //! - [`regime`]: the paper's regime criterion (Fig. 3c–d) from hole lifetimes.
+//! - [`thinning`]: the least Σφ and the void share about a site: how thin the tissue is there.
+//! - [`forecast`]: the precursors against sites of the same thinning, and a forecast of where a
+//!   hole nucleates next, scored on runs it never saw.
 //!
 //! Reading a run's frames, its tables and plots are native and live in `run`.
 
@@ -26,12 +29,14 @@ pub mod correlations;
 pub mod defects;
 pub mod elongation;
 pub mod fields;
+pub mod forecast;
 pub mod frame_file;
 pub mod holes;
 pub mod nucleation;
 pub mod precursors;
 pub mod regime;
 pub mod spirals;
+pub mod thinning;
 pub mod winding;
 
 use num_complex::Complex64 as C64;

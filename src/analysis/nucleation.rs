@@ -1,7 +1,8 @@
 //! The conditional probability of a hole given the local strain rate, P(hole | ε̇) (paper Fig. 2,
 //! docs/reading.md §6): for every site of every frame, in bins of ε̇ of width Δε̇ = 0.000125, how many
 //! sites there were (N_ε̇) and how many of them lie in a hole that nucleates in the next frame
-//! (N_hole,ε̇); P = N_hole,ε̇ / N_ε̇. The paper's exclusion: "if a hole grows above a threshold size,
+//! (N_hole,ε̇); P = N_hole,ε̇ / N_ε̇. A site already void in its frame is not counted: it cannot
+//! open, and counting it would put sub-threshold voids that grow into a hole at P → 1. The paper's exclusion: "if a hole grows above a threshold size,
 //! corresponding to half of a single cell area, lattice sites are not counted … until the hole
 //! closes". Once a hole has grown above πR²/2, no frame is counted until it has closed, as a
 //! family ([`super::holes::HoleCounting::Families`]): its fragments and the holes that joined it
@@ -29,6 +30,8 @@ pub struct HoleProbability {
     pub frames_skipped: u64,
     /// ε̇ of the previous frame, and whether it is to be skipped.
     previous: Vec<f64>,
+    /// The previous frame's void sites: already open, they cannot open into a hole.
+    previous_void: Vec<bool>,
     previous_skipped: Option<bool>,
     new_hole_label: Vec<bool>,
 }
@@ -48,7 +51,10 @@ impl HoleProbability {
                 for r in tracker.nucleated_regions() {
                     self.new_hole_label[r] = true;
                 }
-                for (e, &label) in self.previous.iter().zip(&voids.labels) {
+                for ((e, &label), &was_void) in self.previous.iter().zip(&voids.labels).zip(&self.previous_void) {
+                    if was_void {
+                        continue;
+                    }
                     let bin = (e / STRAIN_RATE_BIN).floor() as i64;
                     let entry = self.bins.entry(bin).or_insert((0, 0));
                     entry.0 += 1;
@@ -61,6 +67,8 @@ impl HoleProbability {
         let large_open = tracker.large_family_open(half_cell_area(radius));
         self.previous.clear();
         self.previous.extend_from_slice(strain_rate);
+        self.previous_void.clear();
+        self.previous_void.extend(voids.labels.iter().map(|&l| l != u32::MAX));
         self.previous_skipped = Some(large_open);
     }
 

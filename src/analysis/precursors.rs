@@ -44,41 +44,66 @@ pub struct Precursor {
     pub strain_rate: f64,
 }
 
-/// The points and strain rate of one frame, and its random sites.
+/// The points and strain rate of one frame: what the precursor measures read about a site.
 #[derive(Clone, Debug, Default)]
-struct Past {
-    spiral_cores: Vec<(f64, f64)>,
+pub struct FramePoints {
+    pub spiral_cores: Vec<(f64, f64)>,
     /// (x, y, orientation ψ).
-    plus_half: Vec<(f64, f64, f64)>,
-    minus_half: Vec<(f64, f64)>,
-    strain_rate: Vec<f64>,
-    chance: Vec<(f64, f64)>,
+    pub plus_half: Vec<(f64, f64, f64)>,
+    pub minus_half: Vec<(f64, f64)>,
+    /// ε̇ = ∇·v/2 of the smoothed velocity, per site.
+    pub strain_rate: Vec<f64>,
 }
 
-impl Past {
+impl FramePoints {
+    /// Takes the frame just measured by `a`, reusing the buffers.
+    pub fn take(&mut self, a: &Analysis) {
+        self.spiral_cores.clear();
+        self.spiral_cores.extend(a.spiral_cores().map(|p| (p.x, p.y)));
+        self.plus_half.clear();
+        self.plus_half.extend(a.defects.iter().filter(|d| d.twice_charge > 0).map(|d| (d.x, d.y, d.orientation)));
+        self.minus_half.clear();
+        self.minus_half.extend(a.defects.iter().filter(|d| d.twice_charge < 0).map(|d| (d.x, d.y)));
+        self.strain_rate.clone_from(&a.strain_rate);
+    }
+
+    /// The distance from (cx, cy) to the nearest spiral core / R.
+    pub fn nearest_spiral_core(&self, cx: f64, cy: f64, l: usize, r: f64) -> Option<f64> {
+        nearest(&self.spiral_cores, cx, cy, l, r)
+    }
+
     /// The measures about (cx, cy), as a row of hole `hole`, `k` frames before.
-    fn measure(&self, hole: usize, k: usize, cx: f64, cy: f64, l: usize, r: f64) -> Precursor {
+    pub fn measure(&self, hole: usize, k: usize, cx: f64, cy: f64, l: usize, r: f64) -> Precursor {
         let mut d: Vec<(f64, f64)> =
             self.plus_half.iter().map(|&(x, y, psi)| (periodic_distance(x, y, cx, cy, l) / r, psi)).collect();
         d.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let nearest = |pts: &[(f64, f64)]| {
-            pts.iter().map(|&(x, y)| periodic_distance(x, y, cx, cy, l) / r).min_by(f64::total_cmp)
-        };
         let near = max_within(&self.strain_rate, l, cx, cy, 0.5 * r);
         let all = self.strain_rate.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         Precursor {
             hole,
             frames_before: k,
-            spiral_core: nearest(&self.spiral_cores),
+            spiral_core: self.nearest_spiral_core(cx, cy, l, r),
             plus_half: [d.first().map(|p| p.0), d.get(1).map(|p| p.0)],
             plus_half_angle: match (d.first(), d.get(1)) {
                 (Some(a), Some(b)) if a.1.is_finite() && b.1.is_finite() => Some(polar_angle_between(a.1, b.1)),
                 _ => None,
             },
-            minus_half: nearest(&self.minus_half),
+            minus_half: nearest(&self.minus_half, cx, cy, l, r),
             strain_rate: near / all,
         }
     }
+}
+
+/// The distance from (cx, cy) to the nearest of `pts` / R.
+fn nearest(pts: &[(f64, f64)], cx: f64, cy: f64, l: usize, r: f64) -> Option<f64> {
+    pts.iter().map(|&(x, y)| periodic_distance(x, y, cx, cy, l) / r).min_by(f64::total_cmp)
+}
+
+/// One frame's points and its random sites.
+#[derive(Clone, Debug, Default)]
+struct Past {
+    points: FramePoints,
+    chance: Vec<(f64, f64)>,
 }
 
 /// Keeps the last [`DEPTH`] + 1 frames and measures each nucleation against them.
@@ -109,13 +134,7 @@ impl Precursors {
     pub fn push(&mut self, a: &Analysis, tracker: &HoleTracker) {
         // Reuse the oldest frame's buffers for the newest.
         let mut now = if self.past.len() > DEPTH { self.past.pop_back().expect("non-empty") } else { Past::default() };
-        now.spiral_cores.clear();
-        now.spiral_cores.extend(a.spiral_cores().map(|p| (p.x, p.y)));
-        now.plus_half.clear();
-        now.plus_half.extend(a.defects.iter().filter(|d| d.twice_charge > 0).map(|d| (d.x, d.y, d.orientation)));
-        now.minus_half.clear();
-        now.minus_half.extend(a.defects.iter().filter(|d| d.twice_charge < 0).map(|d| (d.x, d.y)));
-        now.strain_rate.clone_from(&a.strain_rate);
+        now.points.take(a);
         let (l, r) = (a.l, a.radius);
         let lf = l as f64;
         now.chance.clear();
@@ -129,9 +148,9 @@ impl Precursors {
             let &(_, _, cx, cy) = &tracker.holes[h].history[0];
             let id = tracker.holes[h].id;
             for (k, past) in self.past.iter().enumerate() {
-                self.rows.push(past.measure(id, k, cx, cy, l, r));
+                self.rows.push(past.points.measure(id, k, cx, cy, l, r));
                 for &(x, y) in &past.chance {
-                    self.chance.push(past.measure(id, k, x, y, l, r));
+                    self.chance.push(past.points.measure(id, k, x, y, l, r));
                 }
             }
         }
@@ -144,7 +163,7 @@ fn uniform(rng: &mut ChaCha8Rng) -> f64 {
 }
 
 /// The largest value of `f` at sites within `radius` of (cx, cy) on the periodic box.
-fn max_within(f: &[f64], l: usize, cx: f64, cy: f64, radius: f64) -> f64 {
+pub fn max_within(f: &[f64], l: usize, cx: f64, cy: f64, radius: f64) -> f64 {
     let li = l as i64;
     let reach = radius.ceil() as i64 + 1;
     let (x0, y0) = (cx.round() as i64, cy.round() as i64);

@@ -6,7 +6,8 @@
 //! - [`runner`]: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume);
 //! - [`sweep`]: a grid of runs, one per core, resumable, its summary and regime map;
 //! - [`figures`]: `monolayer figures`, the paper's figures from one plan of runs, here or on Slurm;
-//! - [`offline`]: `monolayer analyze`, the tables of a run's frames; [`plots`]: its figures.
+//! - [`offline`]: `monolayer analyze`, the tables of a run's frames; [`plots`]: its figures;
+//! - [`forecast`]: `monolayer forecast`, thinning, matched chance and the held-out hole forecast.
 //!
 //! Uses `model` and `analysis`; nothing below it uses this layer.
 
@@ -14,6 +15,7 @@ pub mod bench;
 pub mod config;
 pub mod figures;
 pub mod files;
+pub mod forecast;
 pub mod offline;
 pub mod plots;
 pub mod runner;
