@@ -597,6 +597,8 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
 }
 
 fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), String> {
+    // Before the relaxation, which may take long: the write would refuse it at the end.
+    files::replaceable(&a.out)?;
     let params = a.params.params()?;
     let steps = params.relax_steps;
     let key = relaxation_key(&params, a.seed);

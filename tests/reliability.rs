@@ -1023,3 +1023,68 @@ fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
         assert_eq!(RunRecord::load(&out.join("runs").join(run)).unwrap().status, RunStatus::Finished);
     }
 }
+
+// ---- Outputs renamed into place ----
+
+fn mkfifo(path: &Path) {
+    assert!(Command::new("mkfifo").arg(path).status().unwrap().success(), "mkfifo {}", path.display());
+}
+
+fn is_fifo(path: &Path) -> bool {
+    use std::os::unix::fs::FileTypeExt;
+    fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_fifo())
+}
+
+fn relaxed_state(out: &Path) -> Output {
+    monolayer(&[
+        "relaxed-state",
+        "--set",
+        "box_size=48",
+        "--set",
+        "n_cells=10",
+        "--relax-steps",
+        "50",
+        "--out",
+        arg(out),
+    ])
+}
+
+/// A rename replaces whatever is at its target: an output path that is a FIFO (or a device, or a
+/// link to one) is refused and left as it is; a link to a regular file is written through.
+#[test]
+fn an_output_that_is_not_a_regular_file_is_refused_and_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("fifo");
+    mkfifo(&fifo);
+    refused(&relaxed_state(&fifo), &[arg(&fifo), "a FIFO", "not a regular file"]);
+    assert!(is_fifo(&fifo), "the FIFO was replaced");
+
+    let link = dir.path().join("link");
+    std::os::unix::fs::symlink(&fifo, &link).unwrap();
+    refused(&relaxed_state(&link), &[arg(&link), "a symbolic link to a FIFO"]);
+    assert!(fs::symlink_metadata(&link).unwrap().file_type().is_symlink() && is_fifo(&fifo));
+
+    let dangling = dir.path().join("dangling");
+    std::os::unix::fs::symlink(dir.path().join("nothing"), &dangling).unwrap();
+    refused(&relaxed_state(&dangling), &[arg(&dangling), "symbolic link to nothing"]);
+
+    let file = dir.path().join("state.bin");
+    fs::write(&file, "old").unwrap();
+    let to_file = dir.path().join("to_file");
+    std::os::unix::fs::symlink(&file, &to_file).unwrap();
+    ok(&relaxed_state(&to_file));
+    assert!(fs::symlink_metadata(&to_file).unwrap().file_type().is_symlink(), "the link was replaced");
+    assert!(fs::read(&file).unwrap().len() > 100, "the state was not written through the link");
+
+    // `analyze` moves its tables in as one set: a FIFO among them is refused before any is moved.
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let analysis = dir.path().join("a");
+    fs::create_dir_all(&analysis).unwrap();
+    let holes = analysis.join("holes.csv");
+    mkfifo(&holes);
+    refused(&analyzed(&run, &analysis), &[arg(&holes), "a FIFO"]);
+    assert!(is_fifo(&holes));
+    let left: Vec<_> = fs::read_dir(&analysis).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left, ["holes.csv"], "files moved in beside the refused one");
+}

@@ -43,6 +43,7 @@ pub fn checkpoint_path(dir: &Path) -> PathBuf {
 /// beside `run --analyze`) never rename each other's half-written files.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoResult<()>) -> IoResult<()> {
     static CALLS: AtomicU64 = AtomicU64::new(0);
+    let path = &replaceable(path)?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path.file_name().ok_or_else(|| err(path, "not a file name"))?.to_string_lossy();
     let call = CALLS.fetch_add(1, Ordering::Relaxed);
@@ -61,6 +62,64 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
         let _ = fs::remove_file(&tmp);
         err(path, e)
     })
+}
+
+/// The file a rename into `path` replaces: `path` itself, or the regular file a symbolic link
+/// there points to (so that the link is written through, not replaced). A rename replaces
+/// whatever is at its target, so anything else (a device such as `/dev/null`, a FIFO, a
+/// directory, a link to one of those or to nothing) is refused before a byte is written.
+pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
+    let link = match fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
+        Err(e) => return Err(err(path, e)),
+        Ok(m) => m.file_type().is_symlink(),
+    };
+    let target = match fs::metadata(path) {
+        Ok(m) => m,
+        Err(e) if link => {
+            return Err(err(path, format!("a symbolic link to nothing readable ({e}): refused as an output file")))
+        }
+        Err(e) => return Err(err(path, e)),
+    };
+    if !target.is_file() {
+        let kind = file_kind(&target.file_type());
+        let via = if link { "a symbolic link to " } else { "" };
+        return Err(err(
+            path,
+            format!(
+                "exists and is {via}{kind}, not a regular file: it would be replaced by this output; give the path \
+                 of a regular file or of none"
+            ),
+        ));
+    }
+    if link {
+        return fs::canonicalize(path).map_err(|e| err(path, e));
+    }
+    Ok(path.to_path_buf())
+}
+
+fn file_kind(t: &fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
 }
 
 /// Removes the temporary files a killed writer left in `dir` (call it holding the directory's
