@@ -15,7 +15,7 @@ use monolayer::run::files::{self, RunStatus};
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
 use monolayer::run::runner::{Engine, Event, RunDir};
-use monolayer::run::sweep::{measure_existing, run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
+use monolayer::run::sweep::{jobs_of_runs, measure_existing, run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
 use monolayer::{Monolayer, Params, Phase};
 
 #[derive(Parser)]
@@ -245,7 +245,9 @@ struct SweepArgs {
     grid: Vec<String>,
     /// Run nothing: measure the runs already in OUT/runs (finished or part way) and write the
     /// tables and the regime map, which counts only the runs that ended. For a look at a sweep
-    /// that is still running, or a map over runs made by several sweeps.
+    /// that is still running, or a map over runs made by several sweeps. Given no sweep (no FILE,
+    /// --grid, --point, --set, --seeds or --frame-interval): every run in OUT/runs, with the
+    /// parameters its run.json records.
     #[arg(long)]
     tables_only: bool,
     /// One point instead of a grid (repeatable; every point sets the same parameters):
@@ -456,6 +458,26 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     }
     if let Some(fi) = a.frame_interval {
         spec.frame_interval = fi;
+    }
+    let no_sweep = a.file.is_none()
+        && a.grid.is_empty()
+        && a.point.is_empty()
+        && a.set.is_empty()
+        && a.seeds.is_none()
+        && a.frame_interval.is_none();
+    if a.tables_only && no_sweep {
+        let jobs = jobs_of_runs(&a.out)?;
+        let summaries = measure_existing(&jobs, &a.out)?;
+        let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
+        eprintln!(
+            "sweep --tables-only: {} runs in {}, {complete} of them ended",
+            summaries.len(),
+            a.out.join("runs").display()
+        );
+        for path in write_tables(&a.out, &summaries)? {
+            println!("{}", path.display());
+        }
+        return Ok(());
     }
     let jobs = spec.jobs()?;
     if a.tables_only {

@@ -1088,3 +1088,42 @@ fn an_output_that_is_not_a_regular_file_is_refused_and_kept() {
     let left: Vec<_> = fs::read_dir(&analysis).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(left, ["holes.csv"], "files moved in beside the refused one");
 }
+
+// ---- Tables of the runs a sweep directory holds ----
+
+/// `sweep --tables-only` given no grid measures every run in OUT/runs with the parameters its
+/// run.json records, the grid values read from the runs' names.
+#[test]
+fn tables_only_without_a_grid_measures_the_runs_in_the_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let sweep = |extra: &[&str]| {
+        let mut args = vec!["sweep", "--quiet", "--jobs", "1", "--out", arg(&out)];
+        args.extend_from_slice(extra);
+        monolayer(&args)
+    };
+    ok(&sweep(&[
+        "--grid",
+        "zeta=0.2,0.4",
+        "--frame-interval",
+        "50",
+        "--set",
+        "box_size=48",
+        "--set",
+        "n_cells=6",
+        "--set",
+        "relax_steps=100",
+        "--set",
+        "active_steps=100",
+    ]));
+    let before = (lines(&out.join("summary.csv")), lines(&out.join("regimes.csv")));
+    assert_eq!(before.0.len(), 3, "{:?}", before.0);
+    let o = sweep(&["--tables-only"]);
+    ok(&o);
+    assert!(stderr(&o).contains("2 runs in"), "{}", stderr(&o));
+    let after = (lines(&out.join("summary.csv")), lines(&out.join("regimes.csv")));
+    assert_eq!(after.0.len(), 3, "{:?}", after.0);
+    assert!(after.0[0].starts_with("run,zeta,seed,"), "{}", after.0[0]);
+    assert!(after.0[1].starts_with("zeta0.2_seed1,0.2,1,") && after.0[2].starts_with("zeta0.4_seed1,0.4,1,"));
+    assert_eq!(after, before, "the tables changed");
+}
