@@ -66,6 +66,7 @@ fn with_file_size_limit(blocks_of_512: u32, args: &[&str]) -> Output {
 enum Npy {
     I(ArrayD<i64>),
     F(ArrayD<f64>),
+    U(ArrayD<u8>),
 }
 
 fn read_npz(path: &Path) -> Vec<(String, Npy)> {
@@ -77,7 +78,10 @@ fn read_npz(path: &Path) -> Vec<(String, Npy)> {
             let name = n.trim_end_matches(".npy").to_string();
             let a = match z.by_name::<ndarray::OwnedRepr<i64>, IxDyn>(&name) {
                 Ok(a) => Npy::I(a),
-                Err(_) => Npy::F(z.by_name::<ndarray::OwnedRepr<f64>, IxDyn>(&name).unwrap()),
+                Err(_) => match z.by_name::<ndarray::OwnedRepr<u8>, IxDyn>(&name) {
+                    Ok(a) => Npy::U(a),
+                    Err(_) => Npy::F(z.by_name::<ndarray::OwnedRepr<f64>, IxDyn>(&name).unwrap()),
+                },
             };
             (name, a)
         })
@@ -90,6 +94,7 @@ fn write_npz(path: &Path, arrays: &[(String, Npy)]) {
         match a {
             Npy::I(a) => z.add_array(name.as_str(), a).unwrap(),
             Npy::F(a) => z.add_array(name.as_str(), a).unwrap(),
+            Npy::U(a) => z.add_array(name.as_str(), a).unwrap(),
         }
     }
     z.finish().unwrap();
@@ -422,11 +427,12 @@ fn analyze_refuses_damaged_foreign_and_duplicate_frames() {
         match a {
             Npy::I(x) => *x = x.slice_axis(ndarray::Axis(0), (0..keep).into()).to_owned(),
             Npy::F(x) => *x = x.slice_axis(ndarray::Axis(0), (0..keep).into()).to_owned(),
+            Npy::U(_) => unreachable!("a frame holds no bytes"),
         }
     }
     let offsets = match &arrays.iter().find(|(n, _)| n == "phi_offsets").unwrap().1 {
         Npy::I(x) => x[[3]] as usize,
-        Npy::F(_) => unreachable!(),
+        Npy::F(_) | Npy::U(_) => unreachable!(),
     };
     for (name, a) in arrays.iter_mut() {
         if let (true, Npy::F(x)) = (name == "phi", a) {
@@ -917,20 +923,20 @@ fn absurd_finite_inputs_are_refused() {
     // A frame with φ = 1e300 (analysed into NaN before).
     edit_npz(&frame_path(&run, 150), "phi", |a| match a {
         Npy::F(a) => a[[0]] = 1e300,
-        Npy::I(_) => unreachable!(),
+        Npy::I(_) | Npy::U(_) => unreachable!(),
     });
     refused(&analyzed(&run, &dir.path().join("a")), &["frame_0000150.npz", "`phi`"]);
     // φ = 3 is finite and small, and still no φ a run leaves.
     edit_npz(&frame_path(&run, 150), "phi", |a| match a {
         Npy::F(a) => a[[0]] = 3.0,
-        Npy::I(_) => unreachable!(),
+        Npy::I(_) | Npy::U(_) => unreachable!(),
     });
     refused(&analyzed(&run, &dir.path().join("a")), &["frame_0000150.npz", "φ = 3"]);
     // A checkpoint whose substrate map is ≤ 0.
     edit_record(&run, |v| v["status"] = "running".into());
     edit_npz(&checkpoint_path(&run), "substrate", |a| match a {
         Npy::F(a) => a[[3, 4]] = -1.0,
-        Npy::I(_) => unreachable!(),
+        Npy::I(_) | Npy::U(_) => unreachable!(),
     });
     refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["`substrate`", "> 0"]);
     // The relaxed-state decoder: NaN, a 0-wide patch, a step past any run.
@@ -1126,4 +1132,37 @@ fn tables_only_without_a_grid_measures_the_runs_in_the_directory() {
     assert!(after.0[0].starts_with("run,zeta,seed,"), "{}", after.0[0]);
     assert!(after.0[1].starts_with("zeta0.2_seed1,0.2,1,") && after.0[2].starts_with("zeta0.4_seed1,0.4,1,"));
     assert_eq!(after, before, "the tables changed");
+}
+
+// ---- A checkpoint belongs to its parameters ----
+
+/// A run whose run.json was edited after it stopped is refused on resume, naming the parameter,
+/// where it would have continued one trajectory under another's parameters; a checkpoint written
+/// before checkpoints held their parameters still resumes.
+#[test]
+fn a_resume_under_edited_parameters_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 100, &[]));
+    killed_at(&run, 150);
+    let saved = fs::read_to_string(run.join("run.json")).unwrap();
+    let resume = || monolayer(&["run", "--quiet", "--resume", arg(&run)]);
+    for (key, value) in [("gamma", serde_json::json!(0.07)), ("relax_steps", 50.into()), ("seed", 2.into())] {
+        edit_record(&run, |v| match key {
+            "seed" => v["seed"] = value.clone(),
+            _ => v["params"][key] = value.clone(),
+        });
+        refused(&resume(), &[&format!("`{key}` = {value}"), "checkpoint.npz", "run.json"]);
+        fs::write(run.join("run.json"), &saved).unwrap();
+    }
+    // A longer run continues the same trajectory.
+    edit_record(&run, |v| v["params"]["active_steps"] = 150.into());
+    ok(&resume());
+    assert!(frame_path(&run, 250).exists());
+    killed_at(&run, 150);
+    let mut arrays = read_npz(&checkpoint_path(&run));
+    arrays.retain(|(name, _)| name != "run_params");
+    write_npz(&checkpoint_path(&run), &arrays);
+    ok(&resume());
+    assert_eq!(RunRecord::load(&run).unwrap().status, RunStatus::Finished);
 }

@@ -433,8 +433,16 @@ pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
     write_atomic(path, |w| w.write_all(&bytes).map_err(|x| err(path, x)))
 }
 
+/// The array of a checkpoint that holds the seed and parameters it was stepped with (JSON text as
+/// bytes): a resume under other ones would continue another trajectory from this state.
+const RUN_PARAMS: &str = "run_params";
+
+fn run_params_json(params: &Params, seed: u64) -> serde_json::Value {
+    serde_json::json!({ "seed": seed, "params": params })
+}
+
 /// Writes the exact state (f64 bits, padded patches, the solver's warm start and corrector
-/// shift).
+/// shift), and the seed and parameters it belongs to.
 pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     let s = m.state();
     let l = m.params().box_size;
@@ -449,7 +457,9 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     let warm = complex_field(&s.warm_start, l);
     let shift = complex_field(&s.corrector_shift, l);
     let substrate = Array2::from_shape_vec((l, l), s.substrate.clone()).expect("L×L");
+    let key = run_params_json(m.params(), m.seed()).to_string().into_bytes();
     write_npz(path, |z| {
+        z.add_array(RUN_PARAMS, &Array1::from(key))?;
         z.add_array("step", &arr0(s.step as i64))?;
         z.add_array("patches", &patches)?;
         z.add_array("phi_padded", &Array1::from(phi))?;
@@ -528,6 +538,49 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
         corrector_shift: complex(&shift),
         substrate: substrate.iter().copied().collect(),
     })
+}
+
+/// Checks that the checkpoint at `path` was written with the seed and parameters of `record`,
+/// naming the first that differs: `run.json` edited after the run started would otherwise
+/// continue one trajectory under another's parameters. Checkpoints written before they held
+/// their parameters are not checked.
+pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> {
+    check_npz_file_headers(path, frame_file::max_array_values(record.params.box_size))?;
+    let file = File::open(path).map_err(|e| err(path, e))?;
+    let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
+    let has_key = z.names().map_err(|x| err(path, x))?.iter().any(|n| n.trim_end_matches(".npy") == RUN_PARAMS);
+    if !has_key {
+        return Ok(());
+    }
+    let bytes: Array1<u8> = z.by_name(RUN_PARAMS).map_err(|x| err(path, format!("array `{RUN_PARAMS}`: {x}")))?;
+    let stored: serde_json::Value = serde_json::from_slice(&bytes.to_vec())
+        .map_err(|x| err(path, format!("array `{RUN_PARAMS}`: not the JSON of a run's parameters: {x}")))?;
+    let given = run_params_json(&record.params, record.seed);
+    let mut pairs = vec![("seed".to_string(), stored.get("seed"), given.get("seed"))];
+    if let Some(table) = given.get("params").and_then(|p| p.as_object()) {
+        // `active_steps` says only where the trajectory ends: raising it extends the same run.
+        for (k, v) in table.iter().filter(|(k, _)| *k != "active_steps") {
+            pairs.push((k.clone(), stored.get("params").and_then(|p| p.get(k)), Some(v)));
+        }
+    }
+    // A parameter newer than the checkpoint is not in it, and has its default there.
+    let differs = pairs.into_iter().find(|(_, s, g)| s.is_some() && s != g);
+    match differs {
+        None => Ok(()),
+        Some((k, s, g)) => {
+            let show = |v: Option<&serde_json::Value>| v.map(|v| v.to_string()).unwrap_or_default();
+            Err(format!(
+                "{}: `{k}` = {} there, but the checkpoint {} was written with {k} = {}: a run continues only with \
+                 the parameters it started with (was run.json edited?); restore `{k}` to {}, or start a new run \
+                 with these parameters in another --out",
+                RunRecord::path(path.parent().unwrap_or(Path::new("."))).display(),
+                show(g),
+                path.display(),
+                show(s),
+                show(s)
+            ))
+        }
+    }
 }
 
 pub use super::config::load_params;
