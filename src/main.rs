@@ -173,6 +173,22 @@ struct ParamArgs {
 
 impl ParamArgs {
     fn params(&self) -> Result<Params, String> {
+        // A flag beside a --set of its parameter: whichever is applied last would win unsaid.
+        let flags = [
+            ("--chi", "xi_substrate", self.chi.map(|v| v.to_string())),
+            ("--zeta", "zeta", self.zeta.map(|v| v.to_string())),
+            ("--steps", "active_steps", self.steps.map(|v| v.to_string())),
+            ("--relax-steps", "relax_steps", self.relax_steps.map(|v| v.to_string())),
+        ];
+        for s in &self.set {
+            let (k, _) = parse_assignment("--set", s)?;
+            if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
+                return Err(format!(
+                    "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
+                    if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
+                ));
+            }
+        }
         let mut p = load_params(self.config.as_deref(), &self.set)?;
         if let Some(z) = self.zeta {
             p.zeta = z;

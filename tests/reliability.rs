@@ -1166,3 +1166,41 @@ fn a_resume_under_edited_parameters_is_refused_by_name() {
     ok(&resume());
     assert_eq!(RunRecord::load(&run).unwrap().status, RunStatus::Finished);
 }
+
+// ---- One value per parameter ----
+
+/// A parameter given twice, by a flag and `--set` or by a sweep's base and its grid, is refused
+/// by name in either order, where one of the two used to be dropped unsaid.
+#[test]
+fn a_parameter_set_twice_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r");
+    // Small, so that a regression that starts the run ends soon.
+    let tiny = ["--set", "box_size=48", "--set", "n_cells=6", "--set", "relax_steps=5"];
+    for args in [
+        ["--chi", "0.1", "--set", "xi_substrate=0.5", "--steps", "5"],
+        ["--set", "xi_substrate=0.5", "--chi", "0.1", "--steps", "5"],
+        ["--zeta", "0.3", "--set", "zeta=0.4", "--steps", "5"],
+        ["--set", "active_steps=10", "--steps", "20", "--zeta", "0.3"],
+    ] {
+        let mut run = vec!["run", "--quiet", "--frame-interval", "5", "--out", arg(&out)];
+        run.extend(tiny);
+        run.extend(args);
+        let key = args.iter().find_map(|a| a.split_once('=')).unwrap().0;
+        refused(&monolayer(&run), &[&format!("`{key}`"), "give one of them"]);
+        assert!(!out.exists(), "{args:?}: a run was started");
+    }
+    let sweep = dir.path().join("s");
+    let mut args = vec!["sweep", "--quiet", "--jobs", "1", "--frame-interval", "5", "--out", arg(&sweep)];
+    args.extend(tiny);
+    args.extend(["--set", "active_steps=5", "--grid", "gamma=0.06", "--set", "gamma=0.08"]);
+    refused(&monolayer(&args), &["`gamma`", "[base]", "the grid"]);
+    let file = dir.path().join("s.toml");
+    let base = "frame_interval = 5\n[base]\nbox_size = 48\nn_cells = 6\nrelax_steps = 5\nactive_steps = 5\n";
+    fs::write(&file, format!("{base}gamma = 0.08\n[[points]]\ngamma = 0.06\nzeta = 0.3\n")).unwrap();
+    refused(
+        &monolayer(&["sweep", arg(&file), "--quiet", "--jobs", "1", "--out", arg(&sweep)]),
+        &["`gamma`", "the points"],
+    );
+    assert!(!sweep.exists(), "a sweep was started");
+}

@@ -199,6 +199,16 @@ impl SweepSpec {
                         the other): give one of them"
                 .into());
         }
+        // A grid or point value replaces the base's: one of the two would be dropped unsaid.
+        if let Some(k) =
+            self.base.keys().find(|k| self.grid.contains_key(*k) || self.points.iter().any(|p| p.contains_key(*k)))
+        {
+            let by = if self.grid.contains_key(k) { "the grid" } else { "the points" };
+            return Err(format!(
+                "sweep: `{k}` is set both by [base] (or --set) and by {by}, whose value would replace the base's: give \
+                 it in one of them"
+            ));
+        }
         let runs = axes
             .iter()
             .try_fold(self.points.len().max(1).saturating_mul(self.seeds.len()), |n, (_, v)| n.checked_mul(v.len()))
