@@ -1204,3 +1204,38 @@ fn a_parameter_set_twice_is_refused_by_name() {
     );
     assert!(!sweep.exists(), "a sweep was started");
 }
+
+// ---- Frames a run did not write ----
+
+/// Two files of one step: the error says to remove the one whose name this run does not write,
+/// not its own.
+#[test]
+fn a_duplicate_step_names_the_file_the_run_did_not_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let foreign = run.join("frames").join("frame_150.npz");
+    fs::copy(frame_path(&run, 150), &foreign).unwrap();
+    let e = RunFrames::open(&run).unwrap_err();
+    let own = frame_path(&run, 150);
+    assert!(e.contains(&format!("did not write ({}; its own is {})", foreign.display(), own.display())), "{e}");
+}
+
+/// Frames missing in the middle of a run would be measured as one frame interval; refused,
+/// naming the steps, as is a frame off the run's schedule.
+#[test]
+fn analyze_refuses_a_gap_in_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 150, &[]));
+    let out = dir.path().join("a");
+    let off = run.join("frames").join("frame_0000175.npz");
+    fs::copy(frame_path(&run, 150), &off).unwrap();
+    refused(&analyzed(&run, &out), &["frame_0000175.npz", "not a frame interval after", "frame_interval = 50"]);
+    fs::remove_file(&off).unwrap();
+    for step in [150, 200] {
+        fs::remove_file(frame_path(&run, step)).unwrap();
+    }
+    refused(&analyzed(&run, &out), &["frames missing at steps 150, 200", "frame_interval = 50"]);
+    assert!(!out.exists());
+}

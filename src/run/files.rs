@@ -642,12 +642,43 @@ impl RunFrames {
         }
         frames.sort();
         if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
+            let step = w[0].0;
+            let own = frame_path(dir, step);
+            let foreign: Vec<String> =
+                frames.iter().filter(|f| f.0 == step && f.1 != own).map(|f| f.1.display().to_string()).collect();
             return Err(format!(
-                "{} and {} both hold step {}: remove the one this run did not write ({})",
+                "{} and {} both hold step {step}: remove what this run did not write ({}; its own is {})",
                 w[0].1.display(),
                 w[1].1.display(),
-                w[0].0,
-                frame_path(dir, w[0].0).display()
+                foreign.join(", "),
+                own.display()
+            ));
+        }
+        // A gap would be measured as one frame interval: holes would seem to open and close
+        // faster, and a lifetime would end early. The frames need not start at the end of the
+        // relaxation (a page's download holds only its last).
+        let fi = record.frame_interval;
+        if let Some(w) = frames.windows(2).find(|w| w[1].0 - w[0].0 != fi) {
+            let (a, b) = (w[0].0, w[1].0);
+            if (b - a) % fi != 0 {
+                return Err(format!(
+                    "{}: step {b} is not a frame interval after the frame before it ({}, step {a}; run.json: \
+                     frame_interval = {fi}): not a frame of this run",
+                    w[1].1.display(),
+                    w[0].1.display()
+                ));
+            }
+            let missing: Vec<u64> = (1..(b - a) / fi).map(|k| a + k * fi).collect();
+            let shown: Vec<String> = missing.iter().take(10).map(u64::to_string).collect();
+            let more = if missing.len() > 10 { format!(" and {} more", missing.len() - 10) } else { String::new() };
+            return Err(format!(
+                "{}: frames missing at step{} {}{more}, between {} and {} (run.json: a frame every frame_interval = \
+                 {fi} steps): restore them, or move the frames after the gap out of the run to measure up to it",
+                frames_dir.display(),
+                if missing.len() == 1 { "" } else { "s" },
+                shown.join(", "),
+                w[0].1.display(),
+                w[1].1.display()
             ));
         }
         Ok(RunFrames { dir: dir.to_path_buf(), record, frames })
