@@ -1239,3 +1239,24 @@ fn analyze_refuses_a_gap_in_the_frames() {
     refused(&analyzed(&run, &out), &["frames missing at steps 150, 200", "frame_interval = 50"]);
     assert!(!out.exists());
 }
+
+/// NaN or inf in any array of a frame, the ones the analysis recomputes from φ included, is
+/// refused naming the file and the array.
+#[test]
+fn analyze_refuses_nan_in_every_array_of_a_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let out = dir.path().join("a");
+    let frame = frame_path(&run, 150);
+    let saved = fs::read(&frame).unwrap();
+    for (array, value) in [("phi_sum", f64::NAN), ("centres", f64::NAN), ("areas", f64::INFINITY)] {
+        edit_npz(&frame, array, |a| match a {
+            Npy::F(a) => *a.iter_mut().nth(3).unwrap() = value,
+            _ => panic!("{array} is not f64"),
+        });
+        refused(&analyzed(&run, &out), &["frame_0000150.npz", &format!("array `{array}` holds {value}")]);
+        fs::write(&frame, &saved).unwrap();
+    }
+    ok(&analyzed(&run, &out));
+}
