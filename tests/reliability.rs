@@ -1260,3 +1260,20 @@ fn analyze_refuses_nan_in_every_array_of_a_frame() {
     }
     ok(&analyzed(&run, &out));
 }
+
+// ---- Temporaries of a killed sweep ----
+
+/// A sweep's tables are written through temporaries in OUT; those of a sweep killed with -9
+/// are removed by the next one, a living writer's are left.
+#[test]
+fn a_sweep_removes_the_temporaries_of_dead_writers() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    fs::create_dir_all(&out).unwrap();
+    let dead = out.join(".summary.csv.999999999.0.tmp");
+    let alive = out.join(format!(".regimes.csv.{}.0.tmp", std::process::id()));
+    fs::write(&dead, "x").unwrap();
+    fs::write(&alive, "x").unwrap();
+    ok(&monolayer(&["sweep", "--out", arg(&out), "--tables-only", "--grid", "zeta=0.2"]));
+    assert!(!dead.exists() && alive.exists());
+}

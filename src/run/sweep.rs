@@ -851,6 +851,9 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
 /// Writes `OUT/summary.csv`, `OUT/regimes.csv` (and the regime map plot where the grid has χ
 /// and ζ); returns the files written.
 pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, String> {
+    // A sweep takes no lock on OUT (several shards write these tables), so only the temporaries
+    // of writers no longer alive are taken.
+    crate::run::files::remove_dead_temporaries(out);
     let (runs, regimes) = tables(summaries);
     let mut written = Vec::new();
     for (name, text) in [("summary.csv", runs), ("regimes.csv", regimes)] {
