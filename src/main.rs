@@ -15,7 +15,7 @@ use monolayer::run::files::{self, RunStatus};
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
 use monolayer::run::runner::{Engine, Event, RunDir};
-use monolayer::run::sweep::{measure_existing, run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
+use monolayer::run::sweep::{jobs_of_runs, measure_existing, run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
 use monolayer::{Monolayer, Params, Phase};
 
 #[derive(Parser)]
@@ -195,6 +195,22 @@ struct ParamArgs {
 
 impl ParamArgs {
     fn params(&self) -> Result<Params, String> {
+        // A flag beside a --set of its parameter: whichever is applied last would win unsaid.
+        let flags = [
+            ("--chi", "xi_substrate", self.chi.map(|v| v.to_string())),
+            ("--zeta", "zeta", self.zeta.map(|v| v.to_string())),
+            ("--steps", "active_steps", self.steps.map(|v| v.to_string())),
+            ("--relax-steps", "relax_steps", self.relax_steps.map(|v| v.to_string())),
+        ];
+        for s in &self.set {
+            let (k, _) = parse_assignment("--set", s)?;
+            if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
+                return Err(format!(
+                    "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
+                    if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
+                ));
+            }
+        }
         let mut p = load_params(self.config.as_deref(), &self.set)?;
         if let Some(z) = self.zeta {
             p.zeta = z;
@@ -267,7 +283,9 @@ struct SweepArgs {
     grid: Vec<String>,
     /// Run nothing: measure the runs already in OUT/runs (finished or part way) and write the
     /// tables and the regime map, which counts only the runs that ended. For a look at a sweep
-    /// that is still running, or a map over runs made by several sweeps.
+    /// that is still running, or a map over runs made by several sweeps. Given no sweep (no FILE,
+    /// --grid, --point, --set, --seeds or --frame-interval): every run in OUT/runs, with the
+    /// parameters its run.json records.
     #[arg(long)]
     tables_only: bool,
     /// One point instead of a grid (repeatable; every point sets the same parameters):
@@ -480,6 +498,26 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     if let Some(fi) = a.frame_interval {
         spec.frame_interval = fi;
     }
+    let no_sweep = a.file.is_none()
+        && a.grid.is_empty()
+        && a.point.is_empty()
+        && a.set.is_empty()
+        && a.seeds.is_none()
+        && a.frame_interval.is_none();
+    if a.tables_only && no_sweep {
+        let jobs = jobs_of_runs(&a.out)?;
+        let summaries = measure_existing(&jobs, &a.out)?;
+        let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
+        eprintln!(
+            "sweep --tables-only: {} runs in {}, {complete} of them ended",
+            summaries.len(),
+            a.out.join("runs").display()
+        );
+        for path in write_tables(&a.out, &summaries)? {
+            println!("{}", path.display());
+        }
+        return Ok(());
+    }
     let jobs = spec.jobs()?;
     if a.tables_only {
         let summaries = measure_existing(&jobs, &a.out)?;
@@ -620,6 +658,8 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
 }
 
 fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), String> {
+    // Before the relaxation, which may take long: the write would refuse it at the end.
+    files::replaceable(&a.out)?;
     let params = a.params.params()?;
     let steps = params.relax_steps;
     let key = relaxation_key(&params, a.seed);

@@ -66,6 +66,7 @@ fn with_file_size_limit(blocks_of_512: u32, args: &[&str]) -> Output {
 enum Npy {
     I(ArrayD<i64>),
     F(ArrayD<f64>),
+    U(ArrayD<u8>),
 }
 
 fn read_npz(path: &Path) -> Vec<(String, Npy)> {
@@ -77,7 +78,10 @@ fn read_npz(path: &Path) -> Vec<(String, Npy)> {
             let name = n.trim_end_matches(".npy").to_string();
             let a = match z.by_name::<ndarray::OwnedRepr<i64>, IxDyn>(&name) {
                 Ok(a) => Npy::I(a),
-                Err(_) => Npy::F(z.by_name::<ndarray::OwnedRepr<f64>, IxDyn>(&name).unwrap()),
+                Err(_) => match z.by_name::<ndarray::OwnedRepr<u8>, IxDyn>(&name) {
+                    Ok(a) => Npy::U(a),
+                    Err(_) => Npy::F(z.by_name::<ndarray::OwnedRepr<f64>, IxDyn>(&name).unwrap()),
+                },
             };
             (name, a)
         })
@@ -90,6 +94,7 @@ fn write_npz(path: &Path, arrays: &[(String, Npy)]) {
         match a {
             Npy::I(a) => z.add_array(name.as_str(), a).unwrap(),
             Npy::F(a) => z.add_array(name.as_str(), a).unwrap(),
+            Npy::U(a) => z.add_array(name.as_str(), a).unwrap(),
         }
     }
     z.finish().unwrap();
@@ -422,11 +427,12 @@ fn analyze_refuses_damaged_foreign_and_duplicate_frames() {
         match a {
             Npy::I(x) => *x = x.slice_axis(ndarray::Axis(0), (0..keep).into()).to_owned(),
             Npy::F(x) => *x = x.slice_axis(ndarray::Axis(0), (0..keep).into()).to_owned(),
+            Npy::U(_) => unreachable!("a frame holds no bytes"),
         }
     }
     let offsets = match &arrays.iter().find(|(n, _)| n == "phi_offsets").unwrap().1 {
         Npy::I(x) => x[[3]] as usize,
-        Npy::F(_) => unreachable!(),
+        Npy::F(_) | Npy::U(_) => unreachable!(),
     };
     for (name, a) in arrays.iter_mut() {
         if let (true, Npy::F(x)) = (name == "phi", a) {
@@ -917,20 +923,20 @@ fn absurd_finite_inputs_are_refused() {
     // A frame with φ = 1e300 (analysed into NaN before).
     edit_npz(&frame_path(&run, 150), "phi", |a| match a {
         Npy::F(a) => a[[0]] = 1e300,
-        Npy::I(_) => unreachable!(),
+        Npy::I(_) | Npy::U(_) => unreachable!(),
     });
     refused(&analyzed(&run, &dir.path().join("a")), &["frame_0000150.npz", "`phi`"]);
     // φ = 3 is finite and small, and still no φ a run leaves.
     edit_npz(&frame_path(&run, 150), "phi", |a| match a {
         Npy::F(a) => a[[0]] = 3.0,
-        Npy::I(_) => unreachable!(),
+        Npy::I(_) | Npy::U(_) => unreachable!(),
     });
     refused(&analyzed(&run, &dir.path().join("a")), &["frame_0000150.npz", "φ = 3"]);
     // A checkpoint whose substrate map is ≤ 0.
     edit_record(&run, |v| v["status"] = "running".into());
     edit_npz(&checkpoint_path(&run), "substrate", |a| match a {
         Npy::F(a) => a[[3, 4]] = -1.0,
-        Npy::I(_) => unreachable!(),
+        Npy::I(_) | Npy::U(_) => unreachable!(),
     });
     refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["`substrate`", "> 0"]);
     // The relaxed-state decoder: NaN, a 0-wide patch, a step past any run.
@@ -1022,4 +1028,252 @@ fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
     for run in ["zeta0.2_seed1", "zeta0.4_seed1"] {
         assert_eq!(RunRecord::load(&out.join("runs").join(run)).unwrap().status, RunStatus::Finished);
     }
+}
+
+// ---- Outputs renamed into place ----
+
+fn mkfifo(path: &Path) {
+    assert!(Command::new("mkfifo").arg(path).status().unwrap().success(), "mkfifo {}", path.display());
+}
+
+fn is_fifo(path: &Path) -> bool {
+    use std::os::unix::fs::FileTypeExt;
+    fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_fifo())
+}
+
+fn relaxed_state(out: &Path) -> Output {
+    monolayer(&[
+        "relaxed-state",
+        "--set",
+        "box_size=48",
+        "--set",
+        "n_cells=10",
+        "--relax-steps",
+        "50",
+        "--out",
+        arg(out),
+    ])
+}
+
+/// A rename replaces whatever is at its target: an output path that is a FIFO (or a device, or a
+/// link to one) is refused and left as it is; a link to a regular file is written through.
+#[test]
+fn an_output_that_is_not_a_regular_file_is_refused_and_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("fifo");
+    mkfifo(&fifo);
+    refused(&relaxed_state(&fifo), &[arg(&fifo), "a FIFO", "not a regular file"]);
+    assert!(is_fifo(&fifo), "the FIFO was replaced");
+
+    let link = dir.path().join("link");
+    std::os::unix::fs::symlink(&fifo, &link).unwrap();
+    refused(&relaxed_state(&link), &[arg(&link), "a symbolic link to a FIFO"]);
+    assert!(fs::symlink_metadata(&link).unwrap().file_type().is_symlink() && is_fifo(&fifo));
+
+    let dangling = dir.path().join("dangling");
+    std::os::unix::fs::symlink(dir.path().join("nothing"), &dangling).unwrap();
+    refused(&relaxed_state(&dangling), &[arg(&dangling), "symbolic link to nothing"]);
+
+    let file = dir.path().join("state.bin");
+    fs::write(&file, "old").unwrap();
+    let to_file = dir.path().join("to_file");
+    std::os::unix::fs::symlink(&file, &to_file).unwrap();
+    ok(&relaxed_state(&to_file));
+    assert!(fs::symlink_metadata(&to_file).unwrap().file_type().is_symlink(), "the link was replaced");
+    assert!(fs::read(&file).unwrap().len() > 100, "the state was not written through the link");
+
+    // `analyze` moves its tables in as one set: a FIFO among them is refused before any is moved.
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let analysis = dir.path().join("a");
+    fs::create_dir_all(&analysis).unwrap();
+    let holes = analysis.join("holes.csv");
+    mkfifo(&holes);
+    refused(&analyzed(&run, &analysis), &[arg(&holes), "a FIFO"]);
+    assert!(is_fifo(&holes));
+    let left: Vec<_> = fs::read_dir(&analysis).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left, ["holes.csv"], "files moved in beside the refused one");
+}
+
+// ---- Tables of the runs a sweep directory holds ----
+
+/// `sweep --tables-only` given no grid measures every run in OUT/runs with the parameters its
+/// run.json records, the grid values read from the runs' names.
+#[test]
+fn tables_only_without_a_grid_measures_the_runs_in_the_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let sweep = |extra: &[&str]| {
+        let mut args = vec!["sweep", "--quiet", "--jobs", "1", "--out", arg(&out)];
+        args.extend_from_slice(extra);
+        monolayer(&args)
+    };
+    ok(&sweep(&[
+        "--grid",
+        "zeta=0.2,0.4",
+        "--frame-interval",
+        "50",
+        "--set",
+        "box_size=48",
+        "--set",
+        "n_cells=6",
+        "--set",
+        "relax_steps=100",
+        "--set",
+        "active_steps=100",
+    ]));
+    let before = (lines(&out.join("summary.csv")), lines(&out.join("regimes.csv")));
+    assert_eq!(before.0.len(), 3, "{:?}", before.0);
+    let o = sweep(&["--tables-only"]);
+    ok(&o);
+    assert!(stderr(&o).contains("2 runs in"), "{}", stderr(&o));
+    let after = (lines(&out.join("summary.csv")), lines(&out.join("regimes.csv")));
+    assert_eq!(after.0.len(), 3, "{:?}", after.0);
+    assert!(after.0[0].starts_with("run,zeta,seed,"), "{}", after.0[0]);
+    assert!(after.0[1].starts_with("zeta0.2_seed1,0.2,1,") && after.0[2].starts_with("zeta0.4_seed1,0.4,1,"));
+    assert_eq!(after, before, "the tables changed");
+}
+
+// ---- A checkpoint belongs to its parameters ----
+
+/// A run whose run.json was edited after it stopped is refused on resume, naming the parameter,
+/// where it would have continued one trajectory under another's parameters; a checkpoint written
+/// before checkpoints held their parameters still resumes.
+#[test]
+fn a_resume_under_edited_parameters_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 100, &[]));
+    killed_at(&run, 150);
+    let saved = fs::read_to_string(run.join("run.json")).unwrap();
+    let resume = || monolayer(&["run", "--quiet", "--resume", arg(&run)]);
+    for (key, value) in [("gamma", serde_json::json!(0.07)), ("relax_steps", 50.into()), ("seed", 2.into())] {
+        edit_record(&run, |v| match key {
+            "seed" => v["seed"] = value.clone(),
+            _ => v["params"][key] = value.clone(),
+        });
+        refused(&resume(), &[&format!("`{key}` = {value}"), "checkpoint.npz", "run.json"]);
+        fs::write(run.join("run.json"), &saved).unwrap();
+    }
+    // A longer run continues the same trajectory.
+    edit_record(&run, |v| v["params"]["active_steps"] = 150.into());
+    ok(&resume());
+    assert!(frame_path(&run, 250).exists());
+    killed_at(&run, 150);
+    let mut arrays = read_npz(&checkpoint_path(&run));
+    arrays.retain(|(name, _)| name != "run_params");
+    write_npz(&checkpoint_path(&run), &arrays);
+    ok(&resume());
+    assert_eq!(RunRecord::load(&run).unwrap().status, RunStatus::Finished);
+}
+
+// ---- One value per parameter ----
+
+/// A parameter given twice, by a flag and `--set` or by a sweep's base and its grid, is refused
+/// by name in either order, where one of the two used to be dropped unsaid.
+#[test]
+fn a_parameter_set_twice_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r");
+    // Small, so that a regression that starts the run ends soon.
+    let tiny = ["--set", "box_size=48", "--set", "n_cells=6", "--set", "relax_steps=5"];
+    for args in [
+        ["--chi", "0.1", "--set", "xi_substrate=0.5", "--steps", "5"],
+        ["--set", "xi_substrate=0.5", "--chi", "0.1", "--steps", "5"],
+        ["--zeta", "0.3", "--set", "zeta=0.4", "--steps", "5"],
+        ["--set", "active_steps=10", "--steps", "20", "--zeta", "0.3"],
+    ] {
+        let mut run = vec!["run", "--quiet", "--frame-interval", "5", "--out", arg(&out)];
+        run.extend(tiny);
+        run.extend(args);
+        let key = args.iter().find_map(|a| a.split_once('=')).unwrap().0;
+        refused(&monolayer(&run), &[&format!("`{key}`"), "give one of them"]);
+        assert!(!out.exists(), "{args:?}: a run was started");
+    }
+    let sweep = dir.path().join("s");
+    let mut args = vec!["sweep", "--quiet", "--jobs", "1", "--frame-interval", "5", "--out", arg(&sweep)];
+    args.extend(tiny);
+    args.extend(["--set", "active_steps=5", "--grid", "gamma=0.06", "--set", "gamma=0.08"]);
+    refused(&monolayer(&args), &["`gamma`", "[base]", "the grid"]);
+    let file = dir.path().join("s.toml");
+    let base = "frame_interval = 5\n[base]\nbox_size = 48\nn_cells = 6\nrelax_steps = 5\nactive_steps = 5\n";
+    fs::write(&file, format!("{base}gamma = 0.08\n[[points]]\ngamma = 0.06\nzeta = 0.3\n")).unwrap();
+    refused(
+        &monolayer(&["sweep", arg(&file), "--quiet", "--jobs", "1", "--out", arg(&sweep)]),
+        &["`gamma`", "the points"],
+    );
+    assert!(!sweep.exists(), "a sweep was started");
+}
+
+// ---- Frames a run did not write ----
+
+/// Two files of one step: the error says to remove the one whose name this run does not write,
+/// not its own.
+#[test]
+fn a_duplicate_step_names_the_file_the_run_did_not_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let foreign = run.join("frames").join("frame_150.npz");
+    fs::copy(frame_path(&run, 150), &foreign).unwrap();
+    let e = RunFrames::open(&run).unwrap_err();
+    let own = frame_path(&run, 150);
+    assert!(e.contains(&format!("did not write ({}; its own is {})", foreign.display(), own.display())), "{e}");
+}
+
+/// Frames missing in the middle of a run would be measured as one frame interval; refused,
+/// naming the steps, as is a frame off the run's schedule.
+#[test]
+fn analyze_refuses_a_gap_in_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 150, &[]));
+    let out = dir.path().join("a");
+    let off = run.join("frames").join("frame_0000175.npz");
+    fs::copy(frame_path(&run, 150), &off).unwrap();
+    refused(&analyzed(&run, &out), &["frame_0000175.npz", "not a frame interval after", "frame_interval = 50"]);
+    fs::remove_file(&off).unwrap();
+    for step in [150, 200] {
+        fs::remove_file(frame_path(&run, step)).unwrap();
+    }
+    refused(&analyzed(&run, &out), &["frames missing at steps 150, 200", "frame_interval = 50"]);
+    assert!(!out.exists());
+}
+
+/// NaN or inf in any array of a frame, the ones the analysis recomputes from φ included, is
+/// refused naming the file and the array.
+#[test]
+fn analyze_refuses_nan_in_every_array_of_a_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let out = dir.path().join("a");
+    let frame = frame_path(&run, 150);
+    let saved = fs::read(&frame).unwrap();
+    for (array, value) in [("phi_sum", f64::NAN), ("centres", f64::NAN), ("areas", f64::INFINITY)] {
+        edit_npz(&frame, array, |a| match a {
+            Npy::F(a) => *a.iter_mut().nth(3).unwrap() = value,
+            _ => panic!("{array} is not f64"),
+        });
+        refused(&analyzed(&run, &out), &["frame_0000150.npz", &format!("array `{array}` holds {value}")]);
+        fs::write(&frame, &saved).unwrap();
+    }
+    ok(&analyzed(&run, &out));
+}
+
+// ---- Temporaries of a killed sweep ----
+
+/// A sweep's tables are written through temporaries in OUT; those of a sweep killed with -9
+/// are removed by the next one, a living writer's are left.
+#[test]
+fn a_sweep_removes_the_temporaries_of_dead_writers() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    fs::create_dir_all(&out).unwrap();
+    let dead = out.join(".summary.csv.999999999.0.tmp");
+    let alive = out.join(format!(".regimes.csv.{}.0.tmp", std::process::id()));
+    fs::write(&dead, "x").unwrap();
+    fs::write(&alive, "x").unwrap();
+    ok(&monolayer(&["sweep", "--out", arg(&out), "--tables-only", "--grid", "zeta=0.2"]));
+    assert!(!dead.exists() && alive.exists());
 }

@@ -13,7 +13,7 @@
 
 use std::io::{Cursor, Read};
 
-use ndarray::{arr0, Array0, Array1, Array2, Array3};
+use ndarray::{arr0, Array0, Array1, Array2, Array3, ArrayD};
 use ndarray_npy::{NpzReader, NpzWriter, ReadNpzError, WriteNpzError};
 use num_complex::Complex64 as C64;
 
@@ -218,6 +218,15 @@ fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> Res
     finite("phi", phi.iter())?;
     finite("q_hat", q_hat.iter())?;
     finite("velocity", velocity.iter())?;
+    // The analysis recomputes these from φ and never uses them, but NaN in any array means the
+    // file is damaged, and whatever else it holds cannot be trusted either.
+    let names = z.names().map_err(|x| format!("not a readable .npz: {x}"))?;
+    for name in ["phi_sum", "centres", "areas", "shape_tensor"] {
+        if names.iter().any(|n| n.trim_end_matches(".npy") == name) {
+            let a: ArrayD<f64> = z.by_name(name).map_err(e(name))?;
+            finite(name, a.iter())?;
+        }
+    }
     let mut cells = Vec::with_capacity(n);
     for i in 0..n {
         let [x0, y0, w, h] = [0, 1, 2, 3].map(|k| patches[[i, k]]);

@@ -43,6 +43,7 @@ pub fn checkpoint_path(dir: &Path) -> PathBuf {
 /// beside `run --analyze`) never rename each other's half-written files.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoResult<()>) -> IoResult<()> {
     static CALLS: AtomicU64 = AtomicU64::new(0);
+    let path = &replaceable(path)?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path.file_name().ok_or_else(|| err(path, "not a file name"))?.to_string_lossy();
     let call = CALLS.fetch_add(1, Ordering::Relaxed);
@@ -61,6 +62,64 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
         let _ = fs::remove_file(&tmp);
         err(path, e)
     })
+}
+
+/// The file a rename into `path` replaces: `path` itself, or the regular file a symbolic link
+/// there points to (so that the link is written through, not replaced). A rename replaces
+/// whatever is at its target, so anything else (a device such as `/dev/null`, a FIFO, a
+/// directory, a link to one of those or to nothing) is refused before a byte is written.
+pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
+    let link = match fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
+        Err(e) => return Err(err(path, e)),
+        Ok(m) => m.file_type().is_symlink(),
+    };
+    let target = match fs::metadata(path) {
+        Ok(m) => m,
+        Err(e) if link => {
+            return Err(err(path, format!("a symbolic link to nothing readable ({e}): refused as an output file")))
+        }
+        Err(e) => return Err(err(path, e)),
+    };
+    if !target.is_file() {
+        let kind = file_kind(&target.file_type());
+        let via = if link { "a symbolic link to " } else { "" };
+        return Err(err(
+            path,
+            format!(
+                "exists and is {via}{kind}, not a regular file: it would be replaced by this output; give the path \
+                 of a regular file or of none"
+            ),
+        ));
+    }
+    if link {
+        return fs::canonicalize(path).map_err(|e| err(path, e));
+    }
+    Ok(path.to_path_buf())
+}
+
+fn file_kind(t: &fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
 }
 
 /// Removes the temporary files a killed writer left in `dir` (call it holding the directory's
@@ -374,8 +433,16 @@ pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
     write_atomic(path, |w| w.write_all(&bytes).map_err(|x| err(path, x)))
 }
 
+/// The array of a checkpoint that holds the seed and parameters it was stepped with (JSON text as
+/// bytes): a resume under other ones would continue another trajectory from this state.
+const RUN_PARAMS: &str = "run_params";
+
+fn run_params_json(params: &Params, seed: u64) -> serde_json::Value {
+    serde_json::json!({ "seed": seed, "params": params })
+}
+
 /// Writes the exact state (f64 bits, padded patches, the solver's warm start and corrector
-/// shift).
+/// shift), and the seed and parameters it belongs to.
 pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     let s = m.state();
     let l = m.params().box_size;
@@ -390,7 +457,9 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     let warm = complex_field(&s.warm_start, l);
     let shift = complex_field(&s.corrector_shift, l);
     let substrate = Array2::from_shape_vec((l, l), s.substrate.clone()).expect("L×L");
+    let key = run_params_json(m.params(), m.seed()).to_string().into_bytes();
     write_npz(path, |z| {
+        z.add_array(RUN_PARAMS, &Array1::from(key))?;
         z.add_array("step", &arr0(s.step as i64))?;
         z.add_array("patches", &patches)?;
         z.add_array("phi_padded", &Array1::from(phi))?;
@@ -471,6 +540,49 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     })
 }
 
+/// Checks that the checkpoint at `path` was written with the seed and parameters of `record`,
+/// naming the first that differs: `run.json` edited after the run started would otherwise
+/// continue one trajectory under another's parameters. Checkpoints written before they held
+/// their parameters are not checked.
+pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> {
+    check_npz_file_headers(path, frame_file::max_array_values(record.params.box_size))?;
+    let file = File::open(path).map_err(|e| err(path, e))?;
+    let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
+    let has_key = z.names().map_err(|x| err(path, x))?.iter().any(|n| n.trim_end_matches(".npy") == RUN_PARAMS);
+    if !has_key {
+        return Ok(());
+    }
+    let bytes: Array1<u8> = z.by_name(RUN_PARAMS).map_err(|x| err(path, format!("array `{RUN_PARAMS}`: {x}")))?;
+    let stored: serde_json::Value = serde_json::from_slice(&bytes.to_vec())
+        .map_err(|x| err(path, format!("array `{RUN_PARAMS}`: not the JSON of a run's parameters: {x}")))?;
+    let given = run_params_json(&record.params, record.seed);
+    let mut pairs = vec![("seed".to_string(), stored.get("seed"), given.get("seed"))];
+    if let Some(table) = given.get("params").and_then(|p| p.as_object()) {
+        // `active_steps` says only where the trajectory ends: raising it extends the same run.
+        for (k, v) in table.iter().filter(|(k, _)| *k != "active_steps") {
+            pairs.push((k.clone(), stored.get("params").and_then(|p| p.get(k)), Some(v)));
+        }
+    }
+    // A parameter newer than the checkpoint is not in it, and has its default there.
+    let differs = pairs.into_iter().find(|(_, s, g)| s.is_some() && s != g);
+    match differs {
+        None => Ok(()),
+        Some((k, s, g)) => {
+            let show = |v: Option<&serde_json::Value>| v.map(|v| v.to_string()).unwrap_or_default();
+            Err(format!(
+                "{}: `{k}` = {} there, but the checkpoint {} was written with {k} = {}: a run continues only with \
+                 the parameters it started with (was run.json edited?); restore `{k}` to {}, or start a new run \
+                 with these parameters in another --out",
+                RunRecord::path(path.parent().unwrap_or(Path::new("."))).display(),
+                show(g),
+                path.display(),
+                show(s),
+                show(s)
+            ))
+        }
+    }
+}
+
 pub use super::config::load_params;
 
 // ---- Reading frames (offline analysis) ----
@@ -530,12 +642,43 @@ impl RunFrames {
         }
         frames.sort();
         if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
+            let step = w[0].0;
+            let own = frame_path(dir, step);
+            let foreign: Vec<String> =
+                frames.iter().filter(|f| f.0 == step && f.1 != own).map(|f| f.1.display().to_string()).collect();
             return Err(format!(
-                "{} and {} both hold step {}: remove the one this run did not write ({})",
+                "{} and {} both hold step {step}: remove what this run did not write ({}; its own is {})",
                 w[0].1.display(),
                 w[1].1.display(),
-                w[0].0,
-                frame_path(dir, w[0].0).display()
+                foreign.join(", "),
+                own.display()
+            ));
+        }
+        // A gap would be measured as one frame interval: holes would seem to open and close
+        // faster, and a lifetime would end early. The frames need not start at the end of the
+        // relaxation (a page's download holds only its last).
+        let fi = record.frame_interval;
+        if let Some(w) = frames.windows(2).find(|w| w[1].0 - w[0].0 != fi) {
+            let (a, b) = (w[0].0, w[1].0);
+            if (b - a) % fi != 0 {
+                return Err(format!(
+                    "{}: step {b} is not a frame interval after the frame before it ({}, step {a}; run.json: \
+                     frame_interval = {fi}): not a frame of this run",
+                    w[1].1.display(),
+                    w[0].1.display()
+                ));
+            }
+            let missing: Vec<u64> = (1..(b - a) / fi).map(|k| a + k * fi).collect();
+            let shown: Vec<String> = missing.iter().take(10).map(u64::to_string).collect();
+            let more = if missing.len() > 10 { format!(" and {} more", missing.len() - 10) } else { String::new() };
+            return Err(format!(
+                "{}: frames missing at step{} {}{more}, between {} and {} (run.json: a frame every frame_interval = \
+                 {fi} steps): restore them, or move the frames after the gap out of the run to measure up to it",
+                frames_dir.display(),
+                if missing.len() == 1 { "" } else { "s" },
+                shown.join(", "),
+                w[0].1.display(),
+                w[1].1.display()
             ));
         }
         Ok(RunFrames { dir: dir.to_path_buf(), record, frames })

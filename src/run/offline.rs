@@ -279,11 +279,20 @@ impl RunAnalysis {
             .map_err(|e| format!("{}: {e}", stage.display()))
             .and_then(|_| self.write_into(&stage, snapshot, field, params));
         let moved = staged.and_then(|files| {
-            files
+            // Every target checked before the first is moved: one that cannot be replaced leaves
+            // the previous set whole.
+            let targets = files
                 .iter()
                 .map(|f| {
                     let to = out.join(f.file_name().expect("a file"));
-                    fs::rename(f, &to).map(|_| to.clone()).map_err(|e| format!("{}: {e}", to.display()))
+                    super::files::replaceable(&to).map(|target| (to, target))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            files
+                .iter()
+                .zip(targets)
+                .map(|(f, (to, target))| {
+                    fs::rename(f, &target).map(|_| to.clone()).map_err(|e| format!("{}: {e}", to.display()))
                 })
                 .collect::<Result<Vec<_>, _>>()
         });

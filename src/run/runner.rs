@@ -10,8 +10,8 @@ use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
 use crate::model::precision::STORE_NAME;
 use crate::run::files::{
-    checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint, write_frame, RunLock,
-    RunRecord, RunStatus, LAST_GOOD_STATE,
+    check_checkpoint_params, checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint,
+    write_frame, RunLock, RunRecord, RunStatus, LAST_GOOD_STATE,
 };
 use crate::run::offline::LiveRun;
 
@@ -302,6 +302,7 @@ impl RunDir {
             ));
         }
         let state = read_checkpoint(&checkpoint, record.params.box_size)?;
+        check_checkpoint_params(&checkpoint, &record)?;
         let (p, fi, step) = (&record.params, record.frame_interval, state.step);
         let scheduled =
             step == 0 || step == p.relax_steps || (step > p.relax_steps && (step - p.relax_steps).is_multiple_of(fi));

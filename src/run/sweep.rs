@@ -199,6 +199,16 @@ impl SweepSpec {
                         the other): give one of them"
                 .into());
         }
+        // A grid or point value replaces the base's: one of the two would be dropped unsaid.
+        if let Some(k) =
+            self.base.keys().find(|k| self.grid.contains_key(*k) || self.points.iter().any(|p| p.contains_key(*k)))
+        {
+            let by = if self.grid.contains_key(k) { "the grid" } else { "the points" };
+            return Err(format!(
+                "sweep: `{k}` is set both by [base] (or --set) and by {by}, whose value would replace the base's: give \
+                 it in one of them"
+            ));
+        }
         let runs = axes
             .iter()
             .try_fold(self.points.len().max(1).saturating_mul(self.seeds.len()), |n, (_, v)| n.checked_mul(v.len()))
@@ -581,6 +591,114 @@ pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, Str
     Ok(summaries)
 }
 
+/// The runs in `OUT/runs/` as jobs, for `sweep --tables-only` given no grid: each run with the
+/// seed and parameters its `run.json` records, and the grid values its directory name carries
+/// (`chi0.1_zeta0.5_seed1`, as [`SweepSpec::jobs`] names runs) where every name reads so with the
+/// same keys; otherwise the parameters in which the runs differ.
+pub fn jobs_of_runs(out: &Path) -> Result<Vec<Job>, String> {
+    let runs_dir = out.join("runs");
+    let entries = fs::read_dir(&runs_dir)
+        .map_err(|e| format!("{}: {e} (a sweep's runs are in OUT/runs; give --out of a sweep)", runs_dir.display()))?;
+    let mut runs = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| format!("{}: {e}", runs_dir.display()))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let dir = entry.path();
+        // Hidden entries are writers' temporaries; a run linked in from another sweep counts.
+        if name.starts_with('.') || !RunRecord::path(&dir).is_file() {
+            continue;
+        }
+        runs.push((name, RunRecord::load(&dir)?));
+    }
+    let named: Option<Vec<Vec<(String, String)>>> = runs.iter().map(|(n, r)| values_from_name(n, r)).collect();
+    let same_keys =
+        |v: &Vec<Vec<(String, String)>>| v.windows(2).all(|w| w[0].iter().map(|x| &x.0).eq(w[1].iter().map(|x| &x.0)));
+    let values = match named {
+        Some(v) if same_keys(&v) => v,
+        _ => values_that_differ(&runs),
+    };
+    let mut jobs: Vec<Job> = runs
+        .into_iter()
+        .zip(values)
+        .map(|((name, record), values)| Job { name, values, params: record.params, seed: record.seed })
+        .collect();
+    // The order a grid runs in: by each value, numbers as numbers, then by seed.
+    jobs.sort_by(|a, b| {
+        let key = |j: &Job| -> Vec<(f64, String)> {
+            j.values.iter().map(|(_, v)| (v.parse::<f64>().unwrap_or(f64::NAN), v.clone())).collect()
+        };
+        let order = key(a)
+            .iter()
+            .zip(key(b).iter())
+            .map(|(x, y)| x.0.total_cmp(&y.0).then_with(|| x.1.cmp(&y.1)))
+            .find(|o| o.is_ne());
+        order.unwrap_or(std::cmp::Ordering::Equal).then(a.seed.cmp(&b.seed)).then_with(|| a.name.cmp(&b.name))
+    });
+    Ok(jobs)
+}
+
+/// The grid values in a run's directory name, each checked against the run's record: a number
+/// must equal the recorded parameter (`chi` the recorded ξ_s/ξ_cell as the sweep sets it), a word
+/// the recorded one. None where the name does not read so.
+fn values_from_name(name: &str, record: &RunRecord) -> Option<Vec<(String, String)>> {
+    let table = serde_json::to_value(&record.params).ok()?;
+    let table = table.as_object()?;
+    let mut keys: Vec<&str> = table.keys().map(String::as_str).chain(["chi"]).collect();
+    // `phi_min` before a hypothetical `phi`: the longest key that fits.
+    keys.sort_by_key(|k| std::cmp::Reverse(k.len()));
+    let end = format!("seed{}", record.seed);
+    let mut rest = name;
+    let mut values = Vec::new();
+    while rest != end {
+        let found = keys.iter().filter(|k| rest.starts_with(**k)).find_map(move |&k| {
+            let after = &rest[k.len()..];
+            let (shown, len) = match table.get(k) {
+                Some(serde_json::Value::String(word)) => {
+                    let written = word.replace(['/', ' ', '"'], "");
+                    after.starts_with(&format!("{written}_")).then(|| (word.clone(), written.len()))?
+                }
+                recorded => {
+                    let len = after.find('_')?;
+                    let x: f64 = after[..len].parse().ok()?;
+                    let matches = match recorded {
+                        None => {
+                            let mut p = record.params.clone();
+                            p.set_chi(x);
+                            p.xi_substrate == record.params.xi_substrate
+                        }
+                        Some(v) => v.as_f64() == Some(x),
+                    };
+                    matches.then(|| (after[..len].to_string(), len))?
+                }
+            };
+            Some(((k.to_string(), shown), &after[len + 1..]))
+        });
+        let (value, next) = found?;
+        values.push(value);
+        rest = next;
+    }
+    Some(values)
+}
+
+/// Each run's values of the parameters in which the runs differ, by name.
+fn values_that_differ(runs: &[(String, RunRecord)]) -> Vec<Vec<(String, String)>> {
+    let tables: Vec<serde_json::Map<String, serde_json::Value>> = runs
+        .iter()
+        .map(|(_, r)| match serde_json::to_value(&r.params) {
+            Ok(serde_json::Value::Object(t)) => t,
+            _ => unreachable!("parameters serialise as a table"),
+        })
+        .collect();
+    let Some(first) = tables.first() else { return Vec::new() };
+    let keys: Vec<&String> = first.keys().filter(|k| tables.iter().any(|t| t.get(*k) != first.get(*k))).collect();
+    let text = |v: Option<&serde_json::Value>| match v {
+        Some(serde_json::Value::String(s)) => s.clone(),
+        Some(v) => v.to_string(),
+        None => String::new(),
+    };
+    tables.iter().map(|t| keys.iter().map(|k| (k.to_string(), text(t.get(*k)))).collect()).collect()
+}
+
 /// Total steps the sweep still has to run (for the progress bar).
 pub fn steps_to_run(jobs: &[Job], out: &Path, shard: Option<Shard>) -> u64 {
     jobs.iter()
@@ -733,6 +851,9 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
 /// Writes `OUT/summary.csv`, `OUT/regimes.csv` (and the regime map plot where the grid has χ
 /// and ζ); returns the files written.
 pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, String> {
+    // A sweep takes no lock on OUT (several shards write these tables), so only the temporaries
+    // of writers no longer alive are taken.
+    crate::run::files::remove_dead_temporaries(out);
     let (runs, regimes) = tables(summaries);
     let mut written = Vec::new();
     for (name, text) in [("summary.csv", runs), ("regimes.csv", regimes)] {
@@ -853,6 +974,26 @@ mod tests {
         assert_eq!(r.max_void_regions_with_hole, 3);
         let never = PackingReadings::of(frames[2..].iter().map(|(o, f)| (*o, f)));
         assert_eq!((never.min_covered_without_hole, never.min_nonvoid_without_hole), (None, None));
+    }
+
+    /// A run's directory name read back into the grid values its sweep gave it, each checked
+    /// against the record; a name that does not read so gives none.
+    #[test]
+    fn grid_values_are_read_back_from_run_names() {
+        let mut spec: SweepSpec = toml::from_str("seeds = [2]\n[grid]\nchi = [0.001]\nzeta = [0.3]\n").unwrap();
+        spec.add_grid("passive_force=phi_grad_mu").unwrap();
+        spec.add_grid("n_cells=40").unwrap();
+        for job in spec.jobs().unwrap() {
+            let record = RunRecord::new(job.params.clone(), job.seed, 50);
+            assert_eq!(values_from_name(&job.name, &record), Some(job.values.clone()), "{}", job.name);
+            assert_eq!(values_from_name(&job.name.replace("zeta0.3", "zeta0.4"), &record), None);
+            assert_eq!(values_from_name(&job.name.replace("seed2", "seed3"), &record), None);
+        }
+        let (a, mut b) = (Params::default(), Params::default());
+        b.gamma = 0.07;
+        let runs = [("x".to_string(), RunRecord::new(a, 1, 50)), ("y".to_string(), RunRecord::new(b, 1, 50))];
+        let differ = values_that_differ(&runs);
+        assert_eq!(differ[1], [("gamma".to_string(), "0.07".to_string())]);
     }
 
     #[test]
