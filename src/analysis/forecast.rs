@@ -412,8 +412,8 @@ impl Logistic {
                 hess[i][i] += RIDGE * n;
             }
             let step = solve4(hess, grad)?;
-            for i in 0..4 {
-                model.weights[i] += step[i];
+            for (w, d) in model.weights.iter_mut().zip(step) {
+                *w += d;
             }
             if step.iter().all(|d| d.abs() < 1e-10) {
                 return Some(model);
@@ -456,12 +456,13 @@ fn solve4(mut a: [[f64; 4]; 4], mut b: [f64; 4]) -> Option<[f64; 4]> {
         }
         a.swap(c, p);
         b.swap(c, p);
-        for r in c + 1..4 {
-            let m = a[r][c] / a[c][c];
-            for k in c..4 {
-                a[r][k] -= m * a[c][k];
+        let (pivot_row, pivot_b) = (a[c], b[c]);
+        for (row, rhs) in a.iter_mut().zip(b.iter_mut()).skip(c + 1) {
+            let m = row[c] / pivot_row[c];
+            for (x, p) in row.iter_mut().zip(pivot_row).skip(c) {
+                *x -= m * p;
             }
-            b[r] -= m * b[c];
+            *rhs -= m * pivot_b;
         }
     }
     let mut x = [0.0; 4];

@@ -31,6 +31,9 @@ pub const SHOWN_HORIZON: usize = 1;
 struct RunData {
     name: String,
     seed: u64,
+    params: crate::model::params::Params,
+    /// (step, path) of every frame, in order.
+    frames: Vec<(u64, PathBuf)>,
     history: RunHistory,
     samples: Vec<Sample>,
     thinning: Vec<ThinningRow>,
@@ -85,7 +88,16 @@ fn measure_run(dir: &Path, partial: bool) -> Result<RunData, String> {
     // The frames' fields are no longer needed; the nucleations and the sub-grid are.
     history.frames = Vec::new();
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string());
-    Ok(RunData { name, seed: record.seed, history, samples, thinning, baseline })
+    Ok(RunData {
+        name,
+        seed: record.seed,
+        params: params.clone(),
+        frames: run.frames.clone(),
+        history,
+        samples,
+        thinning,
+        baseline,
+    })
 }
 
 /// One held-out score: a predictor on the runs of one seed.
@@ -111,7 +123,7 @@ fn training(runs: &[&RunData], hi: usize, subset: Subset) -> Vec<(Features, bool
             let y = s.labels[hi];
             if !y {
                 negatives += 1;
-                if negatives % NEGATIVE_THINNING != 0 {
+                if !negatives.is_multiple_of(NEGATIVE_THINNING) {
                     continue;
                 }
             }
@@ -485,6 +497,49 @@ pub fn forecast(dirs: &[PathBuf], out: &Path, partial: bool, progress: impl Fn(&
         written.push(path);
     }
     written.extend(both_of(&out.join("forecast_roc"), (1400, 650), &RocFigure { pooled: &pooled, scores: &scores })?);
+    written.extend(fig1b(&runs, out)?);
+    Ok(written)
+}
+
+/// Nucleations drawn as the paper's Fig. 1b.
+const FIG1B_NUCLEATIONS: usize = 3;
+
+/// Fig. 1b one frame before [`FIG1B_NUCLEATIONS`] nucleations: those whose site was still
+/// covered then first, in the order of the runs given, then the others.
+fn fig1b(runs: &[RunData], out: &Path) -> Result<Vec<PathBuf>, String> {
+    let mut chosen: Vec<(&RunData, &ThinningRow)> = Vec::new();
+    for covered in [true, false] {
+        for r in runs {
+            for t in r.thinning.iter().filter(|t| t.frames_before == 1 && t.covered == covered) {
+                if chosen.len() < FIG1B_NUCLEATIONS {
+                    chosen.push((r, t));
+                }
+            }
+        }
+    }
+    let mut written = Vec::new();
+    for (i, (r, t)) in chosen.into_iter().enumerate() {
+        let n = r.history.nucleations.iter().find(|n| n.hole == t.hole).expect("a nucleation of the run");
+        let (step, path) = &r.frames[n.frame - 1];
+        let frame = read_frame(path, r.params.box_size)?;
+        let mut a = Analysis::new(&r.params);
+        a.measure_cells(frame.data.cell_views(), &frame.data.velocity);
+        let caption = format!(
+            "{}, hole {}: step {step}, one frame before it nucleates at ({:.0}, {:.0}); least Σφ within R {:.2}{}",
+            r.name,
+            t.hole,
+            n.x,
+            n.y,
+            t.least,
+            if t.covered { ", still covered" } else { "" }
+        );
+        written.extend(super::plots::nucleation_fields(
+            &out.join(format!("fig1b_{}", i + 1)),
+            &a,
+            (n.x, n.y),
+            caption,
+        )?);
+    }
     Ok(written)
 }
 

@@ -364,3 +364,113 @@ pub(crate) fn regime_marker<DB: DrawingBackend>(
     }
     Ok(())
 }
+
+/// The fields about a nucleation site in one frame, as the paper's Fig. 1b draws them: the
+/// velocity over the strain rate (spiral cores as cyan stars), the active force over its
+/// divergence, and the director over the strain rate with the ±½ defects (+½ green with a line
+/// to its tail, −½ blue). Smoothed fields (the 2R window), each colour over its largest
+/// magnitude in the view; void sites black; the coming nucleation site a black ring.
+struct NucleationFields<'a> {
+    a: &'a Analysis,
+    centre: (f64, f64),
+    caption: String,
+}
+
+impl NucleationFields<'_> {
+    /// View coordinates of lattice point (x, y): the periodic image nearest the centre.
+    fn unwrap(&self, x: f64, y: f64) -> (f64, f64) {
+        let lf = self.a.l as f64;
+        let near = |v: f64, c: f64| c + (v - c + lf / 2.0).rem_euclid(lf) - lf / 2.0;
+        (near(x, self.centre.0), near(y, self.centre.1))
+    }
+}
+
+impl Draw for NucleationFields<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        let a = self.a;
+        let l = a.l;
+        let half = 4.0 * a.radius;
+        let (cx, cy) = self.centre;
+        root.fill(&WHITE).map_err(plot_err)?;
+        let (title, body) = root.split_vertically(40);
+        title.draw(&Text::new(self.caption.clone(), (10, 10), (FONT, 20).into_font())).map_err(plot_err)?;
+        let panels = body.split_evenly((1, 3));
+        let s = &a.smooth;
+        let in_view: Vec<usize> = (0..l * l)
+            .filter(|&k| {
+                let (x, y) = self.unwrap((k % l) as f64, (k / l) as f64);
+                (x - cx).abs() <= half && (y - cy).abs() <= half
+            })
+            .collect();
+        let scale_of = |f: &[f64]| in_view.iter().fold(0.0f64, |m, &k| m.max(f[k].abs())).max(f64::MIN_POSITIVE);
+        let kinds = [("velocity, ε̇ / max", 0), ("active force, ∇·f^a / max", 1), ("director, ε̇ / max", 2)];
+        for (panel, (name, kind)) in panels.iter().zip(kinds) {
+            let colour_field: &[f64] = if kind == 1 { &a.active_force_divergence } else { &a.strain_rate };
+            let scale = scale_of(colour_field);
+            let mut chart = ChartBuilder::on(panel)
+                .caption(name, (FONT, 18))
+                .margin(8)
+                .x_label_area_size(25)
+                .y_label_area_size(35)
+                .build_cartesian_2d(cx - half..cx + half + 1.0, cy - half..cy + half + 1.0)
+                .map_err(plot_err)?;
+            chart.configure_mesh().disable_mesh().draw().map_err(plot_err)?;
+            chart
+                .draw_series(in_view.iter().map(|&k| {
+                    let (x, y) = self.unwrap((k % l) as f64, (k / l) as f64);
+                    let c = if a.voids.labels[k] != u32::MAX { BLACK } else { diverging(colour_field[k] / scale) };
+                    Rectangle::new([(x, y), (x + 1.0, y + 1.0)], c.filled())
+                }))
+                .map_err(plot_err)?;
+            // Arrows (velocity, force) or director lines every third site.
+            let sparse = in_view.iter().copied().filter(|&k| (k % l) % 3 == 0 && (k / l) % 3 == 0);
+            let (ax, ay): (&[f64], &[f64]) = if kind == 1 { (&s.fx, &s.fy) } else { (&s.vx, &s.vy) };
+            let amax = in_view.iter().fold(0.0f64, |m, &k| m.max(ax[k].hypot(ay[k]))).max(f64::MIN_POSITIVE);
+            for k in sparse {
+                let (x, y) = self.unwrap((k % l) as f64, (k / l) as f64);
+                let c = (x + 0.5, y + 0.5);
+                let seg = if kind == 2 {
+                    let th = 0.5 * s.qxy[k].atan2(s.qxx[k]);
+                    let (dx, dy) = (1.3 * th.cos(), 1.3 * th.sin());
+                    vec![(c.0 - dx, c.1 - dy), (c.0 + dx, c.1 + dy)]
+                } else {
+                    let f = 2.8 / amax;
+                    vec![c, (c.0 + f * ax[k], c.1 + f * ay[k])]
+                };
+                chart.draw_series(std::iter::once(PathElement::new(seg, BLACK.stroke_width(1)))).map_err(plot_err)?;
+            }
+            let cyan = RGBColor(0, 200, 220);
+            for p in a.spiral_cores() {
+                let c = self.unwrap(p.x + 0.5, p.y + 0.5);
+                chart.draw_series(std::iter::once(Cross::new(c, 7, cyan.stroke_width(3)))).map_err(plot_err)?;
+            }
+            if kind == 2 {
+                let green = RGBColor(0, 170, 0);
+                for d in &a.defects {
+                    let c = self.unwrap(d.x + 0.5, d.y + 0.5);
+                    if d.twice_charge > 0 {
+                        let tail =
+                            (c.0 + 0.6 * a.radius * d.orientation.cos(), c.1 + 0.6 * a.radius * d.orientation.sin());
+                        chart.draw_series(std::iter::once(Circle::new(c, 5, green.filled()))).map_err(plot_err)?;
+                        chart
+                            .draw_series(std::iter::once(PathElement::new(vec![c, tail], green.stroke_width(3))))
+                            .map_err(plot_err)?;
+                    } else {
+                        chart
+                            .draw_series(std::iter::once(TriangleMarker::new(c, 6, BLUE.filled())))
+                            .map_err(plot_err)?;
+                    }
+                }
+            }
+            chart
+                .draw_series(std::iter::once(Circle::new((cx + 0.5, cy + 0.5), 10, BLACK.stroke_width(2))))
+                .map_err(plot_err)?;
+        }
+        Ok(())
+    }
+}
+
+/// The paper's Fig. 1b about (x, y) in the frame `a` measured: `base.png`, `base.svg`.
+pub fn nucleation_fields(base: &Path, a: &Analysis, site: (f64, f64), caption: String) -> Result<Vec<PathBuf>, String> {
+    both_of(base, (1500, 560), &NucleationFields { a, centre: site, caption })
+}

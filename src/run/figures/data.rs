@@ -450,12 +450,14 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
     let mut fits = String::from(
         "chi,zeta,chi_0.1_over_zeta,bins_with_holes,hole_sites,\
          binomial_amplitude,binomial_coefficient,binomial_coefficient_se,\
-         least_squares_amplitude,least_squares_coefficient,least_squares_coefficient_se\n",
+         least_squares_amplitude,least_squares_coefficient,least_squares_coefficient_se,\
+         runs_with_holes,binomial_coefficient_jackknife_se,least_squares_coefficient_jackknife_se\n",
     );
     let mut panel = Panel::new("Fig. 2: P(hole | ε̇)", "strain rate ε̇", "P(hole | ε̇)");
     panel.log_y = true;
     // The paper's inset, drawn beside the main panel, where it hides no points.
-    let mut inset = Panel::new("Fig. 2 inset: the coefficient b", "χ^0.1 / ζ", "b (binomial ML) ± s.e.");
+    let mut inset =
+        Panel::new("Fig. 2 inset: the coefficient b", "χ^0.1 / ζ", "b (binomial ML) ± jackknife s.e. over runs");
     let mut inset_series = Series::new("", 0);
     // (χ, ζ, b) of each fit, binomial and least squares, for the collapse.
     let mut coefficients: [Vec<(f64, f64, f64)>; 2] = [Vec::new(), Vec::new()];
@@ -501,13 +503,29 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
             let cols = |f: Option<crate::analysis::nucleation::ExponentialFit>| {
                 f.map(|f| format!("{:.6e},{:.6e},{:.6e}", f.ln_a.exp(), f.b, f.se_b)).unwrap_or_else(|| ",,".into())
             };
-            let _ = writeln!(fits, "{chi},{zeta},{x:.6},{holes},{hole_sites},{},{}", cols(ml), cols(ls));
+            let with_holes = sel.iter().filter(|r| r.probability.values().any(|b| b.1 > 0)).count();
+            let jk = |fit: fn(&[(f64, u64, u64)]) -> Option<crate::analysis::nucleation::ExponentialFit>| {
+                jackknife_coefficient_se(&sel, fit)
+            };
+            let (jk_ml, jk_ls) = (jk(binomial_fit), jk(least_squares_fit));
+            let _ = writeln!(
+                fits,
+                "{chi},{zeta},{x:.6},{holes},{hole_sites},{},{},{with_holes},{},{}",
+                cols(ml),
+                cols(ls),
+                jk_ml.map(|v| format!("{v:.6e}")).unwrap_or_default(),
+                jk_ls.map(|v| format!("{v:.6e}")).unwrap_or_default()
+            );
             let shown = |f: Option<crate::analysis::nucleation::ExponentialFit>| {
                 f.map(|f| format!("P = {} · exp(({} ± {}) ε̇)", fmt(f.ln_a.exp()), fmt(f.b), fmt(f.se_b)))
                     .unwrap_or_else(|| "too few bins with holes".into())
             };
+            let jk_text = match (jk_ml, jk_ls) {
+                (Some(m), Some(q)) => format!("jackknife s.e. over runs of b: {} (binomial), {} (least squares)", fmt(m), fmt(q)),
+                _ => format!("{with_holes} run(s) with hole sites: no jackknife over runs; the fits' own s.e. treat sites as independent"),
+            };
             made.measured.push(format!(
-                "χ = {chi}, ζ = {zeta} ({} runs, {hole_sites} hole sites in {holes} bins): binomial ML {}; least squares on ln P {}",
+                "χ = {chi}, ζ = {zeta} ({} runs, {hole_sites} hole sites in {holes} bins): binomial ML {}; least squares on ln P {}; {jk_text}",
                 sel.len(),
                 shown(ml),
                 shown(ls)
@@ -524,7 +542,9 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
                     line.push(e, (f.ln_a + f.b * e).exp(), 0.0);
                 }
                 panel.series.push(line);
-                inset_series.push(x, f.b, f.se_b);
+                // The jackknife over runs; a point with one run with holes has none and is
+                // drawn without an error bar (its binomial s.e. is in the fits' table).
+                inset_series.push(x, f.b, jk_ml.unwrap_or(0.0));
             }
         }
     }
@@ -545,6 +565,40 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
     csv(base, "_fits", &fits, made)?;
     made.files.extend(draw::panels(base, &[panel, inset])?);
     Ok(())
+}
+
+/// The jackknife standard error over runs of a fit's coefficient b: each run left out in turn,
+/// the others' bins pooled and fitted; √((n − 1)/n Σ (b₋ᵢ − b̄)²) over the n runs with hole sites
+/// (a run without holes moves no fit's numerator but still counts its sites: it is left out in
+/// turn too). None unless at least two runs have hole sites and every leave-one-out fit exists.
+pub fn jackknife_coefficient_se(
+    runs: &[&RunData],
+    fit: fn(&[(f64, u64, u64)]) -> Option<crate::analysis::nucleation::ExponentialFit>,
+) -> Option<f64> {
+    use crate::analysis::nucleation::STRAIN_RATE_BIN;
+    if runs.iter().filter(|r| r.probability.values().any(|b| b.1 > 0)).count() < 2 {
+        return None;
+    }
+    let mut bs = Vec::with_capacity(runs.len());
+    for leave in 0..runs.len() {
+        let mut bins: BTreeMap<i64, (u64, u64)> = BTreeMap::new();
+        for (i, r) in runs.iter().enumerate() {
+            if i == leave {
+                continue;
+            }
+            for (&k, &(n, h)) in &r.probability {
+                let e = bins.entry(k).or_insert((0, 0));
+                e.0 += n;
+                e.1 += h;
+            }
+        }
+        let counts: Vec<(f64, u64, u64)> =
+            bins.iter().map(|(&k, &(n, h))| (k as f64 * STRAIN_RATE_BIN, n, h)).collect();
+        bs.push(fit(&counts)?.b);
+    }
+    let n = bs.len() as f64;
+    let mean = bs.iter().sum::<f64>() / n;
+    Some(((n - 1.0) / n * bs.iter().map(|b| (b - mean).powi(2)).sum::<f64>()).sqrt())
 }
 
 /// Kaplan–Meier survival of (x, closed) with censoring: (x, at risk, closed there, S after).
@@ -854,6 +908,43 @@ mod tests {
             probability: BTreeMap::new(),
             correlations: (Vec::new(), Vec::new()),
         }
+    }
+
+    /// Three runs drawn from P = 0.001·exp(b ε̇) with b = 1,000, 2,000, 3,000: the jackknife
+    /// over runs sees their spread, far above the pooled fit's own error, which treats every
+    /// site as independent; one run with holes has no jackknife.
+    #[test]
+    fn the_jackknife_over_runs_sees_the_spread_between_runs() {
+        let run_with = |b: f64| {
+            let mut r = run_with_spiral_cores(&[], &[]);
+            for k in 0..10i64 {
+                let x = k as f64 * crate::analysis::nucleation::STRAIN_RATE_BIN;
+                let n = 1_000_000u64;
+                r.probability.insert(k, (n, (0.001 * (b * x).exp() * n as f64).round() as u64));
+            }
+            r
+        };
+        let (a, b, c) = (run_with(1000.0), run_with(2000.0), run_with(3000.0));
+        let runs = [&a, &b, &c];
+        let jk = jackknife_coefficient_se(&runs, crate::analysis::nucleation::binomial_fit).unwrap();
+        // Leave-one-out coefficients near 2,500, 2,000, 1,500: √(2/3 · 500,000) ≈ 577.
+        assert!(jk > 400.0 && jk < 750.0, "{jk}");
+        let mut pooled = BTreeMap::new();
+        for r in runs {
+            for (&k, &(n, h)) in &r.probability {
+                let e: &mut (u64, u64) = pooled.entry(k).or_default();
+                e.0 += n;
+                e.1 += h;
+            }
+        }
+        let counts: Vec<(f64, u64, u64)> = pooled
+            .iter()
+            .map(|(&k, &(n, h))| (k as f64 * crate::analysis::nucleation::STRAIN_RATE_BIN, n, h))
+            .collect();
+        let own = crate::analysis::nucleation::binomial_fit(&counts).unwrap().se_b;
+        assert!(jk > 5.0 * own, "{jk} against the fit's own {own}");
+        let empty = run_with_spiral_cores(&[], &[]);
+        assert_eq!(jackknife_coefficient_se(&[&a, &empty], crate::analysis::nucleation::binomial_fit), None);
     }
 
     #[test]
