@@ -242,9 +242,9 @@ struct RunArgs {
     /// Output directory (created; must not hold a run already).
     #[arg(long, default_value = "runs/default")]
     out: PathBuf,
-    /// Steps between frames in the active phase.
-    #[arg(long, default_value_t = 1000)]
-    frame_interval: u64,
+    /// Steps between frames in the active phase (default 1000); at most the active steps.
+    #[arg(long)]
+    frame_interval: Option<u64>,
     /// Worker threads (results do not depend on it); default: all cores.
     #[arg(long)]
     threads: Option<usize>,
@@ -422,7 +422,13 @@ fn run(a: &RunArgs) -> Result<(), String> {
             eprintln!("resuming {} at step {}", dir.display(), run.monolayer.step_count());
             run
         }
-        None => RunDir::create(&a.out, a.params.params()?, a.seed, a.frame_interval)?,
+        None => {
+            let params = a.params.params()?;
+            if let Some(fi) = a.frame_interval {
+                monolayer::run::runner::check_frame_interval("--frame-interval", fi, &params)?;
+            }
+            RunDir::create(&a.out, params, a.seed, a.frame_interval.unwrap_or(1000))?
+        }
     };
     let engine = match &a.engine {
         Some(e) => Engine::parse(e)?,
@@ -519,6 +525,12 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
         return Ok(());
     }
     let jobs = spec.jobs()?;
+    if let Some(fi) = a.frame_interval {
+        for job in &jobs {
+            monolayer::run::runner::check_frame_interval("--frame-interval", fi, &job.params)
+                .map_err(|e| format!("run {}: {e}", job.name))?;
+        }
+    }
     if a.tables_only {
         let summaries = measure_existing(&jobs, &a.out)?;
         let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
@@ -648,6 +660,13 @@ fn slurm_shard() -> Result<Option<Shard>, String> {
 }
 
 fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
+    if a.total_steps > monolayer::model::params::MAX_STEPS {
+        return Err(format!(
+            "--total-steps {}: must be in [0, {}] (relaxation included)",
+            a.total_steps,
+            monolayer::model::params::MAX_STEPS
+        ));
+    }
     let params = a.params.params()?;
     params.validate().map_err(|e| e.to_string())?;
     monolayer::run::runner::check_memory(&params)?;
@@ -661,6 +680,7 @@ fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), String> {
     // Before the relaxation, which may take long: the write would refuse it at the end.
     files::replaceable(&a.out)?;
     let params = a.params.params()?;
+    monolayer::run::runner::check_memory(&params)?;
     let steps = params.relax_steps;
     let key = relaxation_key(&params, a.seed);
     let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
@@ -694,6 +714,11 @@ fn bench(a: &BenchArgs) -> Result<(), String> {
     let mut overrides = vec![format!("zeta={}", a.zeta)];
     overrides.extend(a.set.iter().cloned());
     let params = load_params(None, &overrides)?;
+    Params { relax_steps: a.relax_steps, ..params.clone() }.validate().map_err(|e| e.to_string())?;
+    // The relaxed state, a copy per thread count timed, and two more for the ceiling.
+    let ceiling = a.threads.contains(&1) && a.threads.contains(&2);
+    let copies = if a.gpu { 1 } else { 1 + a.threads.len() as u64 + if ceiling { 2 } else { 0 } };
+    monolayer::run::runner::check_memory_of(&params, copies)?;
     if a.gpu {
         return bench_gpu(&params, a);
     }

@@ -3,6 +3,8 @@
 //! panic; a damaged file is refused or reads as exactly what was written. A few dozen cases
 //! each, so that the suite stays quick.
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -262,4 +264,104 @@ fn replace_npz_entry(path: &Path, name: &str, bytes: &[u8]) {
         w.write_all(if n == format!("{name}.npy") { bytes } else { &data }).unwrap();
     }
     w.finish().unwrap();
+}
+
+/// The parameters a hand edit of `run.json` may change, with `seed`.
+const EDITED: [&str; 8] = ["zeta", "gamma", "kappa", "mu", "xi_substrate", "xi_cell", "q_magnitude", "seed"];
+
+/// What a special input file is made as.
+#[derive(Clone, Copy, Debug)]
+enum Special {
+    Fifo,
+    LinkToFifo,
+    Directory,
+}
+
+fn make_special(path: &Path, kind: Special) {
+    match kind {
+        Special::Fifo => common::make_fifo(path),
+        Special::LinkToFifo => {
+            let target = path.with_extension("fifo");
+            common::make_fifo(&target);
+            std::os::unix::fs::symlink(&target, path).unwrap();
+        }
+        Special::Directory => fs::create_dir(path).unwrap(),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// A checkpoint holds the seed and parameters it was stepped with: `run.json` edited since,
+    /// in any of them, is refused naming the one edited.
+    #[test]
+    fn a_record_edited_against_its_checkpoint_is_refused(
+        key in proptest::sample::select(&EDITED[..]),
+        factor in 0.5f64..0.95,
+    ) {
+        use monolayer::run::runner::RunDir;
+        let dir = tempfile::tempdir().unwrap();
+        drop(RunDir::create(dir.path(), small(), 1, 10).unwrap());
+        let path = RunRecord::path(dir.path());
+        let mut v: serde_json::Value = serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
+        if key == "seed" {
+            v["seed"] = (2 + (factor * 100.0) as u64).into();
+        } else {
+            let x = v["params"][key].as_f64().unwrap();
+            v["params"][key] = (x * factor).into();
+        }
+        fs::write(&path, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+        // A process spawned by a test running beside this one holds a copy of the lock's
+        // descriptor from its fork to its exec: wait that moment out.
+        let mut resumed = RunDir::resume(dir.path());
+        for _ in 0..100 {
+            match &resumed {
+                Err(e) if e.contains("is writing this run directory") => {
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                    resumed = RunDir::resume(dir.path());
+                }
+                _ => break,
+            }
+        }
+        match resumed {
+            Ok(_) => prop_assert!(false, "{key} edited, and the run resumed"),
+            Err(e) => prop_assert!(e.contains(&format!("`{key}`")) && e.contains("checkpoint"), "{}", e),
+        }
+    }
+
+    /// Every flag that names an input file refuses a FIFO, a link to one or a directory, naming
+    /// it, without opening it (which would block on a FIFO).
+    #[test]
+    fn special_files_for_every_input_flag_are_refused(
+        flag in 0usize..8,
+        kind in proptest::sample::select(&[Special::Fifo, Special::LinkToFifo, Special::Directory][..]),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let (input, run) = (dir.path().join("input"), dir.path().join("run"));
+        let out = dir.path().join("out");
+        let (i, r, o) = (input.to_str().unwrap(), run.to_str().unwrap(), out.to_str().unwrap());
+        let tiny = ["--set", "box_size=48", "--set", "n_cells=10"];
+        let (args, named): (Vec<&str>, &Path) = match flag {
+            0 => (vec!["run", "--quiet", "--config", i, "--out", o], &input),
+            1 => (vec!["fingerprint", "--config", i, "--total-steps", "1"], &input),
+            2 => (vec!["relaxed-state", "--config", i, "--out", o], &input),
+            3 => (vec!["sweep", "--quiet", i, "--out", o], &input),
+            4 => ([&["bench", "--steps", "2", "--blocks", "1", "--relax-steps", "5", "--from-relaxed", i][..], &tiny].concat(), &input),
+            5 => (vec!["run", "--quiet", "--resume", r], &run),
+            6 => (vec!["analyze", r], &run),
+            _ => (vec!["forecast", r, r, "--out", o], &run),
+        };
+        let special = if named == run.as_path() {
+            fs::create_dir(&run).unwrap();
+            run.join("run.json")
+        } else {
+            input.clone()
+        };
+        make_special(&special, kind);
+        let o = common::monolayer_within(60, &args, &[]);
+        let e = String::from_utf8_lossy(&o.stderr).into_owned();
+        prop_assert_eq!(o.status.code(), Some(2), "{}", e);
+        prop_assert!(e.contains(special.to_str().unwrap()) && e.contains("not a regular file"), "{:?}: {}", kind, e);
+        prop_assert!(!e.contains("panicked") && !out.exists(), "{}", e);
+    }
 }

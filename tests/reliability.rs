@@ -1277,3 +1277,172 @@ fn a_sweep_removes_the_temporaries_of_dead_writers() {
     ok(&monolayer(&["sweep", "--out", arg(&out), "--tables-only", "--grid", "zeta=0.2"]));
     assert!(!dead.exists() && alive.exists());
 }
+
+// ---- Inputs, limits and the errors that name them ----
+
+/// The tiny box of these tests.
+const TINY: [&str; 6] = ["--set", "box_size=48", "--set", "n_cells=10", "--relax-steps", "20"];
+
+/// A refusal within a minute, with every expected text in its error.
+fn refused_within(args: &[&str], env: &[(&str, &str)], expect: &[&str]) {
+    refused(&common::monolayer_within(60, args, env), expect);
+}
+
+/// `relaxed-state`, `bench` and `figures` (its `--dry-run` estimate too) check the memory a
+/// simulation needs before allocating it, as `run` does, reading MONOLAYER_MEMORY_LIMIT_MB.
+#[test]
+fn every_command_that_simulates_checks_the_memory_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let limit = [("MONOLAYER_MEMORY_LIMIT_MB", "1")];
+    let expect = ["box_size = 48, n_cells = 10 need about", "more than MONOLAYER_MEMORY_LIMIT_MB (1 MB)"];
+    let out = dir.path().join("relaxed.bin");
+    refused_within(&[&["relaxed-state", "--out", arg(&out)][..], &TINY].concat(), &limit, &expect);
+    assert!(!out.exists());
+    let bench = ["bench", "--steps", "2", "--blocks", "1", "--chi", "0.1", "--relax-steps", "5"];
+    refused_within(&[&bench[..], &TINY[..4]].concat(), &limit, &expect);
+    let figures = dir.path().join("f");
+    for dry in [&["--dry-run"][..], &[]] {
+        let args = [&["figures", "--quiet", "--only", "1c", "--out", arg(&figures)][..], dry].concat();
+        refused_within(&args, &limit, &["more than MONOLAYER_MEMORY_LIMIT_MB (1 MB)"]);
+    }
+    assert!(!figures.join("runs").exists());
+}
+
+/// Every flag that names an input file refuses a FIFO (or a link to one) before opening it,
+/// where it used to block for ever; a config file past its size limit is refused by size.
+#[test]
+fn input_files_that_are_not_regular_files_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("fifo");
+    common::make_fifo(&fifo);
+    let link = dir.path().join("link.toml");
+    std::os::unix::fs::symlink(&fifo, &link).unwrap();
+    let relaxed = dir.path().join("relaxed.bin");
+    for input in [&fifo, &link] {
+        let f = arg(input);
+        let out = dir.path().join("out");
+        for args in [
+            vec!["run", "--quiet", "--config", f, "--out", arg(&out)],
+            vec!["fingerprint", "--config", f, "--total-steps", "1"],
+            vec!["relaxed-state", "--config", f, "--out", arg(&relaxed)],
+            vec!["sweep", "--quiet", f, "--out", arg(&out)],
+            [&["bench", "--steps", "2", "--blocks", "1", "--from-relaxed", f][..], &TINY[..4]].concat(),
+        ] {
+            refused_within(&args, &[], &[f, "is a FIFO, not a regular file"]);
+        }
+        assert!(!out.exists());
+    }
+    // A run whose record or checkpoint is a FIFO: resume and analyze refuse it.
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let record = run.join("run.json");
+    fs::rename(&record, dir.path().join("run.json")).unwrap();
+    common::make_fifo(&record);
+    refused_within(&["run", "--quiet", "--resume", arg(&run)], &[], &["run.json", "not a regular file"]);
+    refused_within(&["analyze", arg(&run)], &[], &["run.json", "not a regular file"]);
+    fs::remove_file(&record).unwrap();
+    fs::rename(dir.path().join("run.json"), &record).unwrap();
+    fs::remove_file(checkpoint_path(&run)).unwrap();
+    common::make_fifo(&checkpoint_path(&run));
+    refused_within(&["run", "--quiet", "--resume", arg(&run)], &[], &["checkpoint.npz", "not a regular file"]);
+    // A config file of 2 MiB is no config file.
+    let big = dir.path().join("big.toml");
+    fs::write(&big, format!("zeta = 0.4\n{}", "# padding\n".repeat(210_000))).unwrap();
+    refused_within(
+        &["fingerprint", "--config", arg(&big), "--total-steps", "1"],
+        &[],
+        &["big.toml", "1048576 bytes at most"],
+    );
+}
+
+/// Documented bounds enforced: `--total-steps` at most 10⁹, a frame interval no longer than the
+/// active phase, friction coefficients in a finite range (ξ_cell = 0, the dry limit, kept).
+#[test]
+fn bounds_of_steps_intervals_and_frictions_are_enforced() {
+    let dir = tempfile::tempdir().unwrap();
+    refused_within(
+        &[&["fingerprint", "--total-steps", "1000000001"][..], &TINY].concat(),
+        &[],
+        &["--total-steps 1000000001", "[0, 1000000000]"],
+    );
+    let out = dir.path().join("r");
+    let run = [&SMALL_RUN[..], &["--steps", "50", "--frame-interval", "1000000000000", "--out", arg(&out)]].concat();
+    refused_within(&run, &[], &["--frame-interval 1000000000000", "active_steps = 50"]);
+    assert!(!out.exists());
+    let sweep = [
+        &["sweep", "--quiet", "--set", "active_steps=50", "--frame-interval", "51", "--out", arg(&out)][..],
+        &TINY[..4],
+    ]
+    .concat();
+    refused_within(&sweep, &[], &["--frame-interval 51", "active_steps = 50"]);
+    for (set, name) in [
+        ("xi_substrate=1e-300", "xi_substrate"),
+        ("xi_substrate=1e300", "xi_substrate"),
+        ("xi_cell=1e300", "xi_cell"),
+        ("xi_cell=1e-9", "xi_cell"),
+        ("xi_relax=1e-300", "xi_relax"),
+    ] {
+        let args = [&["fingerprint", "--total-steps", "1", "--set", set][..], &TINY].concat();
+        refused_within(&args, &[], &[&format!("parameter `{name}`"), "[1e-6, 1e3]"]);
+    }
+    let dry = Params { xi_cell: 0.0, ..Params::default() };
+    assert!(dry.validate().is_ok());
+    for chi in [0.001, 0.01, 0.1, 1.0] {
+        let mut p = Params::default();
+        p.set_chi(chi);
+        assert!(p.validate().is_ok(), "χ = {chi}");
+    }
+}
+
+/// Errors that name their file and say what is wrong: an empty patch or a cell count off in a
+/// checkpoint, a wrong value in a config file (its line and column), a `.lock` that is a FIFO.
+#[test]
+fn damaged_checkpoints_configs_and_locks_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    let checkpoint = checkpoint_path(&run);
+    let saved = fs::read(&checkpoint).unwrap();
+    edit_npz(&checkpoint, "patches", |a| match a {
+        Npy::I(a) => a[[0, 2]] = 0,
+        _ => panic!("patches are integers"),
+    });
+    refused_within(&["run", "--quiet", "--resume", arg(&run)], &[], &["checkpoint.npz: cell 0: patch at", "is 0×"]);
+    // A checkpoint of before it held its parameters, with one cell too many for run.json.
+    fs::write(&checkpoint, &saved).unwrap();
+    let arrays: Vec<(String, Npy)> = read_npz(&checkpoint).into_iter().filter(|(n, _)| n != "run_params").collect();
+    write_npz(&checkpoint, &arrays);
+    edit_record(&run, |v| v["params"]["n_cells"] = 5.into());
+    refused_within(&["run", "--quiet", "--resume", arg(&run)], &[], &["checkpoint.npz: ", "checkpoint has 6 cells"]);
+    edit_record(&run, |v| v["params"]["n_cells"] = 6.into());
+    let lock = run.join(RunLock::FILE);
+    fs::remove_file(&lock).unwrap();
+    common::make_fifo(&lock);
+    refused_within(&["run", "--quiet", "--resume", arg(&run)], &[], &[".lock", "is a FIFO, not a regular file"]);
+    let config = dir.path().join("c.toml");
+    fs::write(&config, "zeta = 0.3\n  xi_substrate = \"abc\"\n").unwrap();
+    let e = monolayer::run::config::load_params(Some(&config), &[]).unwrap_err();
+    assert!(e.contains("c.toml, line 2, column 18: parameter `xi_substrate`"), "{e}");
+    let e = monolayer::run::config::load_params(Some(&config), &["xi_substrate=0.1".into(), "zeta=abc".into()])
+        .unwrap_err();
+    assert!(e.starts_with("--set: parameter `zeta`"), "{e}");
+}
+
+/// A sweep that finds some of its runs held by another writer (the same sweep started twice)
+/// says so, naming the holder, and why it writes no tables.
+#[test]
+fn a_sweep_beside_another_names_the_holder_of_its_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec: SweepSpec = toml::from_str(
+        "seeds = [1, 2]\nframe_interval = 10\n[base]\nbox_size = 48\nn_cells = 10\nrelax_steps = 10\nactive_steps = 10\n",
+    )
+    .unwrap();
+    let jobs = spec.jobs().unwrap();
+    let held = dir.path().join("runs").join(&jobs[0].name);
+    fs::create_dir_all(&held).unwrap();
+    let _lock = RunLock::acquire(&held).unwrap();
+    let e = run_sweep(&jobs, 10, dir.path(), 1, None, &|_, _, _| {}).unwrap_err();
+    let pid = std::process::id();
+    assert!(e.contains(&format!("being written by process {pid}")) && e.contains("summary.csv"), "{e}");
+    assert!(e.contains(&jobs[0].name) && !e.contains(&jobs[1].name), "{e}");
+}

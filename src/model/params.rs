@@ -218,6 +218,21 @@ fn non_negative(name: &'static str, v: f64) -> Result<(), ParamError> {
     check(v.is_finite() && v >= 0.0, name, v, "must be a finite number ≥ 0")
 }
 
+/// The range of a friction coefficient: the paper's χ = ξ_s/ξ_cell spans 0.001 to 1 at
+/// ξ_cell = 1, well inside it; far outside, the friction solve's matrix is so ill-conditioned
+/// that the solve fails, which would end the run as `failed:` instead of refusing the value.
+pub const FRICTION_RANGE: (f64, f64) = (1e-6, 1e3);
+
+/// A friction coefficient in [`FRICTION_RANGE`], or 0 where `zero_ok` (ξ_cell = 0: the dry
+/// limit, and the relaxation's friction).
+fn friction(name: &'static str, v: f64, zero_ok: bool) -> Result<(), ParamError> {
+    let (lo, hi) = FRICTION_RANGE;
+    let ok = (lo..=hi).contains(&v) || (zero_ok && v == 0.0);
+    let allowed =
+        if zero_ok { format!("must be 0 or in [{lo:e}, {hi:e}]") } else { format!("must be in [{lo:e}, {hi:e}]") };
+    check(ok, name, v, allowed)
+}
+
 impl Params {
     /// The friction ratio χ = ξ_s / ξ_cell (infinite in the dry limit ξ_cell = 0).
     pub fn chi(&self) -> f64 {
@@ -291,8 +306,8 @@ impl Params {
             "must be in (0, 4] (½, 1 or 2 are the readings of the paper)",
         )?;
         positive("q_epsilon", self.q_epsilon)?;
-        positive("xi_substrate", self.xi_substrate)?;
-        non_negative("xi_cell", self.xi_cell)?;
+        friction("xi_substrate", self.xi_substrate, false)?;
+        friction("xi_cell", self.xi_cell, true)?;
         check(
             self.presence_threshold > 0.0 && self.presence_threshold < 0.5,
             "presence_threshold",
@@ -337,7 +352,7 @@ impl Params {
         )?;
         check(self.phi_min < 0.0 && self.phi_min.is_finite(), "phi_min", self.phi_min, "must be a finite number < 0")?;
         check(self.phi_max > 1.0 && self.phi_max.is_finite(), "phi_max", self.phi_max, "must be a finite number > 1")?;
-        positive("xi_relax", self.xi_relax)?;
+        friction("xi_relax", self.xi_relax, false)?;
         // A billion steps is months of computing; the bound keeps their sum far from overflow.
         for (name, steps) in [("relax_steps", self.relax_steps), ("active_steps", self.active_steps)] {
             check(steps <= MAX_STEPS, name, steps, "must be in [0, 1000000000]")?;

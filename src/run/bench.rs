@@ -202,7 +202,10 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
 /// The relaxed state in `file` (the format of `monolayer relaxed-state`), checked against the key
 /// of `params` and `seed`: a file made with other relaxation parameters is refused, naming it.
 pub fn relaxed_start(file: &Path, params: &Params, seed: u64) -> Result<Monolayer, String> {
-    let bytes = fs::read(file).map_err(|e| format!("--from-relaxed {}: {e}", file.display()))?;
+    // A relaxed state holds less than the simulation it starts: a larger file is not one.
+    let max = crate::run::runner::memory_estimate(params);
+    let bytes = crate::run::files::read_input(file, "a relaxed state (--from-relaxed)", max)
+        .map_err(|e| format!("--from-relaxed {e}"))?;
     let state = snapshot::decode_relaxed(&bytes, params, seed).map_err(|e| {
         format!(
             "--from-relaxed {}: {e} (give the relaxation's parameters: --relax-steps, --seed, --set box_size=…, n_cells=…, gamma=…)",

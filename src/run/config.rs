@@ -2,7 +2,6 @@
 //! KEY=VALUE parser of the program, and the one place that turns a table of values into
 //! [`Params`] with errors that name the parameter, what it got and what it takes.
 
-use std::fs;
 use std::path::Path;
 
 use crate::model::params::Params;
@@ -90,9 +89,20 @@ fn single(key: &str, v: toml::Value) -> Result<Params, String> {
 /// key at a time; `origin` prefixes every error (the file, `--set`, or the run of a sweep). The
 /// ranges are left to [`Params::validate`], once the caller has applied its own options.
 pub fn params_from_table(table: &toml::Table, origin: &str) -> Result<Params, String> {
+    params_from_table_at(table, origin, &|_| None)
+}
+
+/// [`params_from_table`] where `at(key)` says where a key's value was given, when known (a
+/// config file's line and column), to name it in place of `origin`.
+fn params_from_table_at(
+    table: &toml::Table,
+    origin: &str,
+    at: &dyn Fn(&str) -> Option<String>,
+) -> Result<Params, String> {
     let defaults = toml::Table::try_from(Params::default()).expect("the defaults serialise");
     let mut checked = toml::Table::new();
     for (k, v) in table {
+        let origin = at(k).unwrap_or_else(|| origin.to_string());
         let Some(d) = defaults.get(k) else {
             let names: Vec<&str> = defaults.keys().map(String::as_str).collect();
             return Err(format!("{origin}: unknown parameter `{k}` (the parameters: {})", names.join(", ")));
@@ -136,25 +146,38 @@ pub fn number(key: &str, v: &toml::Value) -> Result<f64, String> {
 
 /// Parameters from an optional TOML file and `KEY=VALUE` overrides (later ones win).
 pub fn load_params(config: Option<&Path>, overrides: &[String]) -> Result<Params, String> {
+    // Where each key of the file is: a wrong value is named by its line and column.
+    let mut places = std::collections::BTreeMap::new();
     let (mut table, origin) = match config {
         Some(path) => {
-            let text = fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+            let text = crate::run::files::read_text_input(path, "a config file (--config)")?;
             let table: toml::Table = from_toml(&text, &path.display().to_string())?;
+            let spans: std::collections::BTreeMap<String, toml::Spanned<toml::Value>> =
+                toml::from_str(&text).unwrap_or_default();
+            for (k, v) in spans {
+                let start = v.span().start.min(text.len());
+                let before = &text[..start];
+                let line = before.matches('\n').count() + 1;
+                let column = before.rsplit('\n').next().unwrap_or("").chars().count() + 1;
+                places.insert(k, format!("{}, line {line}, column {column}", path.display()));
+            }
             (table, path.display().to_string())
         }
         None => (toml::Table::new(), "--set".to_string()),
     };
     for o in overrides {
         let (k, v) = parse_assignment("--set", o)?;
+        places.insert(k.clone(), "--set".to_string());
         table.insert(k, v);
     }
     let origin = if config.is_some() && !overrides.is_empty() { format!("{origin} and --set") } else { origin };
-    params_from_table(&table, &origin)
+    params_from_table_at(&table, &origin, &|k| places.get(k).cloned())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::fs;
 
     fn set(args: &[&str]) -> Result<Params, String> {
         load_params(None, &args.iter().map(|s| s.to_string()).collect::<Vec<_>>())

@@ -122,6 +122,43 @@ fn file_kind(t: &fs::FileType) -> &'static str {
     }
 }
 
+/// The largest text file read as input: a config file, a sweep file or a `run.json` holds a
+/// few kilobytes; anything near this is not one, and would be read whole into memory.
+pub const MAX_TEXT_INPUT_BYTES: u64 = 1 << 20;
+
+/// Checks that the input file `path` (given as `what`, e.g. `--config`) is a regular file of at
+/// most `max_bytes`, before it is opened: opening a FIFO blocks until a writer comes, and a
+/// device such as `/dev/zero` never ends. A symbolic link is followed to what it points at.
+pub fn check_input(path: &Path, what: &str, max_bytes: u64) -> IoResult<()> {
+    let meta = fs::metadata(path).map_err(|e| err(path, e))?;
+    if !meta.is_file() {
+        let kind = file_kind(&meta.file_type());
+        return Err(err(path, format!("is {kind}, not a regular file: refused as {what}")));
+    }
+    if meta.len() > max_bytes {
+        return Err(err(path, format!("{} bytes: larger than any {what} ({max_bytes} bytes at most)", meta.len())));
+    }
+    Ok(())
+}
+
+/// Reads the input file `path` whole once [`check_input`] accepts it; no more than `max_bytes`
+/// are read should it grow meanwhile.
+pub fn read_input(path: &Path, what: &str, max_bytes: u64) -> IoResult<Vec<u8>> {
+    check_input(path, what, max_bytes)?;
+    let mut bytes = Vec::new();
+    File::open(path).and_then(|f| f.take(max_bytes + 1).read_to_end(&mut bytes)).map_err(|e| err(path, e))?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(err(path, format!("grew past {max_bytes} bytes while read: larger than any {what}")));
+    }
+    Ok(bytes)
+}
+
+/// [`read_input`] of a UTF-8 text file.
+pub fn read_text_input(path: &Path, what: &str) -> IoResult<String> {
+    String::from_utf8(read_input(path, what, MAX_TEXT_INPUT_BYTES)?)
+        .map_err(|e| err(path, format!("not UTF-8 text ({e}): refused as {what}")))
+}
+
 /// Removes the temporary files a killed writer left in `dir` (call it holding the directory's
 /// [`RunLock`], so that no live writer's file is taken).
 pub fn remove_stale_temporaries(dir: &Path) {
@@ -176,12 +213,36 @@ impl RunLock {
 
     /// Takes the lock of `dir` (which must exist), or says which process holds it.
     pub fn acquire(dir: &Path) -> IoResult<Self> {
+        Self::try_acquire(dir)?.map_err(|holder| {
+            let who = holder.map(|pid| format!("process {pid}")).unwrap_or_else(|| "another process".into());
+            format!(
+                "{}: {who} is writing this run directory (one writer per directory): wait for it to end, or stop \
+                 it, then try again",
+                dir.display()
+            )
+        })
+    }
+
+    /// Takes the lock of `dir`, or gives the process id of its holder (None where the file does
+    /// not say) as the inner error.
+    pub fn try_acquire(dir: &Path) -> IoResult<Result<Self, Option<u32>>> {
         let path = dir.join(Self::FILE);
         let mut options = fs::OpenOptions::new();
         options.read(true).write(true).create(true).truncate(false);
         // Never through a symbolic link: the pid would be written into whatever it points at.
         #[cfg(unix)]
         std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NOFOLLOW);
+        // Anything but a regular file (a FIFO, a device) cannot be this program's lock: flock on
+        // it fails with an error that names neither the file nor the cause.
+        if let Ok(m) = fs::symlink_metadata(&path) {
+            if !m.is_file() && !m.file_type().is_symlink() {
+                let kind = file_kind(&m.file_type());
+                return Err(err(
+                    &path,
+                    format!("is {kind}, not a regular file: not this program's lock file; remove it, then try again"),
+                ));
+            }
+        }
         let mut file = options.open(&path).map_err(|e| match fs::symlink_metadata(&path) {
             Ok(m) if m.file_type().is_symlink() => {
                 err(&path, "a symbolic link, not this program's lock file: remove it, then try again")
@@ -193,21 +254,13 @@ impl RunLock {
             Err(fs::TryLockError::WouldBlock) => {
                 let mut holder = String::new();
                 let _ = file.read_to_string(&mut holder);
-                let who = match holder.trim().parse::<u32>() {
-                    Ok(pid) => format!("process {pid}"),
-                    Err(_) => "another process".to_string(),
-                };
-                return Err(format!(
-                    "{}: {who} is writing this run directory (one writer per directory): wait for it to end, or \
-                     stop it, then try again",
-                    dir.display()
-                ));
+                return Ok(Err(holder.trim().parse::<u32>().ok()));
             }
             Err(fs::TryLockError::Error(e)) => return Err(err(&path, e)),
         }
         file.set_len(0).map_err(|e| err(&path, e))?;
         writeln!(file, "{}", std::process::id()).map_err(|e| err(&path, e))?;
-        Ok(RunLock { _file: file })
+        Ok(Ok(RunLock { _file: file }))
     }
 }
 
@@ -345,7 +398,10 @@ impl RunRecord {
         if !dir.is_dir() {
             return Err(format!("{}: no such directory", dir.display()));
         }
-        let text = fs::read_to_string(&path).map_err(|e| err(&path, format!("{e} (is this a run directory?)")))?;
+        if !path.exists() {
+            return Err(err(&path, "no such file (is this a run directory?)"));
+        }
+        let text = read_text_input(&path, "a run record")?;
         let value: serde_json::Value =
             serde_json::from_str(&text).map_err(|e| err(&path, format!("not valid JSON: {e}")))?;
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
@@ -473,6 +529,7 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
 /// Checks every array's header in the `.npz` at `path` before anything is allocated from it
 /// ([`frame_file::check_npz_headers`]).
 fn check_npz_file_headers(path: &Path, max_values: u64) -> IoResult<()> {
+    check_input(path, "a checkpoint", MAX_FRAME_BYTES)?;
     let file = File::open(path).map_err(|e| err(path, e))?;
     frame_file::check_npz_headers(BufReader::new(file), max_values).map_err(|e| err(path, e))
 }
@@ -527,7 +584,25 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
         if [x0, y0, w, h].iter().any(|&v| v < 0 || v as usize >= l) {
             return Err(err(path, format!("cell {i}: patch ({x0}, {y0}, {w}, {h}) does not fit the {l}×{l} lattice")));
         }
+        if w == 0 || h == 0 {
+            return Err(err(
+                path,
+                format!(
+                    "cell {i}: patch at ({x0}, {y0}) is {w}×{h} sites: a cell's patch is at least 1×1 (a damaged file)"
+                ),
+            ));
+        }
         let p = Patch { x0: x0 as usize, y0: y0 as usize, w: w as usize, h: h as usize };
+        if b - a != p.padded_len() {
+            return Err(err(
+                path,
+                format!(
+                    "cell {i}: {} values of φ for a {w}×{h} patch, which holds {} with its padding (a damaged file)",
+                    b - a,
+                    p.padded_len()
+                ),
+            ));
+        }
         cells.push((p, phi.slice(ndarray::s![a..b]).to_vec()));
     }
     let complex = |a: &Array3<f64>| (0..l * l).map(|k| C64::new(a[[k / l, k % l, 0]], a[[k / l, k % l, 1]])).collect();

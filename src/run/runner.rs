@@ -180,10 +180,17 @@ fn memory_limit() -> Result<Option<(u64, &'static str)>, String> {
 
 /// Refuses a run that would not fit in memory, before it starts, with what it would need.
 pub fn check_memory(params: &Params) -> Result<(), String> {
-    let need = memory_estimate(params);
+    check_memory_of(params, 1)
+}
+
+/// [`check_memory`] for `copies` simulations of `params` held at once (`bench` keeps one per
+/// thread count it times).
+pub fn check_memory_of(params: &Params, copies: u64) -> Result<(), String> {
+    let need = memory_estimate(params).saturating_mul(copies.max(1));
+    let held = if copies > 1 { format!(" for the {copies} simulations held at once") } else { String::new() };
     match memory_limit()? {
         Some((limit, what)) if need > limit => Err(format!(
-            "box_size = {}, n_cells = {} need about {} MB, more than {what} ({} MB): lower box_size or n_cells",
+            "box_size = {}, n_cells = {} need about {} MB{held}, more than {what} ({} MB): lower box_size or n_cells",
             params.box_size,
             params.n_cells,
             need >> 20,
@@ -191,6 +198,23 @@ pub fn check_memory(params: &Params) -> Result<(), String> {
         )),
         _ => Ok(()),
     }
+}
+
+/// Refuses a frame interval (given as `flag`) longer than the active phase of `params`: such a
+/// run writes no frame of its activity, only the one at the end of the relaxation. A run of no
+/// active steps has no interval to check.
+pub fn check_frame_interval(flag: &str, frame_interval: u64, params: &Params) -> Result<(), String> {
+    if frame_interval == 0 {
+        return Err(format!("{flag} 0: must be ≥ 1"));
+    }
+    if params.active_steps > 0 && frame_interval > params.active_steps {
+        return Err(format!(
+            "{flag} {frame_interval}: larger than active_steps = {}, so the run would write no frame of its \
+             active phase: give a frame interval in [1, {0}]",
+            params.active_steps
+        ));
+    }
+    Ok(())
 }
 
 /// What steps a run: the CPU core (the reference, the same bits on every machine and thread
@@ -326,7 +350,8 @@ impl RunDir {
         if step >= p.relax_steps && frame_path(dir, step).exists() {
             record.last_frame_step = Some(step);
         }
-        let monolayer = Monolayer::from_state(record.params.clone(), record.seed, state).map_err(|e| e.to_string())?;
+        let monolayer = Monolayer::from_state(record.params.clone(), record.seed, state)
+            .map_err(|e| format!("{}: {e}", checkpoint.display()))?;
         fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
         remove_stale_temporaries(dir);
         remove_stale_temporaries(&dir.join("frames"));

@@ -84,7 +84,7 @@ fn value_text(v: &toml::Value) -> String {
 
 impl SweepSpec {
     pub fn from_file(path: &Path) -> Result<Self, String> {
-        let text = fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let text = crate::run::files::read_text_input(path, "a sweep file")?;
         crate::run::config::from_toml(&text, &path.display().to_string())
     }
 
@@ -480,11 +480,24 @@ fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, String>
     }
 }
 
+/// Why a job of a sweep did not run.
+enum JobError {
+    /// Another process holds the run's lock (its process id, when the lock file says).
+    Held(Option<u32>),
+    Other(String),
+}
+
+impl From<String> for JobError {
+    fn from(e: String) -> Self {
+        JobError::Other(e)
+    }
+}
+
 /// Runs (or resumes, or skips when done) one job in `OUT/runs/NAME`, single-threaded, holding
 /// the directory's lock from before it looks at the directory.
-fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() + Sync)) -> Result<(), String> {
+fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() + Sync)) -> Result<(), JobError> {
     fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let lock = RunLock::acquire(dir)?;
+    let lock = RunLock::try_acquire(dir)?.map_err(JobError::Held)?;
     let mut run = match start_of(job, dir, frame_interval)? {
         Start::Done => return Ok(()),
         Start::Resume => RunDir::resume_locked(lock, dir)?,
@@ -536,6 +549,7 @@ pub fn run_sweep(
     let done = AtomicUsize::new(0);
     let steps = AtomicUsize::new(0);
     let errors = Mutex::new(Vec::new());
+    let held: Mutex<Vec<(String, Option<u32>)>> = Mutex::new(Vec::new());
     let seconds = Mutex::new(std::collections::HashMap::new());
     let total = mine.len();
     std::thread::scope(|scope| {
@@ -554,8 +568,14 @@ pub fn run_sweep(
                         }
                     };
                     let t = std::time::Instant::now();
-                    if let Err(e) = pool.install(|| execute_job(job, &dir, frame_interval, &on_step)) {
-                        errors.lock().expect("no panics hold it").push(format!("{}: {e}", job.name));
+                    match pool.install(|| execute_job(job, &dir, frame_interval, &on_step)) {
+                        Ok(()) => {}
+                        Err(JobError::Held(pid)) => {
+                            held.lock().expect("no panics hold it").push((job.name.clone(), pid))
+                        }
+                        Err(JobError::Other(e)) => {
+                            errors.lock().expect("no panics hold it").push(format!("{}: {e}", job.name))
+                        }
                     }
                     seconds.lock().expect("no panics hold it").insert(job.name.clone(), t.elapsed().as_secs_f64());
                     let d = done.fetch_add(1, Ordering::SeqCst) + 1;
@@ -564,7 +584,27 @@ pub fn run_sweep(
             });
         }
     });
-    let errors = errors.into_inner().expect("no panics hold it");
+    let mut errors = errors.into_inner().expect("no panics hold it");
+    let held = held.into_inner().expect("no panics hold it");
+    if !held.is_empty() {
+        // Tables written now would leave out the runs another writer has under way.
+        let mut holders: Vec<String> = held
+            .iter()
+            .map(|(_, pid)| pid.map(|p| format!("process {p}")).unwrap_or_else(|| "another process".into()))
+            .collect();
+        holders.sort();
+        holders.dedup();
+        let names: Vec<&str> = held.iter().map(|(n, _)| n.as_str()).collect();
+        errors.push(format!(
+            "{} run(s) of this sweep are being written by {} (another sweep of {}, it seems): {}; summary.csv and \
+             the regime map are not written, as they would leave those runs out. Once it has ended, the same \
+             command again writes them (and runs what is left)",
+            held.len(),
+            holders.join(", "),
+            out.display(),
+            names.join(", ")
+        ));
+    }
     if !errors.is_empty() {
         return Err(errors.join("\n"));
     }

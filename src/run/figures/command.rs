@@ -64,6 +64,12 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
     if o.stage == Stage::Figures {
         return draw(&plan, &o.out, o.jobs);
     }
+    // Before the estimate, which steps a simulation of every size in the plan (and would abort
+    // where one does not fit): the largest must fit, as every run must.
+    if let Some(job) = plan.jobs.iter().max_by_key(|j| crate::run::runner::memory_estimate(&j.params)) {
+        job.params.validate().map_err(|e| e.to_string())?;
+        crate::run::runner::check_memory(&job.params)?;
+    }
     let todo: Vec<&Job> =
         mine.iter().copied().filter(|j| steps_to_run(std::slice::from_ref(*j), &o.out, None) > 0).collect();
     let steps: u64 = todo.iter().map(|j| steps_to_run(std::slice::from_ref(*j), &o.out, None)).sum();
