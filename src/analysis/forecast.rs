@@ -412,14 +412,49 @@ impl Logistic {
                 hess[i][i] += RIDGE * n;
             }
             let step = solve4(hess, grad)?;
-            for (w, d) in model.weights.iter_mut().zip(step) {
-                *w += d;
+            // Newton's step, halved until the penalised likelihood does not fall: rare tears
+            // and a strongly separating input make the full step overshoot.
+            let before = model.penalised_log_likelihood(samples);
+            let mut t = 1.0;
+            loop {
+                let mut trial = model;
+                for (w, d) in trial.weights.iter_mut().zip(step) {
+                    *w += t * d;
+                }
+                let after = trial.penalised_log_likelihood(samples);
+                if after >= before - 1e-12 * before.abs() {
+                    model = trial;
+                    break;
+                }
+                t *= 0.5;
+                if t < 1e-12 {
+                    return Some(model);
+                }
             }
-            if step.iter().all(|d| d.abs() < 1e-10) {
+            if step.iter().all(|d| (t * d).abs() < 1e-10) {
                 return Some(model);
             }
         }
         Some(model)
+    }
+
+    /// Σ log P(observed) − the ridge: what [`Self::fit`] climbs.
+    fn penalised_log_likelihood(&self, samples: &[(Features, bool)]) -> f64 {
+        let n = samples.len() as f64;
+        let ll: f64 = samples
+            .iter()
+            .map(|(f, y)| {
+                let z = self.linear(f);
+                // log σ(z) = −log(1 + e^{−z}), log(1 − σ(z)) = −log(1 + e^{z}), stably.
+                let softplus = |x: f64| if x > 0.0 { x + (-x).exp().ln_1p() } else { x.exp().ln_1p() };
+                if *y {
+                    -softplus(-z)
+                } else {
+                    -softplus(z)
+                }
+            })
+            .sum();
+        ll - 0.5 * RIDGE * n * self.weights[1..].iter().map(|w| w * w).sum::<f64>()
     }
 
     /// (1, standardised features).

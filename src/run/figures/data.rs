@@ -288,15 +288,14 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
                 if mc.is_finite() {
                     chance.push(0.0 - before as f64, mc, ec);
                 }
-                // The paper draws a χ without holes at zero.
-                if holes == 0 {
-                    series.push(0.0 - before as f64, 0.0, 0.0);
-                } else if m.is_finite() {
+                // A χ without holes has no curve: the paper draws it at zero, which reads as a
+                // hole at the defect; here it is absent, and the legend says why.
+                if m.is_finite() {
                     series.push(0.0 - before as f64, m, e);
                 }
             }
             if holes == 0 {
-                series.marker = Marker::Empty;
+                series.label = format!("χ = {chi}: no hole in {} runs (not drawn)", sel.len());
             }
             panels[c].series.push(series);
             if !chance.points.is_empty() {
@@ -310,7 +309,7 @@ fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, 
         let at0: Vec<String> =
             columns.iter().map(|(_, desc, column, sign)| precursor_line(&sel, desc, *column, *sign)).collect();
         made.measured.push(if holes == 0 {
-            format!("χ = {chi}: no hole nucleated in {} runs (drawn at zero, as in the paper)", sel.len())
+            format!("χ = {chi}: no hole nucleated in {} runs (no curve; the paper draws such a χ at zero)", sel.len())
         } else {
             format!("χ = {chi}: {holes} holes in {} runs; {}", sel.len(), at0.join("; "))
         });

@@ -18,7 +18,7 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
     match figure {
         Figure::Fig1c => (
             "Fig. 1c: distance from the hole to the nearest spiral core before nucleation",
-            "“just before the hole forms, both the peak strain in the monolayer and the nearest spiral core localise near the nucleation point (within approximately one cell diameter).” Points at zero distance are simulations without holes (χ = 0.1, 0.05); at χ = 0.01 few holes form.",
+            "“just before the hole forms, both the peak strain in the monolayer and the nearest spiral core localise near the nucleation point (within approximately one cell diameter).” The paper draws simulations without holes (χ = 0.1, 0.05) at zero distance; here a χ without holes has no curve, and its legend says so. At χ = 0.01 few holes form.",
             format!("χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta} (the paper states no ζ: the default). Mean ± standard error over every hole of every run at that χ; x is minus the number of frames before the hole's first frame. The faint line beside each curve is chance: the same measure about 16 random sites (seeded ChaCha8) of each of the same frames."),
         ),
         Figure::Fig1d => (
@@ -53,7 +53,7 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
         ),
         Figure::FigS2 => (
             "Fig. S2: distances to the two nearest +½ defects before nucleation",
-            "“While the hole does not always nucleate precisely between the defects, it remains consistently closer to two defects, with both defects typically located within approximately two cell diameters.” Points at zero distance are simulations without holes (χ = 0.1, 0.05).",
+            "“While the hole does not always nucleate precisely between the defects, it remains consistently closer to two defects, with both defects typically located within approximately two cell diameters.” The paper draws simulations without holes (χ = 0.1, 0.05) at zero distance; here a χ without holes has no curve, and its legend says so.",
             format!("As Fig. 1c: χ ∈ {{0.1, 0.05, 0.01, 0.005, 0.001}}, ζ = {zeta}; distances over R. The faint line beside each curve is chance: the same measure about 16 random sites (seeded ChaCha8) of each of the same frames."),
         ),
         Figure::Mechanism => (
