@@ -184,6 +184,12 @@ fn cross_validate(runs: &[RunData]) -> (Vec<FoldScore>, Vec<Vec<Vec<(f64, bool)>
             }
         }
     }
+    // Each fold's pairs came sorted by their own fold; the curve needs them sorted together.
+    for per_subset in &mut pooled {
+        for pairs in per_subset.iter_mut() {
+            pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        }
+    }
     (scores, pooled)
 }
 

@@ -423,7 +423,7 @@ impl Draw for NucleationFields<'_> {
                 }))
                 .map_err(plot_err)?;
             // Arrows (velocity, force) or director lines every third site.
-            let sparse = in_view.iter().copied().filter(|&k| (k % l) % 3 == 0 && (k / l) % 3 == 0);
+            let sparse = in_view.iter().copied().filter(|&k| (k % l).is_multiple_of(3) && (k / l).is_multiple_of(3));
             let (ax, ay): (&[f64], &[f64]) = if kind == 1 { (&s.fx, &s.fy) } else { (&s.vx, &s.vy) };
             let amax = in_view.iter().fold(0.0f64, |m, &k| m.max(ax[k].hypot(ay[k]))).max(f64::MIN_POSITIVE);
             for k in sparse {

@@ -503,9 +503,7 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
                 f.map(|f| format!("{:.6e},{:.6e},{:.6e}", f.ln_a.exp(), f.b, f.se_b)).unwrap_or_else(|| ",,".into())
             };
             let with_holes = sel.iter().filter(|r| r.probability.values().any(|b| b.1 > 0)).count();
-            let jk = |fit: fn(&[(f64, u64, u64)]) -> Option<crate::analysis::nucleation::ExponentialFit>| {
-                jackknife_coefficient_se(&sel, fit)
-            };
+            let jk = |fit: CoefficientFit| jackknife_coefficient_se(&sel, fit);
             let (jk_ml, jk_ls) = (jk(binomial_fit), jk(least_squares_fit));
             let _ = writeln!(
                 fits,
@@ -566,14 +564,14 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
     Ok(())
 }
 
+/// A fit of P(hole | ε̇) to (ε̇, sites, hole sites) bins.
+type CoefficientFit = fn(&[(f64, u64, u64)]) -> Option<crate::analysis::nucleation::ExponentialFit>;
+
 /// The jackknife standard error over runs of a fit's coefficient b: each run left out in turn,
 /// the others' bins pooled and fitted; √((n − 1)/n Σ (b₋ᵢ − b̄)²) over the n runs with hole sites
 /// (a run without holes moves no fit's numerator but still counts its sites: it is left out in
 /// turn too). None unless at least two runs have hole sites and every leave-one-out fit exists.
-pub fn jackknife_coefficient_se(
-    runs: &[&RunData],
-    fit: fn(&[(f64, u64, u64)]) -> Option<crate::analysis::nucleation::ExponentialFit>,
-) -> Option<f64> {
+pub fn jackknife_coefficient_se(runs: &[&RunData], fit: CoefficientFit) -> Option<f64> {
     use crate::analysis::nucleation::STRAIN_RATE_BIN;
     if runs.iter().filter(|r| r.probability.values().any(|b| b.1 > 0)).count() < 2 {
         return None;
