@@ -354,6 +354,16 @@ impl Predictor {
     }
 }
 
+/// The combination the page draws (its forecast field): fitted by `monolayer forecast` on the 18
+/// paper-length runs of docs/figures.md ("Thinning, matched chance and the forecast"), a
+/// nucleation within R in the next 3 frames (3,000 steps), all sites; the numbers are those of
+/// docs/evidence/forecast/forecast_model.txt, which a test holds them to.
+pub const SHIPPED_MODEL: Logistic = Logistic {
+    mean: [-0.00697343980094324, 3.655877436803038, -0.892125735047249],
+    scale: [0.31724060383930314, 0.7416987616920563, 0.9040575761687477],
+    weights: [-8.999196897781783, 1.1660915618090621, -0.4202569395593224, -0.4976739373979643],
+};
+
 /// P(tear | features) = 1 / (1 + exp(−(w₀ + Σ w_k (f_k − m_k)/s_k))), features standardised by
 /// the training set's mean m and standard deviation s.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -652,6 +662,21 @@ pub fn score_field(a: &Analysis, model: &Logistic, out: &mut Vec<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The page's model is the one `monolayer forecast` wrote for the record, to the bit.
+    #[test]
+    fn the_shipped_model_is_the_recorded_fit() {
+        let text = include_str!("../../docs/evidence/forecast/forecast_model.txt");
+        let read = |key: &str| -> Vec<f64> {
+            let line = text.lines().find(|l| l.starts_with(key)).unwrap_or_else(|| panic!("{key} missing"));
+            let list = line.split_once('[').unwrap().1.trim_end_matches(']');
+            list.split(',').map(|v| v.trim().parse().unwrap()).collect()
+        };
+        assert_eq!(read("mean"), SHIPPED_MODEL.mean);
+        assert_eq!(read("scale"), SHIPPED_MODEL.scale);
+        assert_eq!(read("weights"), SHIPPED_MODEL.weights);
+        assert!(text.contains("horizon 3 frames"));
+    }
 
     #[test]
     fn the_auc_is_the_chance_a_tearing_site_outscores_one_that_does_not() {

@@ -12,6 +12,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::analysis::defects::Defect;
+use crate::analysis::forecast::{score_field, SHIPPED_MODEL};
 use crate::analysis::frame_file::FrameData;
 use crate::analysis::spirals::PlusOne;
 use crate::analysis::Analysis;
@@ -38,16 +39,21 @@ pub enum FieldKind {
     StrainRate = 4,
     /// ∇·f^a of the smoothed active force, with defects.
     ForceDivergence = 5,
+    /// Where a hole is likeliest to open within R in the next 3,000 steps: the recorded
+    /// combination of strain rate, spiral cores and thinning (`analysis::forecast`), with the
+    /// spiral cores.
+    Forecast = 6,
 }
 
 impl FieldKind {
-    pub const ALL: [FieldKind; 6] = [
+    pub const ALL: [FieldKind; 7] = [
         FieldKind::Tissue,
         FieldKind::PhiSum,
         FieldKind::Speed,
         FieldKind::Director,
         FieldKind::StrainRate,
         FieldKind::ForceDivergence,
+        FieldKind::Forecast,
     ];
 
     /// Whether a field is drawn under the outlines (with a colour bar), rather than the cells'
@@ -104,6 +110,8 @@ pub struct ViewBuilder {
     /// ±½ defects and spiral cores as last drawn (empty where the field does not show them).
     pub defects: Vec<Defect>,
     pub spiral_cores: Vec<PlusOne>,
+    /// The forecast field as last computed.
+    forecast: Vec<f64>,
 }
 
 const WHITE: [f32; 4] = [1.0, 1.0, 1.0, 0.9];
@@ -183,6 +191,18 @@ impl ViewBuilder {
                 if kind == FieldKind::StrainRate {
                     self.spiral_marks(dpr);
                 }
+            }
+            FieldKind::Forecast => {
+                self.analyse(m, recorded);
+                let a = self.analysis.as_ref().expect("built by analyse");
+                score_field(a, &SHIPPED_MODEL, &mut self.forecast);
+                let top = self.forecast.iter().fold(0.0f64, |t, &v| t.max(v));
+                let s = follow_scale(&mut self.scale, top) as f32;
+                for (f, &v) in self.view.field.iter_mut().zip(&self.forecast) {
+                    f[0] = v as f32;
+                }
+                self.view.range = (0.0, s);
+                self.spiral_marks(dpr);
             }
         }
         &self.view
@@ -451,7 +471,10 @@ mod tests {
         let speed: Vec<f64> = m.velocity_field().iter().map(|c| c.norm()).collect();
         let keys = keys(&m);
         let mut b = ViewBuilder::default();
-        let expect: [(FieldKind, Vec<f64>); 5] = [
+        let mut forecast = Vec::new();
+        crate::analysis::forecast::score_field(&a, &SHIPPED_MODEL, &mut forecast);
+        let expect: [(FieldKind, Vec<f64>); 6] = [
+            (FieldKind::Forecast, forecast),
             (FieldKind::PhiSum, phi_sum),
             (FieldKind::Speed, speed),
             (FieldKind::Director, a.smooth.qxx.iter().zip(&a.smooth.qxy).map(|(x, y)| x.hypot(*y)).collect()),

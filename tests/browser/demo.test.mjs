@@ -294,7 +294,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check(`each field draws with its colour bar`, async () => {
-      const fields = [['2', 'phisum'], ['3', 'speed'], ['4', 'director'], ['5', 'strainrate'], ['6', 'forcedivergence'], ['1', 'tissue']];
+      const fields = [['2', 'phisum'], ['3', 'speed'], ['4', 'director'], ['5', 'strainrate'], ['6', 'forcedivergence'], ['7', 'forecast'], ['1', 'tissue']];
       for (const [key, f] of fields) {
         const drawn = await page.evaluate(() => window.demo.drawn);
         await page.keyboard.press(key);

@@ -54,7 +54,7 @@ export const PARAMS = {
 export const SLIDERS = Object.keys(PARAMS).filter((k) => PARAMS[k].slider);
 export const MODEL_PARAMS = Object.keys(PARAMS).filter((k) => PARAMS[k].model);
 
-// The fields the core can draw (src/web/view.rs, `FieldKind`), in the order of keys 1–6, with
+// The fields the core can draw (src/web/view.rs, `FieldKind`), in the order of keys 1–7, with
 // the colour bar's units. In the URL a field is its FieldKind name in lower case.
 export const FIELDS = new Map([
   [FieldKind.Tissue, { label: 'Cells (outline at φ = ½, axis ∝ elongation)', units: '' }],
@@ -63,6 +63,9 @@ export const FIELDS = new Map([
   [FieldKind.Director, { label: 'Nematic order |Σφ Q̂| with director and ±½ defects', units: '' }],
   [FieldKind.StrainRate, { label: 'Strain rate ε̇ = ∇·v/2 with ±½ defects and spiral cores', units: ' per time unit' }],
   [FieldKind.ForceDivergence, { label: 'Active-force divergence ∇·fᵃ with ±½ defects', units: '' }],
+  // The recorded forecast (src/analysis/forecast.rs, SHIPPED_MODEL); its score on runs it never
+  // saw is in docs/figures.md, "Thinning, matched chance and the forecast".
+  [FieldKind.Forecast, { label: 'Forecast: chance a hole opens within R in the next 3,000 steps, from strain rate, spiral cores and thinning (held-out AUC 0.95 on paper-size runs)', units: '' }],
 ]);
 export const fieldName = (kind) => FieldKind[kind].toLowerCase();
 const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === name);
