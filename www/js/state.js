@@ -65,7 +65,7 @@ export const FIELDS = new Map([
   [FieldKind.ForceDivergence, { label: 'Active-force divergence ∇·fᵃ with ±½ defects', units: '' }],
   // The recorded forecast (src/analysis/forecast.rs, SHIPPED_MODEL); its score on runs it never
   // saw is in docs/figures.md, "Thinning, matched chance and the forecast".
-  [FieldKind.Forecast, { label: 'Forecast: chance a hole opens within R in the next 3,000 steps, from strain rate, spiral cores and thinning (held-out AUC 0.95 on paper-size runs)', units: '' }],
+  [FieldKind.Forecast, { label: 'Forecast of the next hole within 3,000 steps (held-out AUC 0.95)', units: '' }],
 ]);
 export const fieldName = (kind) => FieldKind[kind].toLowerCase();
 const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === name);
