@@ -1,4 +1,4 @@
-// What every compute stage of the GPU stepper shares (src/gpu/; issue 26): the parameters and
+// What every compute stage of the GPU stepper shares (src/gpu/): the parameters and
 // the cells' patches. src/gpu/kernels.rs prepends this file to each stage's file, as the
 // renderer does with common.wgsl.
 //

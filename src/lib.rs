@@ -23,7 +23,7 @@
 pub mod analysis;
 pub mod model;
 
-/// The GPU stepper's stages on wgpu compute (feature `gpu`; issue 26).
+/// The GPU stepper's stages on wgpu compute (feature `gpu`).
 #[cfg(feature = "gpu")]
 pub mod gpu;
 

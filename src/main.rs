@@ -82,7 +82,7 @@ struct FiguresArgs {
     /// the paper's length: one machine overnight), evidence (the paper's protocol: 10,000
     /// relaxation and 100,000 active steps, a frame every 1,000 steps; 4 seeds per point for
     /// Figs. 2 and 3c, 3 elsewhere, the χ = 0.01 points at ζ = 0.4 and 0.5 included; 75 runs,
-    /// some 20 core-hours; issue 23) or paper (the paper's counts: a cluster).
+    /// some 20 core-hours) or paper (the paper's counts: a cluster).
     #[arg(long, default_value = "smoke")]
     scale: monolayer::run::figures::Scale,
     /// Only these figures and their runs: --only 1c,3d,S1 (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3,

@@ -52,7 +52,7 @@ fn the_paper_plan_has_the_papers_counts_and_shares_runs() {
     assert_eq!((dry.params.xi_cell, dry.params.xi_substrate), (0.0, 1.0));
 }
 
-/// The evidence scale (issue 23): the paper's protocol with 4 seeds per point for Figs. 2 and
+/// The evidence scale: the paper's protocol with 4 seeds per point for Figs. 2 and
 /// 3c, 3 elsewhere, χ = 0.01 at ζ = 0.4 and 0.5, S1 with the same 100 cells on 120²; named by
 /// `--help`.
 #[test]
@@ -157,7 +157,7 @@ fn the_smoke_scale_draws_every_figure_and_resumes_without_running_again() {
     let csvs = csv_files(&out);
     assert!(csvs["fig3d.csv"].lines().count() == 16, "{}", csvs["fig3d.csv"]);
     assert!(csvs["figS1.csv"].contains("dry,"), "the dry limit is in Fig. S1");
-    // Issue 23's definitions reach the figures: chance lines, both fits, the mechanism.
+    // The definitions reach the figures: chance lines, both fits, the mechanism.
     for f in ["fig1c.csv", "fig1d.csv", "figS2.csv", "figmechanism.csv"] {
         assert!(csvs[f].lines().next().unwrap().contains("_chance_mean"), "{f} lacks its chance line");
     }

@@ -134,7 +134,7 @@ proptest! {
         }
     }
 
-    /// Any shape in any array's `.npy` header (issue 24: an 80 GB one aborted the process) is
+    /// Any shape in any array's `.npy` header (an 80 GB one once aborted the process) is
     /// refused before it is allocated, or read and checked as any frame is.
     #[test]
     fn any_npz_header_shape_is_refused_or_read(

@@ -1,6 +1,6 @@
 //! What a demanding user does to a run: two writers in one directory, a full disk, a kill at the
 //! wrong moment, a hand-edited record, damaged or foreign frames, absurd numbers. Each test here
-//! reproduces one defect of issue 16 and fails without its fix.
+//! reproduces one defect and fails without its fix.
 
 mod common;
 
@@ -150,7 +150,7 @@ fn a_second_writer_is_refused_and_the_lock_dies_with_its_holder() {
     }
     let o = monolayer(&["run", "--quiet", "--resume", arg(&run)]);
     refused(&o, &[arg(&run), &format!("process {}", first.id()), "one writer per directory"]);
-    // The race of issue 16: the same --out at once. Whichever check meets it, it is refused.
+    // The race: the same --out at once. Whichever check meets it, it is refused.
     let o = small(&run, 100, &["--zeta", "0.5"]);
     refused(&o, &[arg(&run)]);
     // In this process too: the lock is the OS's, not a file's existence.
@@ -512,8 +512,6 @@ fn a_full_disk_during_analyze_leaves_no_partial_tables() {
     ok(&analyzed(&run, &out));
 }
 
-// ---- Issue 24 ----
-
 /// A tmpfs of a given size mounted on a fresh directory, unmounted when dropped; None (with a
 /// message) where this process may not mount one, and a failure under `CI=true`, where `.ci/run`
 /// runs the tests as root.
@@ -557,7 +555,7 @@ impl Drop for TmpFs {
     }
 }
 
-/// Issue 24, item 1: the full-disk reproduction on a real tmpfs, at several disk sizes (the disk
+/// The full-disk reproduction on a real tmpfs, at several disk sizes (the disk
 /// fills at the checkpoint, at a frame or at the record): every run stops, resumes once there is
 /// space, and ends with the same bits as a run that never stopped.
 #[test]
@@ -601,7 +599,7 @@ fn a_full_disk_at_any_write_resumes_to_the_same_bits() {
     }
 }
 
-/// Issue 24, item 2: the estimate steps a stable stand-in where the plan's first job blows up
+/// The estimate steps a stable stand-in where the plan's first job blows up
 /// (at γ = 0.04 the φ guard stops every run within 22 steps), and `--dry-run` needs no `--slurm`.
 #[test]
 fn the_estimate_survives_a_plan_whose_first_job_blows_up() {
@@ -625,7 +623,7 @@ fn the_estimate_survives_a_plan_whose_first_job_blows_up() {
     ok(&o);
 }
 
-/// Issue 24, item 3: a run.json with a parameter removed is refused, naming the key.
+/// A run.json with a parameter removed is refused, naming the key.
 #[test]
 fn a_record_missing_a_parameter_is_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
@@ -640,7 +638,7 @@ fn a_record_missing_a_parameter_is_refused_by_name() {
     refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["run.json", "`params.zeta` is missing"]);
 }
 
-/// Issue 25: a run continues only in the storage precision it started in. A record written
+/// A run continues only in the storage precision it started in. A record written
 /// before the field existed reads as f64 (every build before it stored f64).
 #[test]
 fn a_run_resumes_only_in_its_own_storage_precision() {
@@ -661,7 +659,7 @@ fn a_run_resumes_only_in_its_own_storage_precision() {
     assert_eq!(RunRecord::load(&run).unwrap().storage, "f64", "a record without the field is an f64 run's");
 }
 
-/// Issue 24, item 4: grids that set one parameter twice (directly, or through `chi`) or list
+/// Grids that set one parameter twice (directly, or through `chi`) or list
 /// values equal as numbers are refused.
 #[test]
 fn grids_that_set_a_parameter_twice_are_refused() {
@@ -683,7 +681,7 @@ fn grids_that_set_a_parameter_twice_are_refused() {
     refused(&o, &["`zeta` is already a grid axis"]);
 }
 
-/// Issue 24, item 6: `figures --jobs` has the bound of `--threads` and `sweep --jobs`.
+/// `figures --jobs` has the bound of `--threads` and `sweep --jobs`.
 #[test]
 fn figures_jobs_are_bounded() {
     let o = monolayer(&["figures", "--jobs", "1000", "--dry-run", "--out", "/nonexistent/never"]);
@@ -725,7 +723,7 @@ fn replace_npz_entry(path: &Path, name: &str, bytes: &[u8]) {
     w.finish().unwrap();
 }
 
-/// Issue 24, item 5: an `.npz` header declaring a huge shape is refused before anything is
+/// An `.npz` header declaring a huge shape is refused before anything is
 /// allocated, in `analyze` (a frame) and in `--resume` (the checkpoint); no abort.
 #[test]
 fn huge_npz_headers_are_refused_before_allocating() {
@@ -745,7 +743,7 @@ fn huge_npz_headers_are_refused_before_allocating() {
     refused(&monolayer(&["run", "--quiet", "--resume", arg(&run)]), &["array `warm_start`"]);
 }
 
-/// Issue 24, item 12: a FIFO named as a frame is refused, not read (which would hang).
+/// A FIFO named as a frame is refused, not read (which would hang).
 #[test]
 fn a_fifo_among_the_frames_is_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -757,7 +755,7 @@ fn a_fifo_among_the_frames_is_refused() {
     refused(&analyzed(&run, &dir.path().join("a")), &["frame_0001000.npz", "not a regular file"]);
 }
 
-/// Issue 24, item 14: SIGTERM and SIGINT, sent for real to a running `monolayer run`, stop it
+/// SIGTERM and SIGINT, sent for real to a running `monolayer run`, stop it
 /// after the step under way with `stopped: signal …` and the shell's status (143, 130); the
 /// resume ends with the same bits as a run never stopped.
 #[test]
@@ -797,7 +795,7 @@ fn a_signal_stops_a_run_gracefully_and_it_resumes_to_the_same_bits() {
     }
 }
 
-/// Issue 24, item 7: `MONOLAYER_MEMORY_LIMIT_MB` that cannot be read is named, 2⁴⁴ MB no longer
+/// `MONOLAYER_MEMORY_LIMIT_MB` that cannot be read is named, 2⁴⁴ MB no longer
 /// wraps to 0, RLIMIT_AS is consulted (a run refused, not aborted), and `fingerprint` checks.
 #[test]
 fn the_memory_check_reads_its_variable_and_the_process_limits() {
@@ -827,7 +825,7 @@ fn the_memory_check_reads_its_variable_and_the_process_limits() {
     assert_eq!(cgroup_room("9223372036854771712", None), None, "cgroup v1's 'no limit'");
 }
 
-/// Issue 24, item 8: structure and type errors of TOML and JSON name the key and the line.
+/// Structure and type errors of TOML and JSON name the key and the line.
 #[test]
 fn file_errors_name_the_key_and_the_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -861,7 +859,7 @@ fn file_errors_name_the_key_and_the_line() {
     assert!(e.contains("`seed`") && e.contains("line "), "{e}");
 }
 
-/// Issue 24, item 9: an `--out` an `#SBATCH` line cannot hold is refused, naming what is wrong.
+/// An `--out` an `#SBATCH` line cannot hold is refused, naming what is wrong.
 #[test]
 fn slurm_scripts_refuse_paths_sbatch_cannot_hold() {
     let dir = tempfile::tempdir().unwrap();
@@ -872,7 +870,7 @@ fn slurm_scripts_refuse_paths_sbatch_cannot_hold() {
     }
 }
 
-/// Issue 24, item 10: `.lock` is never followed through a symbolic link.
+/// `.lock` is never followed through a symbolic link.
 #[test]
 fn the_lock_is_not_followed_through_a_symlink() {
     let dir = tempfile::tempdir().unwrap();
@@ -886,7 +884,7 @@ fn the_lock_is_not_followed_through_a_symlink() {
     assert_eq!(fs::read_to_string(&victim).unwrap(), "keep me");
 }
 
-/// Issue 24, item 11: a 1-based Slurm array runs every shard; an array that is not contiguous
+/// A 1-based Slurm array runs every shard; an array that is not contiguous
 /// is refused with what to do, naming the variables Slurm set.
 #[test]
 fn one_based_slurm_arrays_run_every_shard() {
@@ -913,7 +911,7 @@ fn one_based_slurm_arrays_run_every_shard() {
     refused(&o, &["not one of a contiguous array"]);
 }
 
-/// Issue 24, item 12: absurd but finite inputs are refused.
+/// Absurd but finite inputs are refused.
 #[test]
 fn absurd_finite_inputs_are_refused() {
     use monolayer::model::snapshot::{decode, encode};
@@ -960,7 +958,7 @@ fn absurd_finite_inputs_are_refused() {
     assert!(spec.jobs().unwrap_err().contains("more than a sweep's 100000 runs"));
 }
 
-/// Issue 24, item 13: temporaries of writers killed with -9 (`.staging.PID.N` in the analysis
+/// Temporaries of writers killed with -9 (`.staging.PID.N` in the analysis
 /// directory, `.NAME.PID.N.tmp` in a figures directory) are cleaned on the next start; a living
 /// writer's are left.
 #[test]
@@ -984,7 +982,7 @@ fn stale_temporaries_of_dead_writers_are_cleaned() {
     assert!(!stale.exists());
 }
 
-/// Issue 24, item 14, in a sweep: SIGTERM stops the run under way (`stopped: signal SIGTERM`),
+/// In a sweep: SIGTERM stops the run under way (`stopped: signal SIGTERM`),
 /// starts no other, exits 143; the same command again finishes both.
 #[test]
 fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {

@@ -1,4 +1,4 @@
-//! The paper's mechanism claims that no figure of it measures (issue 23, item 2), as numbers:
+//! The paper's mechanism claims that no figure of it measures, as numbers:
 //!
 //! - **antiparallel +½ pairs** ("two +1/2 topological defects … moving in the vicinity of each
 //!   other in an antiparallel relative orientation"): the angle between the orientations ψ of

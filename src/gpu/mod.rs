@@ -1,4 +1,4 @@
-//! The GPU stepper's stages on wgpu compute (issue 26), f32, beside the CPU core that stays the
+//! The GPU stepper's stages on wgpu compute, f32, beside the CPU core that stays the
 //! reference: a device ([`context`]), the state the kernels read and write on it ([`buffers`]),
 //! and the kernels of one step ([`kernels`]), each mirroring its CPU module one to one:
 //!

@@ -1,4 +1,4 @@
-//! The storage precision of each cell's per-site fields (issue 25).
+//! The storage precision of each cell's per-site fields.
 //!
 //! Everything outside the friction solve streams the nine per-site fields of every cell's patch
 //! (φ_i, its Heun copies, μ_i, f_i, v_i, ∂_t φ_i) several times per step, and is limited by

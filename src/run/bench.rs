@@ -279,7 +279,7 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), S
     Ok(())
 }
 
-/// `monolayer bench --gpu`: the GPU kernels (issue 26), timed one by one at the given size from
+/// `monolayer bench --gpu`: the GPU kernels, timed one by one at the given size from
 /// a relaxed tissue a few active steps on: the adapter, ms per dispatch (the median of `repeats`
 /// submissions, each waited for) and the bytes each must move at the least; then the stages up
 /// to the friction solve's right-hand side, a Heun step without a friction solve (relaxation)

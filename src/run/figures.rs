@@ -35,7 +35,7 @@ pub enum Scale {
     Standard,
     /// The paper's protocol (10,000 relaxation and 100,000 active steps, a frame every 1,000)
     /// with the fewest seeds a verdict needs: 4 per point for Figs. 2 and 3c, 3 elsewhere
-    /// (issue 23). 75 runs, some 20 core-hours.
+    /// 75 runs, some 20 core-hours.
     Evidence,
     /// The paper's counts: 10 simulations of 100 frames per point (100 for Figs. 2 and 3c).
     Paper,
@@ -143,7 +143,7 @@ pub enum Figure {
     FigS1,
     FigS2,
     FigS3,
-    /// The mechanism's claims no figure of the paper measures (issue 23): antiparallel +½
+    /// The mechanism's claims no figure of the paper measures: antiparallel +½
     /// pairs, no holes at −½ defects, cells tangential to a hole's edge.
     Mechanism,
 }

@@ -535,7 +535,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await p.close();
     });
 
-    // The paper's own tissue (issue 26): the shipped full-size relaxed state, stepped on the CPU
+    // The paper's own tissue: the shipped full-size relaxed state, stepped on the CPU
     // engine, which the page names; chosen from the preset menu, the tissue is remade at 140².
     check("the paper's preset opens the shipped full-size tissue, steps it, and names its engine", async () => {
       const p = await open(context, base, '/?preset=paper&paused', errors);
@@ -580,7 +580,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await q.close();
     });
 
-    // The GPU engine (issue 26; src/gpu/ stepped from src/web/gpu_engine.rs). With WebGPU
+    // The GPU engine (src/gpu/ stepped from src/web/gpu_engine.rs). With WebGPU
     // (SwiftShader here) ?engine=gpu steps the tissue on WebGPU compute, and its Σφ after 10
     // steps from the shipped relaxed state is the CPU engine's within f32 rounding (the native
     // tests hold it within 10⁻⁴ over 100 full-size steps); the default, auto, keeps the CPU

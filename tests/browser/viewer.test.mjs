@@ -1,4 +1,4 @@
-// Browser tests of the page as an instrument (issue 27), in Debian's headless Chromium on the
+// Browser tests of the page as an instrument, in Debian's headless Chromium on the
 // WebGL2 fallback (VIEWER_BACKEND=webgpu for WebGPU; demo.test.mjs covers both backends):
 // the Download button's CSV and frame (which `monolayer analyze` reads), the code version in
 // share links, and a native run's frames opened in the page. Needs www/pkg (scripts/serve.sh
