@@ -5,34 +5,8 @@ mod common;
 
 use std::fs;
 use std::path::Path;
-use std::process::Output;
 
-use common::{lines, monolayer, stderr};
-
-/// A small, quick run: 18 cells on a 60×60 box, frames every 10 steps from step 300 (the end of
-/// relaxation); with 30 active steps, 4 frames.
-fn small_run(out: &Path, steps: &str, extra: &[&str]) -> Output {
-    let mut args = vec![
-        "run",
-        "--quiet",
-        "--set",
-        "box_size=60",
-        "--set",
-        "n_cells=18",
-        "--relax-steps",
-        "300",
-        "--steps",
-        steps,
-        "--frame-interval",
-        "10",
-        "--threads",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    monolayer(&args)
-}
+use common::{lines, monolayer, small_run, stderr};
 
 /// The tables have a row per frame (and per hole), the plots are real PNG and SVG files, and
 /// `run --analyze` writes the same tables as `analyze` afterwards.
@@ -128,7 +102,7 @@ fn analyze_writes_tables_and_plots_like_run_analyze() {
         let name = e.as_ref().unwrap().file_name();
         name.to_string_lossy().starts_with("snapshot_")
     });
-    assert_eq!(snapshots.count(), 2, "the snapshot of the first session was replaced");
+    assert_eq!(snapshots.count(), 2, "the snapshot of the first run was replaced");
 
     // A run in progress: a frame being written is a hidden temporary file, not read.
     fs::write(run.join("frames").join(".frame_0000340.npz.tmp"), b"half a frame").unwrap();

@@ -3,42 +3,24 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use common::{lines, monolayer, stderr};
+use common::{lines, monolayer, small_run, stderr};
 
-/// A small, quick run: 18 cells on a 60×60 box, relaxation to step 300, 60 active steps with a
-/// frame every 10 (7 frames).
-fn small_run(out: &Path, seed: &str) {
-    let o = monolayer(&[
-        "run",
-        "--quiet",
-        "--set",
-        "box_size=60",
-        "--set",
-        "n_cells=18",
-        "--relax-steps",
-        "300",
-        "--steps",
-        "60",
-        "--frame-interval",
-        "10",
-        "--threads",
-        "1",
-        "--seed",
-        seed,
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+/// Two finished small runs (60 active steps, 7 frames) of seeds 1 and 2 in `dir`.
+fn two_runs(dir: &Path) -> (PathBuf, PathBuf) {
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    for (out, seed) in [(&a, "1"), (&b, "2")] {
+        let o = small_run(out, "60", &["--seed", seed]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    (a, b)
 }
 
 #[test]
 fn forecast_writes_its_tables_for_two_seeds_and_refuses_one() {
     let dir = tempfile::tempdir().unwrap();
-    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
-    small_run(&a, "1");
-    small_run(&b, "2");
+    let (a, b) = two_runs(dir.path());
 
     let lone = dir.path().join("lone");
     let o = monolayer(&["forecast", a.to_str().unwrap(), "--out", lone.to_str().unwrap()]);
@@ -72,9 +54,7 @@ fn forecast_writes_its_tables_for_two_seeds_and_refuses_one() {
 #[test]
 fn forecast_refuses_a_run_that_has_not_finished_unless_partial() {
     let dir = tempfile::tempdir().unwrap();
-    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
-    small_run(&a, "1");
-    small_run(&b, "2");
+    let (a, b) = two_runs(dir.path());
     let record = b.join("run.json");
     let text = std::fs::read_to_string(&record).unwrap().replace("\"finished\"", "\"running\"");
     std::fs::write(&record, text).unwrap();

@@ -127,3 +127,28 @@ pub fn make_fifo(path: &std::path::Path) {
     let made = std::process::Command::new("mkfifo").arg(path).status().expect("mkfifo runs");
     assert!(made.success(), "mkfifo {}", path.display());
 }
+
+/// A small, quick run: 18 cells on a 60×60 box on one thread, relaxation to step 300, then
+/// `steps` active steps with a frame every 10; `extra` flags after these.
+pub fn small_run(out: &std::path::Path, steps: &str, extra: &[&str]) -> std::process::Output {
+    let mut args = vec![
+        "run",
+        "--quiet",
+        "--set",
+        "box_size=60",
+        "--set",
+        "n_cells=18",
+        "--relax-steps",
+        "300",
+        "--steps",
+        steps,
+        "--frame-interval",
+        "10",
+        "--threads",
+        "1",
+        "--out",
+        arg(out),
+    ];
+    args.extend_from_slice(extra);
+    monolayer(&args)
+}
