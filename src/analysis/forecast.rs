@@ -23,9 +23,11 @@
 use rand_chacha::rand_core::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::holes::{periodic_distance, HoleTracker, VOID_THRESHOLD};
+use super::holes::{periodic_distance, HoleTracker, COVERED_THRESHOLD, VOID_THRESHOLD};
 use super::precursors::{FramePoints, Precursor};
-use super::thinning::{disc_offsets, least_on_sites, least_within, void_share_within, COVERED_CORE_FRACTION};
+use super::thinning::{
+    covered_about, disc_offsets, least_on_sites, least_within, void_share_within, COVERED_CORE_FRACTION,
+};
 use super::Analysis;
 
 /// Forecast horizons, in frames: does a hole nucleate within R in the next 1, 3 or 5 frames?
@@ -160,7 +162,7 @@ pub fn thinning_before(h: &RunHistory, depth: usize) -> Vec<ThinningRow> {
                 frames_before: k,
                 least: least_within(p, l, n.x, n.y, r),
                 void_share: void_share_within(p, l, n.x, n.y, r),
-                covered: least_within(p, l, n.x, n.y, COVERED_CORE_FRACTION * r) >= 0.5,
+                covered: covered_about(p, l, n.x, n.y, r),
             });
         }
     }
@@ -308,7 +310,7 @@ pub fn forecast_samples(h: &RunHistory) -> Vec<Sample> {
                 frame_max_strain_rate: max,
                 core,
                 least: f.least[i],
-                covered: f.least_core[i] >= 0.5,
+                covered: f.least_core[i] >= COVERED_THRESHOLD,
                 labels: HORIZONS.map(|k| h.nucleates_near(x, y, t + 1, t + k)),
             });
         }

@@ -7,6 +7,7 @@
 
 use std::collections::BTreeSet;
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
@@ -548,8 +549,6 @@ fn fig1b(runs: &[RunData], out: &Path) -> Result<Vec<PathBuf>, String> {
     }
     Ok(written)
 }
-
-use std::io::Write as _;
 
 #[cfg(test)]
 mod tests {

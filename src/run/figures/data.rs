@@ -466,14 +466,7 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
             if sel.is_empty() {
                 continue;
             }
-            let mut bins: BTreeMap<i64, (u64, u64)> = BTreeMap::new();
-            for r in &sel {
-                for (&k, &(n, h)) in &r.probability {
-                    let e = bins.entry(k).or_insert((0, 0));
-                    e.0 += n;
-                    e.1 += h;
-                }
-            }
+            let bins = pooled_probability(sel.iter().copied());
             let mut pts = Vec::new();
             let mut counts = Vec::new();
             for (&k, &(n, h)) in &bins {
@@ -564,6 +557,19 @@ fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(
     Ok(())
 }
 
+/// Fig. 2's bins of several runs added up: strain-rate bin → (sites, sites opening into a hole).
+fn pooled_probability<'a>(runs: impl Iterator<Item = &'a RunData>) -> BTreeMap<i64, (u64, u64)> {
+    let mut bins: BTreeMap<i64, (u64, u64)> = BTreeMap::new();
+    for r in runs {
+        for (&k, &(n, h)) in &r.probability {
+            let e = bins.entry(k).or_insert((0, 0));
+            e.0 += n;
+            e.1 += h;
+        }
+    }
+    bins
+}
+
 /// A fit of P(hole | ε̇) to (ε̇, sites, hole sites) bins.
 type CoefficientFit = fn(&[(f64, u64, u64)]) -> Option<crate::analysis::nucleation::ExponentialFit>;
 
@@ -578,17 +584,8 @@ pub fn jackknife_coefficient_se(runs: &[&RunData], fit: CoefficientFit) -> Optio
     }
     let mut bs = Vec::with_capacity(runs.len());
     for leave in 0..runs.len() {
-        let mut bins: BTreeMap<i64, (u64, u64)> = BTreeMap::new();
-        for (i, r) in runs.iter().enumerate() {
-            if i == leave {
-                continue;
-            }
-            for (&k, &(n, h)) in &r.probability {
-                let e = bins.entry(k).or_insert((0, 0));
-                e.0 += n;
-                e.1 += h;
-            }
-        }
+        let others = runs.iter().enumerate().filter(|&(i, _)| i != leave).map(|(_, r)| *r);
+        let bins = pooled_probability(others);
         let counts: Vec<(f64, u64, u64)> =
             bins.iter().map(|(&k, &(n, h))| (k as f64 * STRAIN_RATE_BIN, n, h)).collect();
         bs.push(fit(&counts)?.b);
