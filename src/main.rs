@@ -8,7 +8,7 @@ use std::time::Instant;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use monolayer::model::snapshot::{self, relaxation_key};
+use monolayer::model::snapshot;
 use monolayer::run::bench::BenchOptions;
 use monolayer::run::config::{load_params, parse_assignment};
 use monolayer::run::files::{self, RunStatus};
@@ -36,8 +36,9 @@ enum Command {
     /// Step from the random disks and print the state's fingerprint as JSON (to compare the
     /// WebAssembly core with this one, bit for bit).
     Fingerprint(FingerprintArgs),
-    /// Relax a tissue from the random disks (the protocol's relaxation, nothing after it) and
-    /// write the confluent state as a snapshot the browser demo starts from (www/assets/).
+    /// Relax a tissue from the random disks (the protocol's relaxation) and write the confluent
+    /// state as a snapshot the browser demo starts from (www/assets/); with --advance, the state
+    /// that many active steps later (the page's paper tissue, a short time before a hole).
     RelaxedState(RelaxedStateArgs),
     /// Run a grid of parameters (χ, ζ, γ, any parameter, seeds), one simulation per core,
     /// resumable; summary.csv and the regime map.
@@ -47,7 +48,7 @@ enum Command {
     Analyze(AnalyzeArgs),
     /// The paper's figures (1c, 1d, 2, 3a–d, S1–S3) from one plan of runs, each as PNG and SVG
     /// beside its CSV, and DIR/figures.md; here (one run per core, resumable) or with --slurm as a
-    /// job array and an aggregation job. See README "Reproduce the paper".
+    /// job array and an aggregation job. See docs/cli.md, "figures".
     Figures(FiguresArgs),
     /// Do holes come from collective motion or from a tissue that thinned first? For runs of
     /// several seeds: each nucleation's thinning, the precursors against sites of the same
@@ -166,6 +167,11 @@ struct RelaxedStateArgs {
     params: ParamArgs,
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Active steps to run past the relaxation before saving (0: the end of the relaxation,
+    /// which serves every activity and friction; later states continue only under exactly
+    /// these parameters).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=monolayer::model::params::MAX_STEPS))]
+    advance: u64,
     /// The snapshot file to write (atomically).
     #[arg(long)]
     out: PathBuf,
@@ -272,7 +278,7 @@ struct RunArgs {
 #[derive(Args)]
 struct SweepArgs {
     /// Sweep file (TOML: `seeds`, `frame_interval`, `[base]` parameters, `[grid]` lists); see
-    /// README "Sweeps". Without it, the grid comes from --grid.
+    /// docs/cli.md, "sweep". Without it, the grid comes from --grid.
     file: Option<PathBuf>,
     /// Output directory: one run per grid point and seed in OUT/runs/, summary.csv,
     /// regimes.csv and regime_map.png/svg in OUT.
@@ -681,13 +687,16 @@ fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), String> {
     files::replaceable(&a.out)?;
     let params = a.params.params()?;
     monolayer::run::runner::check_memory(&params)?;
-    let steps = params.relax_steps;
-    let key = relaxation_key(&params, a.seed);
+    let steps = params.relax_steps + a.advance;
+    let key = snapshot::key_at(&params, a.seed, steps).expect("at or past the end of the relaxation");
     let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
     let bar = progress_bar(steps, 0, false);
     bar.set_message("relaxing");
     for _ in 0..steps {
-        m.step().map_err(|e| e.to_string())?;
+        if m.step_count() == m.params().relax_steps {
+            bar.set_message("active");
+        }
+        m.step().map_err(|e| format!("at step {}: {e}", m.step_count()))?;
         bar.inc(1);
     }
     bar.finish_and_clear();

@@ -40,10 +40,10 @@ fn page_size(name: &str) -> Params {
 }
 
 /// The page's listed relaxed states: (its size's parameters, seed, γ, file under www/), one
-/// entry a line in RELAXED_STATES.
+/// entry a line in SHIPPED_STATES (those that start with `{ size:`).
 fn page() -> Vec<(Params, u64, f64, PathBuf)> {
-    let start = STATE_JS.find("export const RELAXED_STATES").expect("RELAXED_STATES");
-    let block = &STATE_JS[start..start + STATE_JS[start..].find("];").expect("RELAXED_STATES ends")];
+    let start = STATE_JS.find("export const SHIPPED_STATES").expect("SHIPPED_STATES");
+    let block = &STATE_JS[start..start + STATE_JS[start..].find("];").expect("SHIPPED_STATES ends")];
     let entries = block
         .lines()
         .filter(|l| l.trim_start().starts_with("{ size:"))
@@ -97,11 +97,31 @@ fn the_command_writes_a_state_that_continues_bit_for_bit() {
     let p = Params { box_size: 50, n_cells: 8, relax_steps: 120, ..Params::default() };
     let state = snapshot::decode(&std::fs::read(&out).unwrap(), relaxation_key(&p, 4), 50).unwrap();
     let mut from_file = Monolayer::from_state(p.clone(), 4, state).unwrap();
-    let mut straight = Monolayer::new(p, 4).unwrap();
+    let mut straight = Monolayer::new(p.clone(), 4).unwrap();
     straight.advance(120 + 30).unwrap();
     from_file.advance(30).unwrap();
     assert_eq!(from_file.fingerprint(), straight.fingerprint());
     assert_eq!(from_file.step_count(), 150);
+
+    // --advance: the state that many active steps on, which continues only under the
+    // parameters that made it (another ζ is refused by name).
+    let later = dir.path().join("later.bin");
+    let o = monolayer(
+        &[&["relaxed-state", "--advance", "20", "--zeta", "0.7", "--out", later.to_str().unwrap()][..], &small[..]]
+            .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("step 140, 8 cells"), "{}", stderr(&o));
+    let p7 = Params { zeta: 0.7, ..p.clone() };
+    let bytes = std::fs::read(&later).unwrap();
+    let mut from_later =
+        Monolayer::from_state(p7.clone(), 4, snapshot::decode_shipped(&bytes, &p7, 4).unwrap()).unwrap();
+    let mut straight = Monolayer::new(p7, 4).unwrap();
+    straight.advance(150).unwrap();
+    from_later.advance(10).unwrap();
+    assert_eq!(from_later.fingerprint(), straight.fingerprint());
+    let err = snapshot::decode_shipped(&bytes, &p, 4).unwrap_err().to_string();
+    assert!(err.contains("other parameters"), "{err}");
 
     // A bad parameter is named, and nothing is written.
     let bad = dir.path().join("bad.bin");
@@ -111,56 +131,113 @@ fn the_command_writes_a_state_that_continues_bit_for_bit() {
     assert!(!bad.exists());
 }
 
-/// The browser test waits for the page's default preset (seed 1, from its shipped relaxed state)
-/// to open its first hole at `FIRST_HOLE_STEP` (tests/browser/demo.test.mjs). The core steps the
-/// same bits natively, so the step is found here one step at a time, with the page's own hole
-/// count; a change of the physics or of its arithmetic that moves it fails here first, with the
-/// new step.
-#[test]
-fn the_default_preset_opens_its_first_hole_where_the_browser_test_expects() {
-    const DEMO_TEST: &str = include_str!("browser/demo.test.mjs");
-    let expected: u64 = DEMO_TEST
-        .split("const FIRST_HOLE_STEP = Number(process.env.FIRST_HOLE_STEP ?? ")
-        .nth(1)
-        .and_then(|s| s.split(')').next())
-        .expect("FIRST_HOLE_STEP in demo.test.mjs")
-        .parse()
-        .expect("FIRST_HOLE_STEP is a number");
-    let preset = STATE_JS.split("export const DEFAULT_PRESET = '").nth(1).unwrap().split('\'').next().unwrap();
-    let line = STATE_JS
+/// The page's shipped states further on than the relaxation (`{ preset: …, seed, step,
+/// firstHole, file }` lines of SHIPPED_STATES).
+struct LaterState {
+    preset: String,
+    seed: u64,
+    step: u64,
+    first_hole: u64,
+    file: PathBuf,
+}
+
+fn later_states() -> Vec<LaterState> {
+    let start = STATE_JS.find("export const SHIPPED_STATES").expect("SHIPPED_STATES");
+    let block = &STATE_JS[start..start + STATE_JS[start..].find("];").expect("SHIPPED_STATES ends")];
+    block
+        .lines()
+        .filter(|l| l.trim_start().starts_with("{ preset:"))
+        .map(|e| {
+            let file = e.split("asset('").nth(1).unwrap().split('\'').next().unwrap();
+            LaterState {
+                preset: e.split('\'').nth(1).expect("preset name").to_string(),
+                seed: number_after_in(e, "seed") as u64,
+                step: number_after_in(e, "step") as u64,
+                first_hole: number_after_in(e, "firstHole") as u64,
+                file: Path::new(env!("CARGO_MANIFEST_DIR")).join("www").join("assets").join(file),
+            }
+        })
+        .collect()
+}
+
+/// The parameters of the page's preset `name` (its PRESETS line in state.js).
+fn preset_params(name: &str) -> Params {
+    let presets = &STATE_JS[STATE_JS.find("export const PRESETS").expect("PRESETS")..];
+    let line = presets
         .lines()
         .map(str::trim_start)
-        .find(|l| l.starts_with(&format!("{preset}:")) || l.starts_with(&format!("'{preset}':")))
-        .unwrap_or_else(|| panic!("preset {preset} in state.js"));
+        .find(|l| l.starts_with(&format!("{name}:")) || l.starts_with(&format!("'{name}':")))
+        .unwrap_or_else(|| panic!("preset {name} in state.js"));
     let size = line.split("size: '").nth(1).unwrap().split('\'').next().unwrap();
-    let (zeta, chi, gamma) =
-        (number_after_in(line, "zeta"), number_after_in(line, "chi"), number_after_in(line, "gamma"));
-    let (relaxed, seed, _, file) = page()
-        .into_iter()
-        .find(|(p, seed, g, _)| *seed == 1 && *g == gamma && *p == page_size(size))
-        .unwrap_or_else(|| panic!("no shipped relaxed state for preset {preset}"));
-    let mut p = Params { zeta, gamma, ..relaxed };
-    p.set_chi(chi);
-    let state = snapshot::decode_relaxed(&std::fs::read(&file).unwrap(), &p, seed).unwrap();
-    let mut m = Monolayer::from_state(p.clone(), seed, state).unwrap();
-    let mut regions = monolayer::analysis::holes::VoidRegions::default();
-    let holes = |m: &mut Monolayer, regions: &mut _| {
-        monolayer::web::measure::tissue_stats(m.phi_sum(), p.box_size, p.radius, regions).holes
-    };
-    while holes(&mut m, &mut regions) == 0 && m.step_count() <= expected + 2_000 {
-        m.step().unwrap();
-    }
-    assert_eq!(
-        m.step_count(),
-        expected,
-        "preset {preset} opens its first hole at step {} (relaxation included): set FIRST_HOLE_STEP in \
-         tests/browser/demo.test.mjs to it",
-        m.step_count()
+    let mut p =
+        Params { zeta: number_after_in(line, "zeta"), gamma: number_after_in(line, "gamma"), ..page_size(size) };
+    p.set_chi(number_after_in(line, "chi"));
+    p
+}
+
+/// A shipped state further on is, byte for byte, its preset's shipped relaxed state stepped on
+/// to its step, under the key of every parameter of the trajectory; and the page's label is
+/// true: stepping on one step at a time, the page's own hole count first sees a hole at
+/// `firstHole`, and the hole is still open at the first readout row after it (the browser test
+/// reads the step there). A change of the physics that moves either fails here, with the
+/// command that remakes the file or the step to write.
+#[test]
+fn shipped_states_further_on_open_their_first_hole_where_the_page_says() {
+    let later = later_states();
+    let default = STATE_JS.split("export const DEFAULT_PRESET = '").nth(1).unwrap().split('\'').next().unwrap();
+    assert!(
+        later.iter().any(|s| s.preset == default && s.seed == 1),
+        "the page's default preset ({default}) opens on a shipped state a short time before a hole"
     );
-    // The browser test reads the step from the page's readouts, a row every ROW_EVERY active
-    // steps: the hole must still be open at the first row after it opens.
-    let every = monolayer::web::readouts::ROW_EVERY;
-    let row = p.relax_steps + (expected - p.relax_steps).div_ceil(every) * every;
-    m.advance(row - m.step_count()).unwrap();
-    assert!(holes(&mut m, &mut regions) > 0, "the first hole closed before the readout row at step {row}");
+    for s in later {
+        let p = preset_params(&s.preset);
+        let remake = format!(
+            "cargo run --release -- relaxed-state --set box_size={} --set n_cells={} --relax-steps {} --set gamma={} \
+             --zeta {} --chi {} --seed {} --advance {} --out www/{}",
+            p.box_size,
+            p.n_cells,
+            p.relax_steps,
+            p.gamma,
+            p.zeta,
+            p.xi_substrate / p.xi_cell,
+            s.seed,
+            s.step - p.relax_steps,
+            s.file.strip_prefix(Path::new(env!("CARGO_MANIFEST_DIR")).join("www")).unwrap().display()
+        );
+        let (_, _, _, relaxed_file) = page()
+            .into_iter()
+            .find(|(q, seed, g, _)| *seed == s.seed && *g == p.gamma && q.box_size == p.box_size)
+            .unwrap_or_else(|| panic!("no shipped relaxed state for preset {} seed {}", s.preset, s.seed));
+        let relaxed = snapshot::decode_shipped(&std::fs::read(&relaxed_file).unwrap(), &p, s.seed).unwrap();
+        let mut m = Monolayer::from_state(p.clone(), s.seed, relaxed).unwrap();
+        m.advance(s.step - p.relax_steps).unwrap();
+        let bytes = std::fs::read(&s.file).unwrap_or_else(|e| panic!("{}: {e}; remake it: {remake}", s.file.display()));
+        assert!(
+            bytes == snapshot::encode(&m.state(), snapshot::trajectory_key(&p, s.seed)),
+            "{} is not the state the core reaches now; remake it: {remake}",
+            s.file.display()
+        );
+        let shipped = snapshot::decode_shipped(&bytes, &p, s.seed).unwrap();
+        let mut m = Monolayer::from_state(p.clone(), s.seed, shipped).unwrap();
+        let mut regions = monolayer::analysis::holes::VoidRegions::default();
+        let mut holes = |m: &mut Monolayer| {
+            monolayer::web::measure::tissue_stats(m.phi_sum(), p.box_size, p.radius, &mut regions).holes
+        };
+        assert_eq!(holes(&mut m), 0, "preset {}: a hole is open already at the shipped step {}", s.preset, s.step);
+        while holes(&mut m) == 0 && m.step_count() <= s.first_hole.max(s.step) + 5_000 {
+            m.step().unwrap();
+        }
+        assert_eq!(
+            m.step_count(),
+            s.first_hole,
+            "preset {} seed {} opens its first hole at step {}: set its firstHole in www/js/state.js",
+            s.preset,
+            s.seed,
+            m.step_count()
+        );
+        let every = monolayer::web::readouts::ROW_EVERY;
+        let row = p.relax_steps + (s.first_hole - p.relax_steps).div_ceil(every) * every;
+        m.advance(row - m.step_count()).unwrap();
+        assert!(holes(&mut m) > 0, "the first hole closed before the readout row at step {row}");
+    }
 }

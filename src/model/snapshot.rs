@@ -27,6 +27,8 @@ const VERSION: u32 = 1;
 const HAS_WARM_START: u8 = 1;
 const HAS_SUBSTRATE: u8 = 2;
 const HAS_CORRECTOR_SHIFT: u8 = 4;
+/// Where the step sits in the header: after the magic bytes, the version and the key.
+const STEP_AT: usize = MAGIC.len() + 4 + 8;
 
 /// The offset basis of 64-bit FNV-1a, the hash of no bytes.
 pub(crate) const FNV1A_START: u64 = 0xcbf2_9ce4_8422_2325;
@@ -70,6 +72,46 @@ fn relaxation_params(params: &Params) -> Params {
         active_steps: 0,
         time_unit_seconds: 0.0,
         ..params.clone()
+    }
+}
+
+/// The key of a state past the relaxation: the seed and every parameter the trajectory reads
+/// (all but the run's length and the time unit, which only name the steps), so that a state
+/// from the active phase continues only under exactly the parameters that made it. The page
+/// ships one such state, a short time before a hole opens.
+pub fn trajectory_key(params: &Params, seed: u64) -> u64 {
+    let p = Params { active_steps: 0, time_unit_seconds: 0.0, ..params.clone() };
+    let storage = if STORE_NAME == "f64" { String::new() } else { format!("storage {STORE_NAME}; ") };
+    fnv1a(format!("trajectory; seed {seed}; {storage}{p:?}").as_bytes())
+}
+
+/// The key a state at `step` of the run of `params` and `seed` is saved under: the relaxation
+/// key at the end of the relaxation ([`relaxation_key`]), the trajectory key past it
+/// ([`trajectory_key`]); `None` before the end of the relaxation, which no file holds.
+pub fn key_at(params: &Params, seed: u64, step: u64) -> Option<u64> {
+    match step.cmp(&params.relax_steps) {
+        std::cmp::Ordering::Less => None,
+        std::cmp::Ordering::Equal => Some(relaxation_key(params, seed)),
+        std::cmp::Ordering::Greater => Some(trajectory_key(params, seed)),
+    }
+}
+
+/// A shipped state of `params` and `seed` from `bytes`, at whatever step it was saved: the end
+/// of the relaxation (as [`decode_relaxed`]) or any later step (keyed by every parameter of the
+/// trajectory). Refused if it was made with other parameters, another seed or precision, or
+/// saved before the end of the relaxation.
+pub fn decode_shipped(bytes: &[u8], params: &Params, seed: u64) -> Result<State, SimError> {
+    // The step is read from the header before the checksum is checked: a damaged file is
+    // refused by `decode` whatever its header says.
+    let step = bytes.get(STEP_AT..STEP_AT + 8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
+    match step.and_then(|s| key_at(params, seed, s)) {
+        Some(key) => decode(bytes, key, params.box_size),
+        None if step.is_some() && bytes.starts_with(MAGIC) => Err(SimError::Invalid(format!(
+            "relaxed state: saved at step {}, before the end of the {} relaxation steps",
+            step.unwrap_or(0),
+            params.relax_steps
+        ))),
+        None => decode(bytes, 0, params.box_size),
     }
 }
 
@@ -312,6 +354,34 @@ mod tests {
     /// The key as builds computed it before the storage precision entered it.
     fn relaxation_key_without_storage(params: &Params, seed: u64) -> u64 {
         fnv1a(format!("seed {seed}; {:?}", relaxation_params(params)).as_bytes())
+    }
+
+    #[test]
+    fn a_state_past_the_relaxation_continues_only_under_every_parameter_that_made_it() {
+        let p = Params { zeta: 0.5, ..small() };
+        let mut a = relaxed(&p, 2);
+        a.advance(5).unwrap();
+        let bytes = encode(&a.state(), key_at(&p, 2, a.step_count()).unwrap());
+        let s = decode_shipped(&bytes, &p, 2).unwrap();
+        assert_eq!(s.step, p.relax_steps + 5);
+        let mut b = Monolayer::from_state(p.clone(), 2, s).unwrap();
+        a.advance(10).unwrap();
+        b.advance(10).unwrap();
+        assert_eq!(a.fingerprint(), b.fingerprint());
+        // The length of the run and the time unit only name steps; every other parameter,
+        // activity and friction included, and the seed are the trajectory's.
+        let renamed = Params { active_steps: 9, time_unit_seconds: 1.0, ..p.clone() };
+        assert!(decode_shipped(&bytes, &renamed, 2).is_ok());
+        let err = |q: &Params, seed| decode_shipped(&bytes, q, seed).unwrap_err().to_string();
+        assert!(err(&Params { zeta: 0.6, ..p.clone() }, 2).contains("other parameters"), "ζ");
+        assert!(err(&Params { xi_substrate: 0.5, ..p.clone() }, 2).contains("other parameters"), "χ");
+        assert!(err(&p, 3).contains("other parameters"), "the seed");
+        assert!(err(&Params { relax_steps: 40, ..p.clone() }, 2).contains("before the end"), "saved mid-relaxation");
+        // The end of the relaxation keeps its own key, which serves every activity.
+        let r = relaxed(&p, 2);
+        let at_end = encode(&r.state(), key_at(&p, 2, p.relax_steps).unwrap());
+        assert_eq!(decode_shipped(&at_end, &Params { zeta: 2.0, ..p.clone() }, 2).unwrap(), r.state());
+        assert!(decode_shipped(b"", &p, 2).unwrap_err().to_string().contains("header"));
     }
 
     #[test]

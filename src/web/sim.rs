@@ -82,12 +82,13 @@ impl WebSim {
         Ok(Self::wrap(Monolayer::new(p, seed as u64).map_err(js_err)?))
     }
 
-    /// The same tissue as [`WebSim::new`] with the same arguments, already relaxed: its state
-    /// at the end of the relaxation is read from `snapshot` (written natively by `monolayer
-    /// relaxed-state`), bit for bit what relaxing here would give. Throws if the snapshot was
-    /// made with other parameters or another seed, or is damaged; the page then relaxes live.
+    /// The same tissue as [`WebSim::new`] with the same arguments, further on: its state is
+    /// read from `snapshot` (written natively by `monolayer relaxed-state`), bit for bit what
+    /// stepping here would give. A state at the end of the relaxation serves every ζ and χ; a
+    /// later one (`--advance`) only exactly the parameters that made it. Throws if the snapshot
+    /// was made with other parameters or another seed, or is damaged; the page then relaxes live.
     #[allow(clippy::too_many_arguments)]
-    pub fn from_relaxed(
+    pub fn from_snapshot(
         snapshot: &[u8],
         box_size: usize,
         n_cells: usize,
@@ -99,7 +100,7 @@ impl WebSim {
     ) -> Result<WebSim, JsError> {
         let p = page_params(box_size, n_cells, relax_steps, zeta, chi, gamma);
         p.validate().map_err(js_err)?;
-        let state = snapshot::decode_relaxed(snapshot, &p, seed as u64).map_err(js_err)?;
+        let state = snapshot::decode_shipped(snapshot, &p, seed as u64).map_err(js_err)?;
         Ok(Self::wrap(Monolayer::from_state(p, seed as u64, state).map_err(js_err)?))
     }
 

@@ -24,6 +24,7 @@ import { tmpdir } from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { parseReadouts } from './readouts.mjs';
+import { SHIPPED_STATES, DEFAULT_PRESET } from '../../www/js/state.js';
 
 const ROOT = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
 const WWW = path.join(ROOT, 'www');
@@ -195,11 +196,12 @@ const SKIP_HOLE = Boolean(process.env.SKIP_HOLE);
 const ONLY = process.env.MODES ? process.env.MODES.split(',') : null;
 const wanted = (mode) => !ONLY || ONLY.includes(mode);
 
-// The default preset (ζ = 2.5, χ = 0.001, γ = 0.06) and seed 1 at the page's size open their first
-// hole (a void region above πR²/4, once active) at this step, relaxation included: found by
-// stepping the wasm core one step at a time from the shipped relaxed state and counting holes
-// after each step. It changes only with the physics.
-const FIRST_HOLE_STEP = Number(process.env.FIRST_HOLE_STEP ?? 2677);
+// The default preset opens on a shipped state a short time before its first hole (a void region
+// above πR²/4), which opens at `firstHole`, relaxation included: the step the native core reaches
+// it one step at a time with the page's own count (tests/relaxed_state.rs holds it there). It
+// changes only with the physics.
+const DEFAULT_START = SHIPPED_STATES.find((r) => r.preset === DEFAULT_PRESET && r.seed === 1);
+const FIRST_HOLE_STEP = DEFAULT_START.firstHole;
 
 let server;
 let base;
@@ -243,7 +245,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
 
     let page;
     check(`page loads on ${mode.backend} with no console error`, async () => {
-      page = await open(context, base, '/?seed=1', errors);
+      page = await open(context, base, '/?preset=persistent&seed=1', errors);
       const backend = await page.evaluate(() => window.demo.backend);
       assert(backend.startsWith(mode.backend), `backend ${backend}, expected ${mode.backend}`);
       m.backend = backend;
@@ -415,7 +417,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check(`brushes paint the substrate and remove a cell`, async () => {
-      const p = await open(context, base, '/?paused&seed=1', errors);
+      const p = await open(context, base, '/?preset=persistent&paused&seed=1', errors);
       await waitStats(p);
       // Relax the tissue so that there is a cell under the pointer.
       const drawn = await p.evaluate(() => window.demo.drawn);
@@ -466,7 +468,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check(`the screenshot button saves the drawn frame; ?embed hides the chrome`, async () => {
-      const p = await open(context, base, '/?embed&seed=1', errors);
+      const p = await open(context, base, '/?preset=persistent&embed&seed=1', errors);
       await waitStats(p);
       assert(!(await p.locator('header').isVisible()), 'header visible in embed mode');
       assert(!(await p.locator('#zeta').isVisible()), 'sliders visible in embed mode');
@@ -483,14 +485,14 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check(`bad URL parameters are clamped with a visible notice`, async () => {
-      const p = await open(context, base, '/?chi=5&zeta=abc&seed=-3&preset=nope&field=wrong', errors);
+      const p = await open(context, base, '/?chi=5&zeta=abc&seed=-3&preset=nope&field=wrong&size=reduced', errors);
       const s = await waitStats(p);
       assert(await p.locator('#notice').isVisible(), 'no notice');
       const text = await p.textContent('#notice');
       for (const bit of ['chi=5', 'zeta=abc', 'seed=-3', 'preset=nope', 'field=wrong']) {
         assert(text.includes(bit), `notice does not mention ${bit}: ${text}`);
       }
-      const zetaDefault = await p.evaluate(() => import('./js/state.js').then((m) => m.PARAMS.zeta.def));
+      const zetaDefault = await p.evaluate(() => import('./js/state.js').then((m) => m.PRESETS[m.DEFAULT_PRESET].zeta));
       assert(s.chi === 1 && s.zeta === zetaDefault, `clamped values in the core: χ=${s.chi} ζ=${s.zeta}`);
       const seed = await p.inputValue('#seed');
       assert(seed === '0', `seed ${seed}`);
@@ -498,8 +500,8 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check('the page opens on the shipped relaxed tissue, bit for bit what relaxing live gives', async () => {
-      const shipped = await open(context, base, '/?paused&seed=1', errors);
-      const live = await open(context, base, '/?paused&seed=1&relax', errors);
+      const shipped = await open(context, base, '/?preset=persistent&paused&seed=1', errors);
+      const live = await open(context, base, '/?preset=persistent&paused&seed=1&relax', errors);
       const size = await shipped.evaluate(() => window.demo.size);
       const a = await shipped.evaluate(() => window.demo.call('stats'));
       const b = await live.evaluate(() => window.demo.call('stats'));
@@ -518,7 +520,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check('a reset with another seed relaxes live, its progress shown', async () => {
-      const p = await open(context, base, '/?seed=1', errors);
+      const p = await open(context, base, '/?preset=persistent&seed=1', errors);
       await waitStats(p);
       await p.fill('#seed', '2');
       await p.locator('#seed').dispatchEvent('change');
@@ -535,15 +537,32 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await p.close();
     });
 
-    // The paper's own tissue: the shipped full-size relaxed state, stepped on the CPU
-    // engine, which the page names; chosen from the preset menu, the tissue is remade at 140².
-    check("the paper's preset opens the shipped full-size tissue, steps it, and names its engine", async () => {
-      const p = await open(context, base, '/?preset=paper&paused', errors);
+    // The paper's own tissue. Its preset (the page's default) opens on the shipped state a short
+    // time before its first hole, labelled with its seed and steps; the same parameters given
+    // one by one open on the shipped full-size relaxed state, where the CPU engine is timed
+    // against the native core on the same steps. Chosen from the preset menu, the tissue is
+    // remade at 140².
+    check("the paper's preset opens the shipped full-size tissue before its first hole, steps it, and names its engine", async () => {
+      const later = SHIPPED_STATES.find((r) => r.preset === 'paper' && r.seed === 1);
+      const o = await open(context, base, '/?preset=paper&paused', errors);
+      await waitStats(o);
+      const t = await workerStats(o);
+      assert(t.startedFrom === 'snapshot' && t.step === later.step && t.l === 140 && t.cells === 100 && t.active,
+        `?preset=paper: ${t.cells} cells on ${t.l}², started from ${t.startedFrom} at step ${t.step}`);
+      assert.deepEqual([t.chi, t.zeta, t.gamma], [0.001, 0.5, 0.06]);
+      const origin = await o.textContent('#origin');
+      assert(await o.locator('#origin').isVisible(), 'no label of where the tissue comes from');
+      const n = (v) => v.toLocaleString('en-US');
+      assert(origin.includes(`Seed 1, from step ${n(later.step)}`) && origin.includes(`opens at step ${n(later.firstHole)}`), `label: ${origin}`);
+      assert(!(await o.textContent('#engine')).includes('minutes'), 'the engine label says minutes to the first hole');
+      await o.close();
+
+      const p = await open(context, base, '/?zeta=0.5&chi=0.001&gamma=0.06&paused', errors);
       await waitStats(p);
       const s = await workerStats(p);
       assert(s.startedFrom === 'snapshot' && s.step === 10000 && s.l === 140 && s.cells === 100 && s.active,
-        `?preset=paper: ${s.cells} cells on ${s.l}², started from ${s.startedFrom} at step ${s.step}`);
-      assert.deepEqual([s.chi, s.zeta, s.gamma], [0.001, 0.5, 0.06]);
+        `the paper's parameters one by one: ${s.cells} cells on ${s.l}², started from ${s.startedFrom} at step ${s.step}`);
+      assert(!(await p.locator('#origin').isVisible()), 'a label of a later state on the relaxed one');
       // The fastest of three batches of 10 active steps, timed in the worker, beside the native
       // core's fastest block of the same steps from the same shipped state (one thread): first
       // the core alone (a copy of the tissue, no readouts, as natively), then the page's steps,
@@ -567,14 +586,14 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert.equal(await p.evaluate(() => window.demo.engine), 'cpu');
       await p.close();
 
-      const q = await open(context, base, '/?seed=1&paused', errors);
+      const q = await open(context, base, '/?preset=persistent&seed=1&paused', errors);
       await waitStats(q);
       assert.equal((await workerStats(q)).l, 80);
       assert((await q.textContent('#engine')).includes('33 cells on 80²'), 'reduced engine label');
       await q.selectOption('#preset', 'paper');
       await until(q, 'the tissue at 140²', () => window.demo.stats?.l === 140);
       const r = await workerStats(q);
-      assert(r.startedFrom === 'snapshot' && r.step === 10000, `from the menu: ${r.startedFrom} at ${r.step}`);
+      assert(r.startedFrom === 'snapshot' && r.step === later.step, `from the menu: ${r.startedFrom} at ${r.step}`);
       assert.match(q.url(), /preset=paper/);
       console.log(`       the paper's tissue on the CPU engine: wasm core ${after.core.toFixed(2)} ms/step, native ${m.paperNativeMsPerStep.toFixed(2)} ms/step (ratio ${m.paperSpeedRatio.toFixed(2)}); the page's step with its readouts ${after.ms.toFixed(2)} (ratio ${m.paperPageSpeedRatio.toFixed(2)}; reported, not asserted)`);
       await q.close();
@@ -643,16 +662,17 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       const paper = await open(context, base, '/?preset=paper&engine=gpu&paused', errors);
       await waitStats(paper);
       const before = await workerStats(paper);
-      assert(before.engine === 'gpu' && before.l === 140 && before.cells === 100 && before.step === 10000,
+      const shippedStep = SHIPPED_STATES.find((r) => r.preset === 'paper' && r.seed === 1).step;
+      assert(before.engine === 'gpu' && before.l === 140 && before.cells === 100 && before.step === shippedStep,
         `the paper's preset on the GPU engine: ${JSON.stringify(before)}`);
       assert((await paper.textContent('#engine')).includes('100 cells on 140²'), 'paper engine label');
       const one = await stepped(paper, 1);
-      assert.equal(one.step, 10001);
+      assert.equal(one.step, shippedStep + 1);
       m.gpuEngine.paperMsPerStep = one.ms;
       assert(Math.abs(one.packing - before.packing) < 0.01, `packing ${before.packing} → ${one.packing} in one step`);
       await paper.close();
       // auto (the default) on a software adapter: the CPU engine, and why.
-      const r = await open(context, base, '/?paused', errors);
+      const r = await open(context, base, '/?preset=persistent&paused', errors);
       await waitStats(r);
       assert.equal((await workerStats(r)).engine, 'cpu');
       const auto = await r.textContent('#engine');
@@ -661,7 +681,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check(`the wasm core's fingerprint equals the native one`, async () => {
-      const p = await open(context, base, '/?paused&seed=7', errors);
+      const p = await open(context, base, '/?preset=persistent&paused&seed=7', errors);
       await waitStats(p);
       const size = await p.evaluate(() => window.demo.size);
       const active = 150;
@@ -679,7 +699,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
 
     check(`speed of the wasm core vs native, and drawing fps (reported, not asserted)`, async () => {
-      const p = await open(context, base, '/?paused&seed=1', errors);
+      const p = await open(context, base, '/?preset=persistent&paused&seed=1', errors);
       await waitStats(p);
       const size = await p.evaluate(() => window.demo.size);
       const n = 300;
@@ -738,7 +758,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert(firstRow, 'no readout row has a hole, though the page counted one');
       assert(rowEvery > 0, 'the readouts header states their spacing');
       assert(firstRow.step >= FIRST_HOLE_STEP && firstRow.step < FIRST_HOLE_STEP + rowEvery,
-        `first readout row with a hole at step ${firstRow.step}: it opens at step ${FIRST_HOLE_STEP} (default preset, seed 1)`);
+        `first readout row with a hole at step ${firstRow.step}: it opens at step ${FIRST_HOLE_STEP} (default preset ${DEFAULT_PRESET}, seed 1, from step ${DEFAULT_START.step})`);
       await p.close();
     });
 

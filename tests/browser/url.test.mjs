@@ -6,7 +6,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 
-import { PARAMS, FIELDS, PRESETS, SIZES, ENGINES, parseUrl, toUrl, fieldName, relaxedStateFor } from '../../www/js/state.js';
+import { PARAMS, FIELDS, PRESETS, SIZES, ENGINES, parseUrl, toUrl, fieldName, shippedStateFor, SHIPPED_STATES, DEFAULT_PRESET } from '../../www/js/state.js';
 
 // mulberry32: a small, well-mixed 32-bit generator.
 function rng(seed) {
@@ -88,35 +88,49 @@ test('a preset with a parameter changed is no longer that preset', () => {
 
 test('bad values are named in a notice and replaced', () => {
   const { state, notices } = parseUrl('?zeta=abc&chi=1e999&gamma=NaN&seed=-3&field=nope&preset=nope');
-  assert.equal(state.zeta, PRESETS.persistent.zeta);
-  assert.equal(state.chi, PRESETS.persistent.chi);
+  assert.equal(state.zeta, PRESETS[DEFAULT_PRESET].zeta);
+  assert.equal(state.chi, PRESETS[DEFAULT_PRESET].chi);
   assert.equal(state.seed, PARAMS.seed.min);
   for (const name of ['zeta', 'chi', 'gamma', 'seed', 'field', 'preset']) {
     assert.ok(notices.some((n) => n.startsWith(`${name}=`)), `no notice names ${name}: ${notices}`);
   }
 });
 
-test("the paper's preset is the paper's tissue, and its size survives a changed parameter", () => {
+test("the paper's preset is the paper's tissue and the page's default, and its size survives a changed parameter", () => {
   const { state, notices } = parseUrl('?preset=paper');
   assert.deepEqual(notices, []);
   assert.equal(state.size, 'paper');
   assert.deepEqual(SIZES.paper, { box: 140, cells: 100, relaxSteps: 10000 });
   assert.deepEqual([state.chi, state.zeta, state.gamma], [0.001, 0.5, 0.06]);
-  assert.match(relaxedStateFor(state), /relaxed-paper-seed1\.bin$/);
+  // The preset opens on its shipped state a short time before its first hole, which the page
+  // labels with its seed and steps (tests/relaxed_state.rs holds the numbers to the core).
+  const later = shippedStateFor(state);
+  assert.match(later.file, /paper-seed1-step12000\.bin$/);
+  assert.ok(later.step > SIZES.paper.relaxSteps && later.firstHole > later.step, JSON.stringify(later));
+  assert.equal(DEFAULT_PRESET, 'paper');
+  assert.deepEqual(parseUrl('').state, state);
+  assert.equal(toUrl(parseUrl('').state), '?preset=paper&seed=1');
+  // ?relax relaxes live; the same values without the preset start from the relaxation's end.
+  assert.equal(shippedStateFor(parseUrl('?preset=paper&relax').state), null);
+  assert.match(shippedStateFor(parseUrl('?zeta=0.5&chi=0.001&gamma=0.06').state).file, /relaxed-paper-seed1\.bin$/);
   // Another ζ keeps the size: the URL says size=paper, and the page does not silently shrink.
   const changed = parseUrl('?preset=paper&zeta=0.4').state;
   assert.equal(changed.preset, null);
   assert.equal(changed.size, 'paper');
-  assert.match(toUrl(changed), /size=paper/);
   assert.equal(parseUrl(toUrl(changed)).state.size, 'paper');
-  // A reduced preset at the paper's size is no longer that preset; the default is reduced.
+  assert.match(shippedStateFor(changed).file, /relaxed-paper-seed1\.bin$/);
+  // A reduced preset at the paper's size is no longer that preset; the reduced size is named.
   assert.equal(parseUrl('?preset=persistent&size=paper').state.preset, null);
-  assert.equal(parseUrl('').state.size, 'reduced');
-  assert.match(relaxedStateFor(parseUrl('?seed=1').state), /relaxed-seed1\.bin$/);
-  assert.equal(relaxedStateFor(parseUrl('?preset=paper&seed=2').state), null);
+  const reduced = parseUrl('?zeta=2&size=reduced').state;
+  assert.match(toUrl(reduced), /size=reduced/);
+  assert.equal(parseUrl(toUrl(reduced)).state.size, 'reduced');
+  assert.match(shippedStateFor(parseUrl('?preset=persistent&seed=1').state).file, /relaxed-seed1\.bin$/);
+  assert.equal(shippedStateFor(parseUrl('?preset=paper&seed=2').state), null);
   const bad = parseUrl('?size=huge');
-  assert.equal(bad.state.size, 'reduced');
+  assert.equal(bad.state.size, 'paper');
   assert.ok(bad.notices.some((n) => n.startsWith('size=huge')), `${bad.notices}`);
+  // Every shipped state is one of two kinds: the end of a size's relaxation, or a preset's later step.
+  for (const r of SHIPPED_STATES) assert.ok((r.size in SIZES) !== (r.preset in PRESETS), JSON.stringify(r));
 });
 
 test('the engine is auto unless the URL chooses one, and a bad one is named', () => {

@@ -112,7 +112,7 @@ describe(`the page as an instrument (Chromium, ${WEBGPU ? 'WebGPU' : 'WebGL2'})`
   }
 
   it('a link from another version opens with a notice, and the page writes its own version into the URL', { timeout: 120000 }, async () => {
-    const page = await open('/?seed=1&paused&v=0.0.1%2Bdeadbeef0000');
+    const page = await open('/?preset=persistent&seed=1&paused&v=0.0.1%2Bdeadbeef0000');
     const backend = await page.evaluate(() => window.demo.backend);
     assert(backend.startsWith(WEBGPU ? 'WebGPU' : 'WebGL2'), `drawing with ${backend}`);
     const version = await page.evaluate(() => window.demo.version);
@@ -125,7 +125,7 @@ describe(`the page as an instrument (Chromium, ${WEBGPU ? 'WebGPU' : 'WebGL2'})`
   });
 
   it('Download gives the readouts as CSV and the state as a frame that monolayer analyze reads', { timeout: 180000 }, async () => {
-    const page = await open('/?seed=1');
+    const page = await open('/?preset=persistent&seed=1');
     // Rows fall every 10 active steps from the start of activity (the shipped relaxed state).
     await page.waitForFunction(() => window.demo.call('readout_rows').then((n) => n >= 4), null, { timeout: 90000, polling: 500 });
     await page.click('#play'); // pause: the readouts and the downloaded state are of one step
@@ -206,7 +206,7 @@ describe(`the page as an instrument (Chromium, ${WEBGPU ? 'WebGPU' : 'WebGL2'})`
     await writeFile(damaged, bytes.subarray(0, bytes.length >> 1));
     await writeFile(path.join(work, 'state.npz'), 'not a frame');
 
-    const page = await open('/?seed=1&field=director');
+    const page = await open('/?preset=persistent&seed=1&field=director');
     await page.setInputFiles('#open-files', [path.join(run, 'run.json'), ...names.map((n) => path.join(frameDir, n)), path.join(work, 'state.npz')]);
     await page.waitForFunction(() => window.demo.playback.opened === 1, null, { timeout: 60000 });
     const pb = await page.evaluate(() => window.demo.playback);

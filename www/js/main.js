@@ -4,7 +4,7 @@
 // through the actions below, which keep the worker, the controls and the URL in step.
 
 import init, { Renderer, WebView, FieldKind, codeVersion } from '../pkg/monolayer.js';
-import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZES, parseUrl, toUrl, relaxedStateFor } from './state.js';
+import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZES, parseUrl, toUrl, shippedStateFor } from './state.js';
 import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
 import { Readouts, formatSeconds } from './readouts.js';
@@ -91,6 +91,7 @@ worker.onmessage = (e) => {
   } else if (m.type === 'ready') {
     page.stats = m.stats;
     showEngine(m.stats);
+    showOrigin(m.stats);
     readouts.reset(m.stats.timeUnitSeconds);
     onReady?.();
   } else if (m.type === 'stopped') {
@@ -115,12 +116,26 @@ function showEngine(s) {
     text = `Engine: GPU (WebGPU compute, f32; ${s.engineNote}), ${size}. Not bit-identical to native (f32): the native tests keep it within 10⁻⁴ of the CPU core over 100 full-size steps.`;
   } else {
     const why = s.engineNote && s.engineNote !== 'chosen' ? ` GPU engine not used: ${s.engineNote}.` : '';
-    const slow = s.l >= SIZES.paper.box ? ' At the paper\'s size the CPU engine takes minutes to reach the first hole.' : '';
+    // From the relaxation, not from a shipped state further on (showOrigin).
+    const slow = s.l >= SIZES.paper.box && s.startedAt <= s.relaxSteps
+      ? ' At the paper\'s size the CPU engine takes minutes from the relaxation to the first hole.' : '';
     text = `Engine: CPU (WebAssembly), bit-identical to native, ${size}.${why}${slow}`;
   }
   $('engine').textContent = text;
   demo.engine = s.engine;
   demo.engineNote = s.engineNote;
+}
+
+// Where a tissue from a shipped state further on than its relaxation came from: its seed and
+// step, and the step its first hole opens (found natively; tests/relaxed_state.rs holds it).
+function showOrigin(s) {
+  const shipped = shippedStateFor(page.state);
+  const later = s.startedFrom === 'snapshot' && shipped?.step !== undefined && s.startedAt === shipped.step;
+  const origin = $('origin');
+  origin.hidden = !later;
+  if (!later) return;
+  const n = (v) => v.toLocaleString('en-US');
+  origin.textContent = `Seed ${shipped.seed}, from step ${n(shipped.step)} of the native run (${n(shipped.step - s.relaxSteps)} active steps): its first hole opens at step ${n(shipped.firstHole)}. The forecast (key 7) shades where.`;
 }
 
 // --- drawing and readouts ---------------------------------------------------------------------------
@@ -209,7 +224,7 @@ function saveBlob(blob, name) {
 // The Download button: the readouts since the last reset as CSV (its last row the state now),
 // and the state now as a frame file in the native format with a run.json, so that
 // `mkdir -p run/frames`, the frame into run/frames and run.json into run/ make a run that
-// `monolayer analyze run` reads (README, "Data out").
+// `monolayer analyze run` reads (docs/demo.md, "Data out").
 async function download() {
   const d = await call('download');
   const stem = `monolayer-seed${page.state.seed}-step${d.step}`;
@@ -247,7 +262,7 @@ function newSim() {
     onReady = resolve;
   });
   worker.postMessage({
-    type: 'new', size: SIZES[s.size], params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed, relaxed: relaxedStateFor(s),
+    type: 'new', size: SIZES[s.size], params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed, shipped: shippedStateFor(s)?.file ?? null,
     engine: s.engine,
   });
   demo.size = SIZES[s.size];

@@ -6,31 +6,39 @@
 // itself is instantiated by main.js.
 import { FieldKind } from '../pkg/monolayer.js';
 
-// Sizes of the browser's tissue. `reduced`, chosen from measurements (README, "Browser demo"):
-// big enough for a hole to be a hole (several cells around it), small enough that the default
-// preset opens its first hole within a minute on the CPU engine. `paper`: the paper's own
-// tissue, 100 cells on 140² after 10,000 relaxation steps (the native defaults).
+// Sizes of the browser's tissue. `reduced`, chosen from measurements (docs/demo.md, "Presets"):
+// big enough for a hole to be a hole (several cells around it), small enough that its presets
+// open their first hole within a minute of the relaxation on the CPU engine. `paper`: the
+// paper's own tissue, 100 cells on 140² after 10,000 relaxation steps (the native defaults).
 export const SIZES = {
   reduced: { box: 80, cells: 33, relaxSteps: 1500 },
   paper: { box: 140, cells: 100, relaxSteps: 10000 },
 };
-export const DEFAULT_SIZE = 'reduced';
 
-// Relaxed tissues shipped with the page (`monolayer relaxed-state`, README "Browser demo"): the
-// state at the end of the relaxation for these sizes, seeds and γ, so that the page opens on a
-// confluent tissue. The core checks that a file was made with exactly the page's parameters and
-// seed, and refuses it otherwise; any other seed or γ relaxes live, with its progress shown, as
-// does `?relax` (to watch the tissue close up). One entry a line (tests/relaxed_state.rs reads
-// them).
+// Tissues shipped with the page (`monolayer relaxed-state`, docs/demo.md), so that it opens on a
+// confluent tissue: the state at the end of the relaxation for these sizes, seeds and γ, which
+// serves every ζ and χ; and, for a preset, a state further on, which serves only exactly its
+// parameters. The core checks that a file was made with the page's parameters and seed, and
+// refuses it otherwise; any other seed or γ relaxes live, with its progress shown, as does
+// `?relax` (to watch the tissue close up). One entry a line (tests/relaxed_state.rs reads them
+// and holds each file to what the core computes now).
+//
+// The paper's preset opens on seed 1 at step 12,000, 2,000 active steps after its relaxation,
+// a short time before its first hole (a void region above πR²/4) opens at `firstHole`: the step
+// the native core reaches it, one step at a time, with the page's own count.
 const asset = (name) => new URL(`../assets/${name}`, import.meta.url).href;
-export const RELAXED_STATES = [
+export const SHIPPED_STATES = [
   { size: 'reduced', seed: 1, gamma: 0.06, file: asset('relaxed-seed1.bin') },
   { size: 'paper', seed: 1, gamma: 0.06, file: asset('relaxed-paper-seed1.bin') },
+  { preset: 'paper', seed: 1, step: 12000, firstHole: 14255, file: asset('paper-seed1-step12000.bin') },
 ];
-export const relaxedStateFor = (state) =>
-  state.relax
-    ? null
-    : RELAXED_STATES.find((r) => r.size === state.size && r.seed === state.seed && r.gamma === state.gamma)?.file ?? null;
+// The shipped state a new tissue of `state` starts from (its URL and step), or null.
+export function shippedStateFor(state) {
+  if (state.relax) return null;
+  const later = SHIPPED_STATES.find((r) => r.preset !== undefined && r.preset === state.preset && r.seed === state.seed);
+  const relaxed = SHIPPED_STATES.find((r) => r.size === state.size && r.seed === state.seed && r.gamma === state.gamma);
+  return later ?? relaxed ?? null;
+}
 
 // Which engine steps the tissue (worker.js): 'auto' is the GPU engine on a hardware adapter
 // with WebGPU compute and the CPU engine elsewhere (on a software adapter such as SwiftShader
@@ -72,7 +80,7 @@ const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === na
 
 // The paper's three regimes at this size, from native runs of the same core with the calibrated
 // conventions (subdomain friction weights, −∇μ; `monolayer sweep`, seeds 1 and 2, 1,500
-// relaxation steps, 8,000 active steps; README, "Browser demo"). An 80-site box truncates the
+// relaxation steps, 8,000 active steps; docs/demo.md, "Presets"). An 80-site box truncates the
 // long-range flows that tear the full-size tissue at the paper's ζ ≤ 0.5, so the presets drive
 // 3–5× harder:
 //   χ = 0.1,   ζ = 2:   no void site in 8,000 active steps (both seeds);
@@ -92,7 +100,10 @@ export const PRESETS = {
 };
 // Whether the state is still exactly the preset (its model parameters and its size).
 const isPreset = (state, name) => MODEL_PARAMS.every((k) => state[k] === PRESETS[name][k]) && state.size === PRESETS[name].size;
-export const DEFAULT_PRESET = 'persistent';
+// The page opens on the paper's own tissue, from its shipped state a short time before a hole.
+export const DEFAULT_PRESET = 'paper';
+// The size a URL without `size` or `preset` means.
+export const DEFAULT_SIZE = PRESETS[DEFAULT_PRESET].size;
 
 // `fallback` is what the state holds without this value (the preset's, or the default).
 function clampParam(name, raw, notices, fallback) {

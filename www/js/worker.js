@@ -8,7 +8,7 @@
 // the `WebSim` only when the page draws, measures or edits: everything drawn and read out is
 // measured by the same code either way.
 //
-// Messages in: { type: 'new', size, params, seed, relaxed (a relaxed state's URL, or null),
+// Messages in: { type: 'new', size, params, seed, shipped (a shipped state's URL, or null),
 // engine ('auto' | 'cpu' | 'gpu') }, { type: 'engine', engine }, { type: 'play', on }, { type: 'spf', n },
 // { type: 'frame', field, dpr }, { type: 'call', id, method, args }.
 // Messages out: { type: 'ready', info }, { type: 'engine', stats }, { type: 'frame', parts, stats }, { type: 'stopped', why,
@@ -36,8 +36,10 @@ let turnQueued = false;
 // A run's frames opened in the page instead of the live simulation (null while live):
 // { p: WebPlayback, frames: [{ name, step, file }], index }.
 let playback = null;
-// How the current tissue started: 'snapshot' (a shipped relaxed state) or 'disks' (relaxing here).
+// How the current tissue started: 'snapshot' (a shipped state) or 'disks' (relaxing here), and
+// the step it started at.
 let startedFrom = null;
+let startedAt = 0;
 let playing = false;
 // The "steps per frame" slider caps the speed at `spf` steps per 1/30 s: a budget that refills
 // with time, not with frames drawn, so that drawing never holds stepping back.
@@ -298,6 +300,7 @@ function stats() {
     timeUnitSeconds: sim.time_unit_seconds(),
     msPerStep,
     startedFrom,
+    startedAt,
     // Which engine steps, and why (main.js, showEngine).
     engine: gpu ? 'gpu' : 'cpu',
     engineNote: gpuNote,
@@ -463,7 +466,7 @@ async function showFrame(index) {
   return { index, step: f.step };
 }
 
-// A new tissue (the 'new' message): from a shipped relaxed state where one fits, else from
+// A new tissue (the 'new' message): from a shipped state where one fits, else from
 // random disks; then the engine that steps it.
 async function newTissue(m) {
   if (!sim) await init();
@@ -474,15 +477,15 @@ async function newTissue(m) {
   playback = null;
   const { size, params: p, seed } = m;
   const args = [size.box, size.cells, size.relaxSteps, p.zeta, p.chi, p.gamma, seed];
-  if (m.relaxed) {
+  if (m.shipped) {
     try {
-      const res = await fetch(m.relaxed);
+      const res = await fetch(m.shipped);
       if (!res.ok) throw new Error(`HTTP ${res.status}`);
-      sim = WebSim.from_relaxed(new Uint8Array(await res.arrayBuffer()), ...args);
+      sim = WebSim.from_snapshot(new Uint8Array(await res.arrayBuffer()), ...args);
       startedFrom = 'snapshot';
     } catch (err) {
       // Not fatal: the same tissue comes from relaxing here, only later.
-      console.warn(`relaxing live: the relaxed state ${m.relaxed} was not usable (${err.message ?? err})`);
+      console.warn(`relaxing live: the shipped state ${m.shipped} was not usable (${err.message ?? err})`);
     }
   }
   try {
@@ -490,6 +493,7 @@ async function newTissue(m) {
       sim = new WebSim(...args);
       startedFrom = 'disks';
     }
+    startedAt = sim.step_count();
   } catch (err) {
     postMessage({ type: 'fatal', message: `Could not start the simulation: ${err.message ?? err}` });
     return;
