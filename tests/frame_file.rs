@@ -64,7 +64,7 @@ fn the_pages_frame_is_the_native_frame_and_its_download_is_a_run_analyze_reads()
     write_frame(&mut m, &native).unwrap();
     assert!(fs::read(&native).unwrap() == bytes, "the page's frame differs from the native frame of the same state");
 
-    // The download, laid out as the README says: run.json and frames/frame_<step>.npz.
+    // The download, laid out as docs/demo.md ("Data out") says: run.json and frames/frame_<step>.npz.
     let run = dir.path().join("downloaded");
     fs::create_dir_all(run.join("frames")).unwrap();
     fs::write(run.join("run.json"), run_record_json(&m)).unwrap();

@@ -1,6 +1,6 @@
 //! Every knob of the model in one struct, with the paper's values as defaults.
 //!
-//! Field names follow the paper's symbols (see the table in the README). The conventions the
+//! Field names follow the paper's symbols (see the table in docs/model.md). The conventions the
 //! paper leaves open (docs/reading.md §7) are named fields here, not constants buried
 //! in the kernels, so that the calibration can compare them run against run.
 
@@ -147,7 +147,7 @@ pub struct Params {
     /// Seconds per simulation time unit, for speeds in µm/h (Δx ≈ 1 µm); it changes no
     /// dynamics. The paper settles it itself: its persistence threshold τ_t > 0.5 t_total is
     /// 5,000 time units, which it calls "∼ 5 h", so one time unit ≈ 3.6 s (the default); its
-    /// "Δt ∼ 5 s" is the same estimate rounded (docs/units.md).
+    /// "Δt ∼ 5 s" is the same estimate rounded (docs/calibration.md, "Units").
     pub time_unit_seconds: f64,
 }
 

@@ -1,4 +1,4 @@
-//! `monolayer figures`: the paper's figures from one plan of runs (README "Reproduce the paper").
+//! `monolayer figures`: the paper's figures from one plan of runs (docs/cli.md, "figures").
 //!
 //! Every figure names the parameter points it needs and how many seeds (the paper's counts at the
 //! `paper` scale); the plan is their union, so a run at χ = 0.001, ζ = 0.3, seed 1 made for Fig. 3d
@@ -243,7 +243,7 @@ pub const ZETAS: [f64; 3] = [0.3, 0.4, 0.5];
 /// Fig. S3 varies γ at χ = 0.001, ζ = 0.3 without giving the values. The text "increase[s] the
 /// elasticity of the monolayer through the surface tension": the default 0.06 and above. (Below
 /// it, at γ = 0.04, the paper's half-size initial disks overshoot the φ guard `phi_max` = 1.5 in
-/// the first relaxation steps; README "Reproduce the paper".)
+/// the first relaxation steps; docs/cli.md, "S3's surface tensions".)
 pub const GAMMAS_S3: [f64; 4] = [0.06, 0.08, 0.1, 0.12];
 
 /// The plan: every run once, and which figures use it.

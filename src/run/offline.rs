@@ -1,5 +1,5 @@
 //! The analysis of a whole run: every frame measured in order, holes followed across frames,
-//! and the tables and plots written to `DIR/analysis/` (README "Analysis").
+//! and the tables and plots written to `DIR/analysis/` (docs/cli.md, "analyze"; the tables in docs/formats.md).
 //!
 //! Nothing is written until every frame has been read and measured, so a run that cannot be
 //! analysed (missing, foreign, another format version, a damaged frame) leaves no output.
