@@ -248,7 +248,10 @@ fn cg_begin(@builtin(local_invocation_index) t: u32) {
         solve.alpha = vec2<f32>(0.0, 0.0);
         solve.beta = vec2<f32>(0.0, 0.0);
         solve.iterations = vec2<u32>(0u, 0u);
-        solve.done = select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), a.xy <= vec2<f32>(target2, target2));
+        // A residual that is not a finite number never meets its target (by its bits:
+        // `is_finite2`), so the solve counts as unconverged and the step is put back.
+        let met = is_finite2(a.xy) & vec2<bool>(is_finite(target2)) & (a.xy <= vec2<f32>(target2, target2));
+        solve.done = select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), met);
     }
 }
 
@@ -310,7 +313,8 @@ fn cg_beta(@builtin(local_invocation_index) t: u32) {
         let running = solve.done == vec2<u32>(0u, 0u);
         solve.iterations += select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), running);
         solve.rr = select(solve.rr, rr, running);
-        let met = running & (rr <= vec2<f32>(solve.target2, solve.target2));
+        let met = running & is_finite2(rr) & vec2<bool>(is_finite(solve.target2))
+            & (rr <= vec2<f32>(solve.target2, solve.target2));
         solve.done = select(solve.done, vec2<u32>(1u, 1u), met);
         solve.beta = select(vec2<f32>(0.0, 0.0), rz / solve.rz, running);
         solve.rz = select(solve.rz, rz, running);

@@ -96,3 +96,14 @@ fn lattice_index(p: Patch, site: vec2<u32>, l: u32) -> u32 {
     let gy = (p.y0 + site.y - 1u) % l;
     return gy * l + gx;
 }
+
+// Whether x is a finite number, read from its bits: a WGSL compiler may assume that no float
+// is NaN or infinite (Metal's fast math does) and fold away a comparison that counts on NaN
+// being unordered, but not a test of the exponent's bits. Every fault check goes through it.
+fn is_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+fn is_finite2(v: vec2<f32>) -> vec2<bool> {
+    return (bitcast<vec2<u32>>(v) & vec2<u32>(0x7f800000u)) != vec2<u32>(0x7f800000u);
+}

@@ -49,9 +49,8 @@ fn correct(@builtin(global_invocation_id) gid: vec3<u32>) {
     let v = phi0[i] + half * (k1[i] + rate[i]);
     phi[i] = v;
     // `first_out_of_range` looks at the interior only, row by row; the padded index orders the
-    // sites the same way. Written as !(in range) so that a NaN would count, as on the CPU,
-    // though a WGSL compiler may assume there are none.
-    if site.interior && !(v >= params.phi_min && v <= params.phi_max) {
+    // sites the same way. A NaN or an infinity counts, as on the CPU, by its bits (`is_finite`).
+    if site.interior && !(is_finite(v) && v >= params.phi_min && v <= params.phi_max) {
         atomicMin(&fault[gid.y], gid.x);
     }
 }

@@ -1363,6 +1363,43 @@ fn a_gpu_run_stops_on_a_fault_and_keeps_the_last_good_state() {
     }
 }
 
+/// A NaN in φ stops a GPU run as a value out of range does: the range check reads a value's
+/// bits (`is_finite` in shaders/model.wgsl), not only comparisons a compiler may fold.
+#[test]
+fn a_nan_in_phi_stops_a_gpu_run_and_keeps_the_last_good_state() {
+    let Some(ctx) = context() else { return };
+    let r = relaxing_tissue();
+    for poison in [f64::NAN, f64::INFINITY] {
+        let mut state = r.state();
+        let (patch, phi) = &mut state.cells[7];
+        phi[patch.idx(patch.w / 2, patch.h / 2)] = poison;
+        let bad = Monolayer::from_state(r.params().clone(), r.seed(), state).expect("the state loads");
+        let mut run = GpuRun::new(&ctx, &bad).expect("the monolayer fits the device");
+        run.check_every = 4;
+        let err = run.advance(&ctx, 10).expect_err("a non-finite φ stops the run");
+        assert!(matches!(err, GpuRunError::Unstable { from, .. } if from == r.step_count()), "{poison}: {err:?}");
+        assert_eq!(run.step_count(), r.step_count());
+    }
+}
+
+/// A NaN in the friction solve's right-hand side never passes for convergence: the stop test
+/// reads the residual's bits, so the solve ends unconverged and the step is put back.
+#[test]
+fn a_nan_in_the_friction_solve_is_not_convergence() {
+    let Some(ctx) = context() else { return };
+    let m = reduced_tissue();
+    let gpu = GpuMonolayer::new(&ctx, m).expect("the monolayer fits the device");
+    gpu.run(&ctx, &Kernel::FRICTION_SUMS);
+    let n = gpu.read(&ctx, Slot::Weight);
+    let site = (0..n.len()).max_by(|&a, &b| n[a].total_cmp(&n[b])).expect("sites");
+    let nan = [f32::NAN, 0.0];
+    ctx.queue.write_buffer(gpu.state().buffer(Slot::Force), (site * 8) as u64, bytemuck::cast_slice(&nan));
+    gpu.run(&ctx, &Kernel::friction_solve(gpu.preconditioner, gpu.solve_iterations));
+    let solve = gpu.read_solve(&ctx);
+    assert!(!solve.converged(), "a NaN in F converged: {solve:?}");
+    assert!(solve.unconverged >= 1, "the unconverged solve was not counted: {solve:?}");
+}
+
 /// `monolayer run --engine gpu`: the run's protocol stepped on the GPU, its frames and
 /// checkpoints written from the state downloaded at their steps. The record names the engine,
 /// the state at the end is the CPU run's within 10⁻⁴, and a resume on the other engine is

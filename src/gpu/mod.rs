@@ -28,6 +28,7 @@
 
 pub mod buffers;
 pub mod context;
+pub mod iterations;
 pub mod kernels;
 pub mod readback;
 pub mod stepper;

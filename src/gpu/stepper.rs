@@ -10,6 +10,7 @@
 
 use crate::gpu::buffers::{patch_storage, GpuPatch, Layout, PatchFault, Slot, SolveScalars, NO_FAULT};
 use crate::gpu::context::{GpuContext, GpuError};
+use crate::gpu::iterations::{steps_per_submission, AfterFailure, IterationRule};
 use crate::gpu::kernels::{GpuMonolayer, Kernel};
 use crate::gpu::readback::read_words;
 use crate::model::lattice::Patch;
@@ -91,11 +92,14 @@ pub struct GpuRun {
     pub check_every: u64,
     /// Whether the recorded solve iterations follow what the solves need ([`Self::settle`]).
     pub adapt_iterations: bool,
+    /// How they follow it; made from the recorded count when first needed, and again when the
+    /// count was set from outside.
+    rule: Option<IterationRule>,
 }
 
-/// The recorded solve iterations, when adapted, stay within these multiples of the
-/// preconditioner's default ([`GpuMonolayer::set_preconditioner`]): a quarter of it (the
-/// multigrid's 30 → 7; a warm-started solve inside a run takes 3–5) to eight times.
+/// The recorded solve iterations, when adapted ([`IterationRule`]), stay within these
+/// multiples of the preconditioner's default ([`GpuMonolayer::set_preconditioner`]): a quarter
+/// of it (the multigrid's 30 → 7; a warm-started solve inside a run takes 3–5) to eight times.
 const FEWEST_ITERATIONS: f64 = 0.25;
 const MOST_ITERATIONS: usize = 8;
 
@@ -128,6 +132,7 @@ impl GpuRun {
             kept,
             check_every: 50,
             adapt_iterations: true,
+            rule: None,
         })
     }
 
@@ -187,7 +192,8 @@ impl GpuRun {
         if self.gpu.state().params.active != (phase == Phase::Active) as u32 {
             self.gpu.state_mut().set_phase(ctx, &self.params, phase, &self.xi_s);
         }
-        let mut steps = self.check_every.max(1).min(n);
+        let one = [self.gpu.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat();
+        let mut steps = steps_per_submission(self.check_every.max(1).min(n), one.len());
         if phase == Phase::Relaxation {
             steps = steps.min(self.params.relax_steps - self.step);
         }
@@ -196,13 +202,25 @@ impl GpuRun {
         }
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
         self.copy_kept(&mut encoder, Keep::Store);
-        let one = [self.gpu.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat();
         for _ in 0..steps {
             self.gpu.encode(&mut encoder, &one);
         }
         ctx.queue.submit([encoder.finish()]);
         self.pending = Some((self.step, self.step + steps));
         steps
+    }
+
+    /// The iteration rule, in step with the recorded count (made anew if it was set from
+    /// outside, or the preconditioner changed).
+    fn rule(&mut self) -> &mut IterationRule {
+        let (default, recorded) = (self.gpu.preconditioner.default_iterations(), self.gpu.solve_iterations);
+        let fewest = ((default as f64 * FEWEST_ITERATIONS) as usize).max(1);
+        let most = MOST_ITERATIONS * default;
+        let stale = self.rule.as_ref().is_none_or(|r| r.recorded != recorded || r.most != most);
+        if stale {
+            self.rule = Some(IterationRule::new(recorded, fewest, most));
+        }
+        self.rule.as_mut().expect("made above")
     }
 
     /// Copies the state aside (before a submission) or back (after a fault).
@@ -229,29 +247,32 @@ impl GpuRun {
 
     /// Accepts the pending steps (`Ok(true)`), or on a fault puts the state kept at their start
     /// back and clears the faults. A solve that missed its tolerance within the recorded
-    /// iterations, while they may still grow (`adapt_iterations`), doubles them and asks for
-    /// the same steps again (`Ok(false)`): a solve that converges gives the same bits whatever
-    /// the iterations recorded after it, so the run is the one a larger count would have made.
-    /// Otherwise the error says what happened. After accepted steps the recorded iterations
-    /// halve while the most any solve took is under a third of them.
+    /// iterations, while they may still grow (`adapt_iterations`), grows them and asks for the
+    /// same steps again (`Ok(false)`): a solve that converges gives the same bits whatever the
+    /// iterations recorded after it, so the run is the one a larger count would have made.
+    /// Otherwise the error says what happened. After accepted steps the count follows what the
+    /// solves took ([`IterationRule`]: lowered slowly, never back to a count that failed lately).
     pub fn settle(&mut self, ctx: &GpuContext, faults: &Faults) -> Result<bool, GpuRunError> {
         let Some((from, to)) = self.pending.take() else { return Ok(true) };
         self.gpu.state().reset_faults(ctx);
-        let (default, recorded) = (self.gpu.preconditioner.default_iterations(), self.gpu.solve_iterations);
-        let fewest = ((default as f64 * FEWEST_ITERATIONS) as usize).max(1);
+        let adapts = self.adapt_iterations && self.gpu.solve().is_some();
         let error = match faults.error(from, to) {
             None => {
-                let most = faults.solve.most_iterations as usize;
-                if self.adapt_iterations && self.gpu.solve().is_some() && 3 * most < recorded {
-                    self.gpu.solve_iterations = (recorded / 2).max(fewest);
+                if adapts {
+                    let rule = self.rule();
+                    rule.accepted(faults.solve.most_iterations as usize);
+                    self.gpu.solve_iterations = rule.recorded;
                 }
                 self.step = to;
                 return Ok(true);
             }
-            Some(GpuRunError::Friction { .. }) if self.adapt_iterations && recorded < MOST_ITERATIONS * default => {
-                self.gpu.solve_iterations = (2 * recorded).min(MOST_ITERATIONS * default);
-                None
-            }
+            Some(e @ GpuRunError::Friction { .. }) if adapts => match self.rule().failed() {
+                AfterFailure::Retry(n) => {
+                    self.gpu.solve_iterations = n;
+                    None
+                }
+                AfterFailure::GiveUp => Some(e),
+            },
             Some(e) => Some(e),
         };
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("restore") });
