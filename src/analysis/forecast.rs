@@ -1,5 +1,5 @@
 //! Does collective motion tell where the tissue tears, beyond where it has already thinned?
-//! (docs/figures.md, "Thinning, matched chance and the forecast").
+//! (docs/figures-precursors.md, "Thinning, matched chance and the forecast").
 //!
 //! A run's frames are kept as [`RunHistory`]: per frame the precursor points and strain rate
 //! ([`FramePoints`]), Σφ, and the local thinning on a sub-grid of sites; and every nucleation
@@ -246,14 +246,14 @@ fn draw<'a>(rng: &mut ChaCha8Rng, pool: &'a mut [usize], k: usize) -> &'a [usize
 pub type Features = [f64; 3];
 
 /// The combination reads a spiral core's distance up to this many R: beyond two cell diameters
-/// the core is no nearer than at a random site (docs/figures.md, Fig. 1c).
+/// the core is no nearer than at a random site (docs/figures-precursors.md, Fig. 1c).
 pub const CORE_DISTANCE_CAP: f64 = 4.0;
 
 /// The combination's inputs from a site's measures: ε̇ over the frame's largest (Fig. 1d's
 /// normalisation, comparable across runs and activities), the spiral core's distance capped at
 /// [`CORE_DISTANCE_CAP`], and ln(least Σφ within R + the void threshold), so that the approach to
 /// a void is not squeezed into the last hundredth of the range. Fixed before the held-out seeds
-/// were read (docs/figures.md).
+/// were read (docs/figures-precursors.md).
 pub fn model_inputs(strain_rate: f64, frame_max_strain_rate: f64, core: f64, least: f64) -> Features {
     let e = if frame_max_strain_rate > 0.0 { strain_rate / frame_max_strain_rate } else { 0.0 };
     [e, core.min(CORE_DISTANCE_CAP), (least.max(0.0) + VOID_THRESHOLD).ln()]
@@ -357,7 +357,7 @@ impl Predictor {
 }
 
 /// The combination the page draws (its forecast field): fitted by `monolayer forecast` on the 18
-/// paper-length runs of docs/figures.md ("Thinning, matched chance and the forecast"), a
+/// paper-length runs of docs/figures-precursors.md ("Thinning, matched chance and the forecast"), a
 /// nucleation within R in the next 3 frames (3,000 steps), all sites; the numbers are those of
 /// docs/evidence/forecast/forecast_model.txt, which a test holds them to.
 pub const SHIPPED_MODEL: Logistic = Logistic {

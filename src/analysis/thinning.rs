@@ -1,7 +1,7 @@
 //! How thin the tissue is about a site: the least Σφ within a radius, and the share of void
 //! sites there. The paper's argument for collective motion rests on the tissue *not* thinning
 //! before a hole ("when no hole is present the packing fraction is always above 95 %"), so every
-//! precursor of a hole is read beside these two numbers (docs/figures.md, "Thinning").
+//! precursor of a hole is read beside these two numbers (docs/figures-precursors.md, "Thinning").
 //!
 //! Sites are the lattice points (x, y) = (i, j); a site is within `radius` of a point when their
 //! periodic distance is at most `radius` (the same disc as the strain rate's "within R/2").
