@@ -1,6 +1,6 @@
 //! Records the git commit the crate is built from (`MONOLAYER_GIT_COMMIT`: 12 hex digits, or
 //! "unknown" outside a git checkout), for the code version the page puts in its share links and
-//! downloads (`src/web/version.rs`).
+//! downloads and in every run.json (`src/formats/version.rs`).
 
 use std::process::Command;
 

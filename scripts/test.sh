@@ -13,6 +13,9 @@ cargo fmt --all -- --check
 step "lints (native; with the GPU stages of feature \`gpu\`)"
 cargo clippy --all-targets --release --features gpu -- -D warnings
 
+step "docs (rustdoc: no broken intra-doc links or other warnings; tests/docs.rs checks the .md links)"
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps
+
 step "lints and build (wasm32-unknown-unknown, the browser's core)"
 cargo clippy --target wasm32-unknown-unknown --lib --no-default-features -- -D warnings
 # The page's build: the core with the GPU engine (wgpu's WebGPU backend, src/web/gpu_engine.rs).

@@ -10,28 +10,33 @@
 //! seed: no threads, files or clocks inside it. Native extras (threads, files, the CLI) sit
 //! behind the `parallel` and `cli` features.
 //!
-//! Five layers, each a folder; imports go downwards only (model ← analysis, gpu ← run, web), which
-//! `tests/layers.rs` checks:
+//! Six layers, each a folder; imports go downwards only (model ← analysis, formats, gpu ← run,
+//! web) and no files import each other around a circle, which `tests/layers.rs` checks:
 //!
 //! - [`model`]: the physics core, one module per concept of the paper;
 //! - [`analysis`]: the paper's measurements, pure, for both faces (live and offline);
+//! - [`formats`]: the file formats both faces write and read (run.json, frame files, relaxed
+//!   states, the code version), pure: bytes, no files;
 //! - `gpu` (feature `gpu`): the model's stages as wgpu compute kernels, f32, beside `analysis`
 //!   (imports only `model`);
 //! - `run` (native, feature `cli`): files, runs, sweeps, the offline analysis, plots;
 //! - [`web`]: the browser demo's view (native and wasm32), its binding and wgpu renderer (wasm32).
 
 pub mod analysis;
+pub mod formats;
 pub mod model;
 
-/// The GPU stepper's stages on wgpu compute (feature `gpu`).
+// The GPU stepper's stages on wgpu compute (feature `gpu`).
 #[cfg(feature = "gpu")]
 pub mod gpu;
 
-#[cfg(feature = "cli")]
+// Files, runs and the command line (feature `cli`, native only: its dependencies are not built
+// for wasm32).
+#[cfg(all(feature = "cli", not(target_arch = "wasm32")))]
 pub mod run;
 
-/// The browser demo (see `www/`): what it draws and measures, and on wasm32 its binding and
-/// wgpu drawing.
+// The browser demo (see `www/`): what it draws and measures, and on wasm32 its binding and
+// wgpu drawing.
 pub mod web;
 
 pub use model::error::SimError;

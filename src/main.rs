@@ -8,13 +8,13 @@ use std::time::Instant;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use monolayer::model::snapshot;
+use monolayer::formats::snapshot;
 use monolayer::run::bench::BenchOptions;
 use monolayer::run::config::{load_params, parse_assignment};
-use monolayer::run::files::{self, RunStatus};
+use monolayer::run::files::{self, Engine, RunStatus};
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
-use monolayer::run::runner::{Engine, Event, RunDir};
+use monolayer::run::runner::{Event, RunDir};
 use monolayer::run::sweep::{jobs_of_runs, measure_existing, run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
 use monolayer::{Monolayer, Params, Phase};
 
@@ -54,7 +54,7 @@ enum Command {
     /// several seeds: each nucleation's thinning, the precursors against sites of the same
     /// thinning, and a forecast of where a hole opens next (strain rate, spiral core, thinning,
     /// and their combination) scored on each seed's runs with the combination fitted on the other
-    /// seeds. Tables and the ROC figure to --out (docs/figures.md).
+    /// seeds. Tables and the ROC figure to --out (docs/figures-precursors.md).
     Forecast(ForecastArgs),
 }
 

@@ -1,4 +1,4 @@
-//! The page's frame files (`analysis::frame_file`, the code the browser runs, here natively) against
+//! The page's frame files (`formats::frame_file`, the code the browser runs, here natively) against
 //! the native ones: frames written by `monolayer run` decode to the same arrays as
 //! `monolayer analyze` reads, the page's own frame of a state is the native frame of it byte for
 //! byte, and the page's download (frame + run.json) is a run `monolayer analyze` accepts.
@@ -8,9 +8,10 @@ mod common;
 use std::fs;
 
 use common::{arg, monolayer, stderr};
-use monolayer::analysis::frame_file::{decode_frame, encode_frame};
+use monolayer::formats::frame_file::{decode_frame, encode_frame};
+use monolayer::formats::frame_file_name;
 use monolayer::run::files::{read_frame, write_frame, RunFrames, RunRecord};
-use monolayer::web::readouts::{frame_file_name, run_record_json};
+use monolayer::web::readouts::run_record_json;
 use monolayer::{Monolayer, Params};
 
 #[test]

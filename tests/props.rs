@@ -211,7 +211,7 @@ proptest! {
     fn relaxed_states_with_any_bytes_changed_are_refused_or_sane(
         edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
     ) {
-        use monolayer::model::snapshot::{decode, encode};
+        use monolayer::formats::snapshot::{decode, encode};
         let (_, _, checkpoint) = files();
         let state = read_checkpoint(checkpoint, small().box_size).unwrap();
         let mut bytes = encode(&state, 7);

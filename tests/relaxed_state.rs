@@ -9,7 +9,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{monolayer, stderr};
-use monolayer::model::snapshot::{self, relaxation_key};
+use monolayer::formats::snapshot::{self, relaxation_key};
 use monolayer::{Monolayer, Params};
 
 const STATE_JS: &str = include_str!("../www/js/state.js");

@@ -914,7 +914,7 @@ fn one_based_slurm_arrays_run_every_shard() {
 /// Absurd but finite inputs are refused.
 #[test]
 fn absurd_finite_inputs_are_refused() {
-    use monolayer::model::snapshot::{decode, encode};
+    use monolayer::formats::snapshot::{decode, encode};
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("r");
     ok(&small(&run, 50, &[]));

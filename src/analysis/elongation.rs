@@ -75,7 +75,7 @@ pub fn ellipse_eigenvalue_ratio(k: f64) -> f64 {
 }
 
 /// The aspect ratio of a cell from its gradient tensor's trace T and shape tensor Q:
-/// the k ≥ 1 with [`ellipse_eigenvalue_ratio`](k) = (T/2 + |Q|)/(T/2 − |Q|), bracketed on the
+/// the k ≥ 1 with [`ellipse_eigenvalue_ratio`]\(k) = (T/2 + |Q|)/(T/2 − |Q|), bracketed on the
 /// tabulated grid and refined by regula falsi (Illinois). 1 for a round cell;
 /// [`MAX_ASPECT_RATIO`] at most; None for a cell with no gradient.
 pub fn aspect_ratio(trace: f64, q: [f64; 2]) -> Option<f64> {

@@ -299,7 +299,7 @@ impl HoleTracker {
 pub enum HoleCounting {
     /// A hole is a family: the region that nucleated it, the fragments that break off it (and
     /// theirs), and the holes that join it. It lives from the first nucleation in the family
-    /// until no member is open. The paper's reading (its "only one hole can form at a time, [so]
+    /// until no member is open. The paper's reading (its "only one hole can form at a time, \[so\]
     /// long lifetimes prevent new ones from forming"), and the one the regime criterion uses.
     Families,
     /// Every tracked region is a hole of its own: a fragment above the nucleation area is born

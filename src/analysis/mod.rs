@@ -30,7 +30,6 @@ pub mod defects;
 pub mod elongation;
 pub mod fields;
 pub mod forecast;
-pub mod frame_file;
 pub mod holes;
 pub mod nucleation;
 pub mod precursors;

@@ -7,12 +7,13 @@
 //! protocol, patches, stability checks).
 //!
 //! [`lattice`] and [`cell`] hold the geometry, [`counters`] the time per stage, [`par`] the
-//! deterministic parallel loops, [`error`] what can go wrong, [`snapshot`] a state as bytes
-//! (the browser demo's confluent start), [`precision`] the type the cells' per-site fields are
-//! stored in, [`sum`] the order of every sum over sites. Nothing here touches files,
-//! clocks or threads directly (threads only through [`par`], behind the `parallel` feature), so
-//! the core compiles for `wasm32-unknown-unknown` with the same bits. It imports nothing from
-//! `analysis`, `run` or `web` (tested by `tests/layers.rs`).
+//! deterministic parallel loops, [`error`] what can go wrong, `hash` the one hash (FNV-1a) of
+//! fingerprints and of the relaxed states' keys and checksums (`formats::snapshot`),
+//! [`precision`] the type the cells' per-site fields are stored in, [`sum`] the order of every
+//! sum over sites. Nothing here touches files, clocks or threads directly (threads only through
+//! [`par`], behind the `parallel` feature), so the core compiles for `wasm32-unknown-unknown`
+//! with the same bits. It imports nothing from `analysis`, `formats`, `gpu`, `run` or `web`
+//! (tested by `tests/layers.rs`).
 
 pub mod cell;
 pub mod counters;
@@ -20,6 +21,7 @@ pub mod error;
 pub mod forces;
 pub mod free_energy;
 pub mod friction;
+pub(crate) mod hash;
 pub mod init;
 pub mod lattice;
 pub mod monolayer;
@@ -29,5 +31,4 @@ pub mod par;
 pub mod params;
 pub mod precision;
 pub mod shape;
-pub mod snapshot;
 pub mod sum;

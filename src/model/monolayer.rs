@@ -28,6 +28,7 @@ use crate::model::error::SimError;
 use crate::model::forces::force_density;
 use crate::model::free_energy::{area, FreeEnergy};
 use crate::model::friction::{FrictionSolver, SolveStats};
+use crate::model::hash::{fnv1a_continue, FNV1A_START};
 use crate::model::init::random_disks;
 use crate::model::lattice::{wrap, Patch};
 use crate::model::motion::{friction_weight, velocity_and_rate, Drag, MotionFields};
@@ -35,7 +36,6 @@ use crate::model::par;
 use crate::model::params::{FrictionWeights, Params};
 use crate::model::precision::{load, Real, Store};
 use crate::model::shape::{normalise, shape_tensor};
-use crate::model::snapshot::{fnv1a_continue, FNV1A_START};
 
 const ZERO: C64 = C64 { re: 0.0, im: 0.0 };
 

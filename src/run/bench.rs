@@ -1,9 +1,9 @@
 //! `monolayer bench` and `monolayer analyze --bench`: where the time goes at full size.
 //!
-//! This machine's speed drifts by up to 1.4× from one minute to the next, so every comparison is
-//! made inside one run, block by block in turn on the same trajectory: each thread count on its
-//! own copy of the state, and two independent one-thread simulations side by side, which is the
-//! most two threads can give on this machine (they share its caches and memory bandwidth). The
+//! A shared machine's speed can drift by 1.4× from one minute to the next, so every comparison
+//! is made inside one run, block by block in turn on the same trajectory: each thread count on
+//! its own copy of the state, and two independent one-thread simulations side by side, which is
+//! the most two threads can give on the machine (they share its caches and memory bandwidth). The
 //! two-thread speed-up is reported as a fraction of that ceiling.
 
 use std::fs;
@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::analysis::Analysis;
+use crate::formats::snapshot;
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
-use crate::model::snapshot;
 use crate::run::files::{frame_path, write_frame, RunRecord};
 use crate::run::offline::analyze_run;
 use crate::run::plots::Background;
@@ -504,7 +504,7 @@ mod tests {
     /// file made with other relaxation parameters or saved at another step, naming the file.
     #[test]
     fn a_relaxed_start_is_the_relaxation_and_a_foreign_file_is_refused() {
-        use crate::model::snapshot::relaxation_key;
+        use crate::formats::snapshot::relaxation_key;
         let p = Params { box_size: 40, n_cells: 4, relax_steps: 20, ..Params::default() };
         let mut relaxed = Monolayer::new(p.clone(), 3).unwrap();
         relaxed.advance(20).unwrap();

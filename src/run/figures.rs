@@ -240,7 +240,7 @@ pub const CHI_FIG3AB: [f64; 3] = [0.1, 0.01, 0.001];
 pub const CHI_FIG3C: [f64; 2] = [0.005, 0.001];
 pub const CHI_S1: [f64; 3] = [0.1, 0.01, 0.001];
 pub const ZETAS: [f64; 3] = [0.3, 0.4, 0.5];
-/// Fig. S3 varies γ at χ = 0.001, ζ = 0.3 without giving the values. The text "increase[s] the
+/// Fig. S3 varies γ at χ = 0.001, ζ = 0.3 without giving the values. The text "increase\[s\] the
 /// elasticity of the monolayer through the surface tension": the default 0.06 and above. (Below
 /// it, at γ = 0.04, the paper's half-size initial disks overshoot the φ guard `phi_max` = 1.5 in
 /// the first relaxation steps; docs/cli.md, "S3's surface tensions".)

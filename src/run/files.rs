@@ -1,5 +1,7 @@
 //! A run's files: frames NumPy reads directly (`.npz`), bit-exact checkpoints, and the run record
-//! (`run.json`), with the writer and the reader of each side by side. Every file is written to a
+//! (`run.json`), with the writer and the reader of each side by side. The formats themselves,
+//! which the page writes and reads too, are `crate::formats`'s (the frame codec, the record's
+//! type, the frame file's name); this module adds the files. Every file is written to a
 //! temporary name in the same directory and renamed, so a reader (or a crash) never sees half a
 //! file; every read error names the file and the array that is wrong.
 
@@ -11,17 +13,14 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use ndarray::{arr0, Array1, Array2, Array3};
 use ndarray_npy::{NpzReader, NpzWriter};
 use num_complex::Complex64 as C64;
-use serde::{Deserialize, Serialize};
 
-use crate::analysis::frame_file::{self, FrameData};
+use crate::formats::frame_file::{self, FrameData};
+use crate::formats::frame_file_name;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::{Monolayer, State};
 use crate::model::params::Params;
-use crate::model::precision::STORE_NAME;
 
-/// Identifies the files of this program and the version of their layout.
-pub const FORMAT: &str = "monolayer-run";
-pub const FORMAT_VERSION: u32 = 1;
+pub use crate::formats::run_record::{Engine, RunRecord, RunStatus, FORMAT, FORMAT_VERSION};
 
 pub type IoResult<T> = Result<T, String>;
 
@@ -264,132 +263,14 @@ impl RunLock {
     }
 }
 
-/// How a run stands, as `run.json` records it: `"running"`, `"finished"`, `"failed: …"` or
-/// `"stopped: …"` with the reason.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub enum RunStatus {
-    /// Started and not ended (or killed).
-    #[default]
-    Running,
-    Finished,
-    /// The simulation itself failed (unstable, the friction solve did not converge): a result,
-    /// the same on every rerun, so it is kept and not retried.
-    Failed(String),
-    /// The machine stopped it (a full disk, another IO error): the run itself is sound and
-    /// continues from its checkpoint when run again.
-    Stopped(String),
-}
-
-impl RunStatus {
-    /// Ended for good: nothing more will run.
-    pub fn is_complete(&self) -> bool {
-        matches!(self, RunStatus::Finished | RunStatus::Failed(_))
-    }
-
-    pub fn blew_up(&self) -> bool {
-        matches!(self, RunStatus::Failed(_))
-    }
-}
-
-impl std::fmt::Display for RunStatus {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            RunStatus::Running => f.write_str("running"),
-            RunStatus::Finished => f.write_str("finished"),
-            RunStatus::Failed(why) => write!(f, "failed: {why}"),
-            RunStatus::Stopped(why) => write!(f, "stopped: {why}"),
-        }
-    }
-}
-
-impl std::str::FromStr for RunStatus {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "running" => Ok(RunStatus::Running),
-            "finished" => Ok(RunStatus::Finished),
-            // Records written before `stopped` existed called an IO error `failed` too; an IO
-            // error's text ends in its OS error code, which no simulation error has.
-            _ if s.starts_with("failed: ") && s.contains("(os error ") => Ok(RunStatus::Stopped(s[8..].into())),
-            _ if s.starts_with("failed: ") => Ok(RunStatus::Failed(s[8..].into())),
-            _ if s.starts_with("stopped: ") => Ok(RunStatus::Stopped(s[9..].into())),
-            _ => Err(format!("unknown status \"{s}\" (running, finished, failed: …, stopped: …)")),
-        }
-    }
-}
-
-impl Serialize for RunStatus {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_str(self)
-    }
-}
-
-impl<'de> Deserialize<'de> for RunStatus {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        String::deserialize(d)?.parse().map_err(serde::de::Error::custom)
-    }
-}
-
-fn storage_before_the_field() -> String {
-    "f64".into()
-}
-
-/// The engine of records written before the GPU engine existed.
-fn engine_before_the_field() -> String {
-    crate::run::runner::Engine::Cpu.name().into()
-}
-
-/// What `run.json` records: enough to reproduce the run and to continue it.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct RunRecord {
-    pub format: String,
-    pub format_version: u32,
-    /// Version of this program that wrote the run.
-    pub version: String,
-    /// The precision the cells' fields were stored in ([`STORE_NAME`]). A run continues only in
-    /// the precision it started in. Records without it were written before f32 storage existed,
-    /// by builds that stored f64.
-    #[serde(default = "storage_before_the_field")]
-    pub storage: String,
-    /// The engine that steps the run (`runner::Engine`): "cpu", the reference, or "gpu-f32"
-    /// (feature `gpu`). A run continues only on the engine it started on.
-    #[serde(default = "engine_before_the_field")]
-    pub engine: String,
-    pub seed: u64,
-    /// Steps between frames in the active phase.
-    pub frame_interval: u64,
-    pub status: RunStatus,
-    /// Last step with a frame (None before the first).
-    pub last_frame_step: Option<u64>,
-    pub params: Params,
-}
-
 impl RunRecord {
-    pub fn new(params: Params, seed: u64, frame_interval: u64) -> Self {
-        RunRecord {
-            format: FORMAT.into(),
-            format_version: FORMAT_VERSION,
-            version: env!("CARGO_PKG_VERSION").into(),
-            storage: STORE_NAME.into(),
-            engine: engine_before_the_field(),
-            seed,
-            frame_interval,
-            status: RunStatus::Running,
-            last_frame_step: None,
-            params,
-        }
-    }
-
     pub fn path(dir: &Path) -> PathBuf {
         dir.join("run.json")
     }
 
     pub fn save(&self, dir: &Path) -> IoResult<()> {
         let path = Self::path(dir);
-        write_atomic(&path, |w| {
-            serde_json::to_writer_pretty(&mut *w, self).map_err(|e| err(&path, e))?;
-            w.write_all(b"\n").map_err(|e| err(&path, e))
-        })
+        write_atomic(&path, |w| w.write_all(self.to_json().as_bytes()).map_err(|e| err(&path, e)))
     }
 
     /// Reads and checks `DIR/run.json`, naming what is wrong.
@@ -439,9 +320,9 @@ impl RunRecord {
     }
 }
 
-/// Name of the frame file of a step: `frames/frame_0011000.npz`.
+/// Name of the frame file of a step: `frames/frame_0011000.npz` ([`frame_file_name`]).
 pub fn frame_path(dir: &Path, step: u64) -> PathBuf {
-    dir.join("frames").join(format!("frame_{step:07}.npz"))
+    dir.join("frames").join(frame_file_name(step))
 }
 
 fn npz_err(path: &Path) -> impl Fn(ndarray_npy::WriteNpzError) -> String + '_ {
@@ -657,8 +538,6 @@ pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> 
         }
     }
 }
-
-pub use super::config::load_params;
 
 // ---- Reading frames (offline analysis) ----
 

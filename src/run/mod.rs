@@ -1,6 +1,6 @@
 //! Native only (feature `cli`): everything that touches files, clocks and the terminal.
 //!
-//! - [`bench`]: `monolayer bench`, stage by stage, and the two-thread ceiling;
+//! - [`bench`](mod@bench): `monolayer bench`, stage by stage, and the two-thread ceiling;
 //! - [`config`]: parameters from config files, `--set` and `--grid`, the one KEY=VALUE parser;
 //! - [`files`]: frames, checkpoints and `run.json`, the writer and the reader of each together;
 //! - [`runner`]: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume);

@@ -11,7 +11,7 @@ use crate::model::params::Params;
 use crate::model::precision::STORE_NAME;
 use crate::run::files::{
     check_checkpoint_params, checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint,
-    write_frame, RunLock, RunRecord, RunStatus, LAST_GOOD_STATE,
+    write_frame, Engine, RunLock, RunRecord, RunStatus, LAST_GOOD_STATE,
 };
 use crate::run::offline::LiveRun;
 
@@ -215,42 +215,6 @@ pub fn check_frame_interval(flag: &str, frame_interval: u64, params: &Params) ->
         ));
     }
     Ok(())
-}
-
-/// What steps a run: the CPU core (the reference, the same bits on every machine and thread
-/// count), or the GPU stepper in f32 (`gpu::stepper::GpuRun`, feature `gpu`), whose runs agree
-/// with the CPU's within f32 rounding step by step and are compared with them statistically
-/// (docs/gpu.md).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Engine {
-    Cpu,
-    Gpu,
-}
-
-impl Engine {
-    /// As `run.json` records it.
-    pub fn name(self) -> &'static str {
-        match self {
-            Engine::Cpu => "cpu",
-            Engine::Gpu => "gpu-f32",
-        }
-    }
-
-    /// As `--engine` takes it.
-    pub fn flag(self) -> &'static str {
-        match self {
-            Engine::Cpu => "cpu",
-            Engine::Gpu => "gpu",
-        }
-    }
-
-    pub fn parse(s: &str) -> Result<Self, String> {
-        match s {
-            "cpu" => Ok(Engine::Cpu),
-            "gpu" | "gpu-f32" => Ok(Engine::Gpu),
-            other => Err(format!("engine {other:?}: must be cpu or gpu")),
-        }
-    }
 }
 
 /// A run directory with its record and the simulation it holds, and the directory's lock: one

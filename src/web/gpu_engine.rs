@@ -17,10 +17,9 @@ use wasm_bindgen::prelude::*;
 
 use super::js_err;
 
-use super::sim::WebSim;
+use super::sim::{GpuState, WebSim};
 use crate::gpu::stepper::{GpuRun, GpuRunError};
 use crate::gpu::GpuContext;
-use crate::Monolayer;
 
 struct Engine {
     ctx: GpuContext,
@@ -32,17 +31,6 @@ impl Engine {
         let mut run = self.run.borrow_mut();
         let run = run.as_mut().ok_or_else(|| JsError::new("the GPU engine has no tissue yet: upload one"))?;
         Ok(f(run))
-    }
-}
-
-/// The state a [`WebGpuEngine`] downloaded, for [`WebSim::adopt`].
-#[wasm_bindgen]
-pub struct GpuState(pub(super) Monolayer);
-
-#[wasm_bindgen]
-impl GpuState {
-    pub fn step_count(&self) -> f64 {
-        self.0.step_count() as f64
     }
 }
 

@@ -10,9 +10,10 @@ use crate::{Monolayer, Params};
 
 use super::measure::{tissue_stats, TissueStats};
 use super::view::{FieldKind, View, ViewBuilder};
-use crate::analysis::frame_file::{decode_frame, FrameData};
+use crate::formats::frame_file::{decode_frame, FrameData};
+use crate::formats::run_record::{FORMAT, FORMAT_VERSION};
 
-/// What the page needs of a run's `run.json` (the native `run::files::RunRecord`).
+/// What the page needs of a run's `run.json` (`formats::run_record::RunRecord`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunInfo {
     pub params: Params,
@@ -25,12 +26,12 @@ pub struct RunInfo {
 pub fn parse_run_json(name: &str, text: &str) -> Result<RunInfo, String> {
     let e = |why: String| format!("{name}: {why}");
     let v: serde_json::Value = serde_json::from_str(text).map_err(|x| e(format!("not valid JSON: {x}")))?;
-    if v.get("format").and_then(|f| f.as_str()) != Some("monolayer-run") {
-        return Err(e("not a record of this program (no \"format\": \"monolayer-run\")".into()));
+    if v.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
+        return Err(e(format!("not a record of this program (no \"format\": \"{FORMAT}\")")));
     }
     let fv = v.get("format_version").and_then(|f| f.as_u64());
-    if fv != Some(1) {
-        return Err(e(format!("format_version {fv:?}, this page reads 1")));
+    if fv != Some(FORMAT_VERSION as u64) {
+        return Err(e(format!("format_version {fv:?}, this page reads {FORMAT_VERSION}")));
     }
     let params: Params = serde_json::from_value(v.get("params").cloned().unwrap_or_default())
         .map_err(|x| e(format!("`params`: {x}")))?;
@@ -137,8 +138,8 @@ impl Playback {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::frame_file::encode_frame;
     use crate::analysis::Analysis;
+    use crate::formats::frame_file::encode_frame;
 
     fn run_json(p: &Params, seed: u64) -> String {
         serde_json::json!({"format": "monolayer-run", "format_version": 1, "version": "x", "seed": seed,

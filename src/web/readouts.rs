@@ -2,9 +2,10 @@
 //! steps since the tissue was made (a Reset makes a new one), measured by the analysis module
 //! as offline ([`Analysis::summary`]), and the CSV with a header naming the code version, the
 //! seed and the parameters. With it the page writes the current state as a frame file
-//! ([`crate::analysis::frame_file::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
+//! ([`crate::formats::frame_file::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
 
 use crate::analysis::{Analysis, Detail};
+use crate::formats::run_record::RunRecord;
 use crate::model::error::SimError;
 use crate::Monolayer;
 
@@ -163,28 +164,11 @@ impl ReadoutLog {
 }
 
 /// A `run.json` for the current state of `m` as a run of one frame, in the format of the native
-/// runs (`run::files::RunRecord`, which the native tests read it with): with the frame file in
-/// `DIR/frames/frame_<step>.npz`, `monolayer analyze DIR` reads it.
+/// runs (the one [`RunRecord`], [`RunRecord::of_page`], written with its keys in alphabetical
+/// order as the page always wrote it): with the frame file in `DIR/frames/`
+/// (`formats::frame_file_name`), `monolayer analyze DIR` reads it.
 pub fn run_record_json(m: &Monolayer) -> String {
-    let record = serde_json::json!({
-        "format": "monolayer-run",
-        "format_version": 1,
-        "version": code_version(),
-        "storage": crate::model::precision::STORE_NAME,
-        "seed": m.seed(),
-        "frame_interval": 1,
-        "status": "stopped: the state of the browser page, downloaded",
-        "last_frame_step": m.step_count(),
-        "params": m.params(),
-    });
-    let mut s = serde_json::to_string_pretty(&record).expect("record serialises");
-    s.push('\n');
-    s
-}
-
-/// The frame file's name in a run directory, as the native runs name it.
-pub fn frame_file_name(step: u64) -> String {
-    format!("frame_{step:07}.npz")
+    RunRecord::of_page(m.params().clone(), m.seed(), m.step_count()).to_json_sorted()
 }
 
 #[cfg(test)]

@@ -7,12 +7,13 @@ use wasm_bindgen::prelude::*;
 use super::js_err;
 
 use super::measure::{tissue_stats, TissueStats};
-use super::readouts::{frame_file_name, run_record_json, ReadoutLog};
+use super::readouts::{run_record_json, ReadoutLog};
 use super::render::WebView;
 use super::view::{FieldKind, ViewBuilder};
-use crate::analysis::frame_file::encode_frame;
 use crate::analysis::holes::VoidRegions;
-use crate::model::snapshot;
+use crate::formats::frame_file::encode_frame;
+use crate::formats::frame_file_name;
+use crate::formats::snapshot;
 use crate::{Monolayer, Params};
 
 /// The page's parameters: its size and the three sliders; every other one is the native default.
@@ -20,6 +21,20 @@ fn page_params(box_size: usize, n_cells: usize, relax_steps: u32, zeta: f64, chi
     let mut p = Params { box_size, n_cells, relax_steps: relax_steps as u64, zeta, gamma, ..Params::default() };
     p.set_chi(chi);
     p
+}
+
+/// The state a GPU engine downloaded (`gpu_engine::WebGpuEngine::download`), for
+/// [`WebSim::adopt`].
+#[cfg(feature = "gpu")]
+#[wasm_bindgen]
+pub struct GpuState(pub(super) Monolayer);
+
+#[cfg(feature = "gpu")]
+#[wasm_bindgen]
+impl GpuState {
+    pub fn step_count(&self) -> f64 {
+        self.0.step_count() as f64
+    }
 }
 
 #[wasm_bindgen]
@@ -130,7 +145,7 @@ impl WebSim {
     /// what is drawn and read out from now on is measured on it, as on the CPU engine's. Its
     /// cells must be this tissue's (the engine was uploaded from it and steps it).
     #[cfg(feature = "gpu")]
-    pub fn adopt(&mut self, state: super::gpu_engine::GpuState) -> Result<(), JsError> {
+    pub fn adopt(&mut self, state: GpuState) -> Result<(), JsError> {
         let m = state.0;
         if m.cells().len() != self.m.cells().len() || m.params().box_size != self.m.params().box_size {
             return Err(JsError::new("adopt: the GPU's state is not this tissue's (upload it again after an edit)"));
@@ -225,7 +240,7 @@ impl WebSim {
         self.m.params().relax_steps as f64
     }
 
-    /// Steps since the random disks, relaxation included (f64: exact far beyond any session).
+    /// Steps since the random disks, relaxation included (f64: exact far beyond any visit to the page).
     pub fn step_count(&self) -> f64 {
         self.m.step_count() as f64
     }

@@ -1,23 +1,10 @@
-//! The code version the page names in its share links and downloads: the crate version and the
-//! git commit it was built from (`build.rs`), e.g. `0.1.0+f1cefbb1a2b3`.
+//! The code version the page names in its share links and downloads (`codeVersion`): the one
+//! of every file this program writes ([`crate::formats::version`]), e.g. `0.1.0+f1cefbb1a2b3`.
 
-pub const CRATE_VERSION: &str = env!("CARGO_PKG_VERSION");
-/// 12 hex digits of the commit, or "unknown" when built outside a git checkout.
-pub const GIT_COMMIT: &str = env!("MONOLAYER_GIT_COMMIT");
+pub use crate::formats::version::{CRATE_VERSION, GIT_COMMIT};
 
 /// `<crate version>+<git commit>`.
 #[cfg_attr(target_arch = "wasm32", wasm_bindgen::prelude::wasm_bindgen(js_name = codeVersion))]
 pub fn code_version() -> String {
-    format!("{CRATE_VERSION}+{GIT_COMMIT}")
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn the_version_names_the_crate_and_a_commit() {
-        let v = super::code_version();
-        let (crate_version, commit) = v.split_once('+').unwrap();
-        assert_eq!(crate_version, env!("CARGO_PKG_VERSION"));
-        assert!(commit == "unknown" || (commit.len() == 12 && commit.chars().all(|c| c.is_ascii_hexdigit())), "{v}");
-    }
+    crate::formats::version::code_version()
 }

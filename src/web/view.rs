@@ -13,9 +13,9 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::analysis::defects::Defect;
 use crate::analysis::forecast::{score_field, SHIPPED_MODEL};
-use crate::analysis::frame_file::FrameData;
 use crate::analysis::spirals::PlusOne;
 use crate::analysis::Analysis;
+use crate::formats::frame_file::FrameData;
 use crate::model::precision::Real;
 use crate::model::shape::gradient;
 use crate::Monolayer;

@@ -17,6 +17,7 @@
 use num_complex::Complex64 as C64;
 
 use crate::model::error::SimError;
+use crate::model::hash::fnv1a;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::State;
 use crate::model::params::{FrictionWeights, Params};
@@ -29,21 +30,6 @@ const HAS_SUBSTRATE: u8 = 2;
 const HAS_CORRECTOR_SHIFT: u8 = 4;
 /// Where the step sits in the header: after the magic bytes, the version and the key.
 const STEP_AT: usize = MAGIC.len() + 4 + 8;
-
-/// The offset basis of 64-bit FNV-1a, the hash of no bytes.
-pub(crate) const FNV1A_START: u64 = 0xcbf2_9ce4_8422_2325;
-
-/// 64-bit FNV-1a of `bytes`, continuing from the hash `h` of what came before them (start from
-/// [`FNV1A_START`]): small, the same on every target, and enough to tell parameter sets, damaged
-/// files and states apart (it is no defence against a forged file, which the page never loads).
-/// [`Monolayer::fingerprint`](crate::model::monolayer::Monolayer::fingerprint) hashes a state with it.
-pub(crate) fn fnv1a_continue(h: u64, bytes: &[u8]) -> u64 {
-    bytes.iter().fold(h, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
-}
-
-fn fnv1a(bytes: &[u8]) -> u64 {
-    fnv1a_continue(FNV1A_START, bytes)
-}
 
 /// The key of a relaxed state: the seed and every parameter the relaxation reads. Those it does
 /// not read (activity, the friction of the active phase and its solve, the active steps, the

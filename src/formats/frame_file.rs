@@ -4,7 +4,8 @@
 //! through `ndarray-npy` and its `zip` with pure-Rust deflate, so the same code builds for wasm32;
 //! `tests/frame_file.rs` checks the page's path against `monolayer run`'s frames.
 //!
-//! A frame is the analysis's input, so the format lives in this layer, below both `run` and `web`.
+//! A frame is the analysis's input and both faces write it, so the format lives in `formats`,
+//! below both `run` and `web`; [`super::frame_file_name`] names its files.
 //!
 //! Arrays of a frame (N cells, L box; lattice arrays are indexed [y, x]): `step` (), `time` (),
 //! `centres` (N, 2), `areas` (N,), `q_hat` (N, 2), `shape_tensor` (N, 2), `patches` (N, 4: x0,
