@@ -1,6 +1,8 @@
 //! The wgpu device the kernels run on: natively Vulkan (on a machine without a GPU, Mesa's
 //! lavapipe, whose adapter is named "llvmpipe"), in the browser WebGPU.
 
+use std::sync::{Arc, Mutex};
+
 use thiserror::Error;
 
 /// Why no device could be had.
@@ -12,6 +14,8 @@ pub enum GpuError {
     NoDevice { adapter: String, reason: String },
     #[error("{what} is {value}, beyond this device's limit {limit} (wgpu `Limits::{limit_name}`)")]
     TooLarge { what: String, value: u64, limit: u64, limit_name: &'static str },
+    #[error("the GPU device failed: {0}")]
+    Failed(String),
 }
 
 /// An adapter's device and queue, and what the adapter is.
@@ -19,6 +23,15 @@ pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     info: wgpu::AdapterInfo,
+    /// The first sign that the device can no longer be trusted (its loss, an error no scope
+    /// caught, a readback that failed): after it nothing it computes is used.
+    fault: Arc<Mutex<Option<String>>>,
+}
+
+/// Keeps the first fault only: later ones follow from it.
+fn record(fault: &Mutex<Option<String>>, why: String) {
+    let mut f = fault.lock().unwrap_or_else(|e| e.into_inner());
+    f.get_or_insert(why);
 }
 
 /// The backends the GPU stepper uses: Vulkan natively (the only native backend compiled in),
@@ -49,7 +62,45 @@ impl GpuContext {
             .request_device(&descriptor)
             .await
             .map_err(|e| GpuError::NoDevice { adapter: info.name.clone(), reason: e.to_string() })?;
-        Ok(GpuContext { device, queue, info })
+        let fault = Arc::new(Mutex::new(None));
+        let lost = fault.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            record(
+                &lost,
+                format!(
+                    "the device was lost ({reason:?}{})",
+                    if message.is_empty() { String::new() } else { format!(": {message}") }
+                ),
+            )
+        });
+        // In a browser an error no scope caught would only reach the console: it is a fault
+        // of the device for the page, which then steps on the CPU engine. Natively wgpu's own
+        // handler stays, which panics: a validation error there is a bug for the tests to show.
+        #[cfg(target_arch = "wasm32")]
+        {
+            let uncaptured = fault.clone();
+            device
+                .on_uncaptured_error(Arc::new(move |e: wgpu::Error| record(&uncaptured, format!("a GPU error: {e}"))));
+        }
+        Ok(GpuContext { device, queue, info, fault })
+    }
+
+    /// Why the device can no longer be trusted, if it cannot: its loss, an uncaptured error (in
+    /// a browser), or a readback that failed.
+    pub fn fault(&self) -> Option<String> {
+        self.fault.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Where faults are recorded, for a future that outlives the borrow of the context (a
+    /// readback that did not map records itself there); the first one recorded is kept.
+    pub(crate) fn fault_handle(&self) -> Arc<Mutex<Option<String>>> {
+        self.fault.clone()
+    }
+
+    /// Destroys the device, as a driver reset or an unplugged GPU would: its loss callback
+    /// fires and every later readback fails (the browser tests' forced loss).
+    pub fn destroy(&self) {
+        self.device.destroy();
     }
 
     /// [`GpuContext::request`], blocking (native only: a browser cannot block).

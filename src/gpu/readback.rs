@@ -3,13 +3,17 @@
 //! natively, a poll of the device) has mapped it. One readback can carry several buffers, since
 //! in a browser each costs milliseconds whatever its size.
 
-use crate::gpu::context::GpuContext;
+use crate::gpu::context::{GpuContext, GpuError};
 use std::future::Future;
 
 /// The contents of `buffers`, as 32-bit words, once every submitted dispatch has finished:
 /// one copy into one mappable buffer, one map. Natively the future blocks on the device when
-/// first polled; in a browser it resolves from the event loop, so it must be awaited there.
-pub fn read_words(ctx: &GpuContext, buffers: &[&wgpu::Buffer]) -> impl Future<Output = Vec<Vec<u32>>> + 'static {
+/// first polled; in a browser it resolves from the event loop, so it must be awaited there. A
+/// map that fails (a lost device) is an error, recorded as the context's fault.
+pub fn read_words(
+    ctx: &GpuContext,
+    buffers: &[&wgpu::Buffer],
+) -> impl Future<Output = Result<Vec<Vec<u32>>, GpuError>> + 'static {
     let sizes: Vec<u64> = buffers.iter().map(|b| b.size()).collect();
     let total: u64 = sizes.iter().sum();
     let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -32,13 +36,19 @@ pub fn read_words(ctx: &GpuContext, buffers: &[&wgpu::Buffer]) -> impl Future<Ou
         let _ = tx.send(r);
     });
     let device = ctx.device.clone();
+    let fault = ctx.fault_handle();
     async move {
+        let fail = |why: String| {
+            fault.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(why.clone());
+            GpuError::Failed(why)
+        };
         #[cfg(not(target_arch = "wasm32"))]
-        device.poll(wgpu::PollType::wait_indefinitely()).expect("the device finishes its work");
+        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| fail(format!("waiting for the device: {e}")))?;
         #[cfg(target_arch = "wasm32")]
         let _ = device;
-        rx.await.expect("wgpu calls the map callback").expect("the readback buffer maps");
-        let data = staging.get_mapped_range(..).expect("the buffer is mapped");
+        let mapped = rx.await.map_err(|_| fail("the readback's map was dropped".into()))?;
+        mapped.map_err(|e| fail(format!("a readback did not map: {e}")))?;
+        let data = staging.get_mapped_range(..).map_err(|e| fail(format!("a readback's range: {e}")))?;
         // Copied word by word: a browser's mapped range carries no alignment promise.
         let words: Vec<u32> = data.chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])).collect();
         let mut out = Vec::with_capacity(sizes.len());
@@ -50,12 +60,13 @@ pub fn read_words(ctx: &GpuContext, buffers: &[&wgpu::Buffer]) -> impl Future<Ou
         }
         drop(data);
         staging.unmap();
-        out
+        Ok(out)
     }
 }
 
 /// [`read_words`] of one buffer, blocking (native only).
 #[cfg(not(target_arch = "wasm32"))]
 pub fn read_now(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Vec<u32> {
-    pollster::block_on(read_words(ctx, &[buffer])).pop().expect("one buffer read")
+    let words = pollster::block_on(read_words(ctx, &[buffer])).unwrap_or_else(|e| panic!("{e}"));
+    words.into_iter().next().expect("one buffer read")
 }

@@ -32,6 +32,8 @@ pub enum GpuRunError {
     Regrow { from: u64, reason: String },
     #[error("in steps {from}..{to}: {count} friction solves missed their tolerance in the recorded iterations; the state is back at step {from}")]
     Friction { from: u64, to: u64, count: u32 },
+    #[error("after step {from}: {reason}")]
+    Device { from: u64, reason: String },
 }
 
 /// The sticky faults of one submission, read back together.
@@ -235,13 +237,14 @@ impl GpuRun {
         }
     }
 
-    /// The sticky faults once every submitted step has finished: one readback.
-    pub fn read_faults(&self, ctx: &GpuContext) -> impl Future<Output = Faults> + 'static {
+    /// The sticky faults once every submitted step has finished: one readback. An error if the
+    /// device failed (lost, or the readback did not map): nothing it computed is used then.
+    pub fn read_faults(&self, ctx: &GpuContext) -> impl Future<Output = Result<Faults, GpuError>> + 'static {
         let s = self.gpu.state();
         let words = read_words(ctx, &[s.buffer(Slot::Fault), s.buffer(Slot::PatchFault), s.buffer(Slot::Solve)]);
         async move {
-            let [range, patch, solve]: [Vec<u32>; 3] = words.await.try_into().expect("three buffers read");
-            Faults { range, patch, solve: *bytemuck::from_bytes(bytemuck::cast_slice(&solve)) }
+            let [range, patch, solve]: [Vec<u32>; 3] = words.await?.try_into().expect("three buffers read");
+            Ok(Faults { range, patch, solve: *bytemuck::from_bytes(bytemuck::cast_slice(&solve)) })
         }
     }
 
@@ -283,14 +286,14 @@ impl GpuRun {
 
     /// The state on the device as a CPU monolayer (φ rounded from f32), once every submitted
     /// step has finished: one readback. Ask for it with nothing pending, so that its step
-    /// count is the state's.
-    pub fn download(&self, ctx: &GpuContext) -> impl Future<Output = Monolayer> + 'static {
+    /// count is the state's. An error if the device failed.
+    pub fn download(&self, ctx: &GpuContext) -> impl Future<Output = Result<Monolayer, GpuError>> + 'static {
         assert!(self.pending.is_none(), "download a settled state");
         let s = self.gpu.state();
         let words = read_words(ctx, &[s.buffer(Slot::Patches), s.buffer(Slot::Phi), s.buffer(Slot::MeanVelocity)]);
         let (params, seed, step, substrate) = (self.params.clone(), self.seed, self.step, self.substrate.clone());
         async move {
-            let [patches, phi, u]: [Vec<u32>; 3] = words.await.try_into().expect("three buffers read");
+            let [patches, phi, u]: [Vec<u32>; 3] = words.await?.try_into().expect("three buffers read");
             let patches: &[GpuPatch] = bytemuck::cast_slice(&patches);
             let cells: Vec<(Patch, Vec<f64>)> = patches
                 .iter()
@@ -301,7 +304,7 @@ impl GpuRun {
             // The GPU's corrector starts from its predictor's solution alone (docs/gpu.md).
             let corrector_shift = vec![C64::new(0.0, 0.0); warm_start.len()];
             let state = State { step, cells, warm_start, corrector_shift, substrate };
-            Monolayer::from_state(params, seed, state).expect("the GPU's state is a valid state")
+            Ok(Monolayer::from_state(params, seed, state).expect("the GPU's state is a valid state"))
         }
     }
 
@@ -316,7 +319,8 @@ impl GpuRun {
         let mut regrown_at = None;
         while self.step < end {
             self.submit(ctx, end - self.step);
-            let faults = pollster::block_on(self.read_faults(ctx));
+            let faults = pollster::block_on(self.read_faults(ctx))
+                .map_err(|e| GpuRunError::Device { from: self.step, reason: e.to_string() })?;
             match self.settle(ctx, &faults) {
                 Err(GpuRunError::BeyondCapacity { from, .. }) if regrown_at != Some(from) => {
                     regrown_at = Some(from);
@@ -334,13 +338,17 @@ impl GpuRun {
     /// native). The browser's engine does the same with [`Self::download`] awaited.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn regrow(&mut self, ctx: &GpuContext) -> Result<(), GpuError> {
-        let m = self.download_now(ctx);
+        let m = pollster::block_on(self.download(ctx))?;
         self.upload(ctx, &m)
     }
 
     /// [`Self::download`], blocking (native).
+    ///
+    /// # Panics
+    /// If the device failed (natively a lost device ends the run: wgpu has no device to go on
+    /// with, and the CPU engine cannot continue a GPU run's record).
     #[cfg(not(target_arch = "wasm32"))]
     pub fn download_now(&self, ctx: &GpuContext) -> Monolayer {
-        pollster::block_on(self.download(ctx))
+        pollster::block_on(self.download(ctx)).unwrap_or_else(|e| panic!("{e}"))
     }
 }

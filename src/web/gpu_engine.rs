@@ -86,16 +86,20 @@ impl WebGpuEngine {
     /// iterations, or a cell more storage: both are then given). Rejects on a fault of the model
     /// (φ out of range, a cell lost), the state back at the start of the submission, naming
     /// the steps and the cell.
+    ///
+    /// A failure of the device itself (lost, a GPU error, a readback that did not map) also
+    /// rejects; [`WebGpuEngine::device_fault`] then says what happened, and the page goes on on
+    /// the CPU engine from the last state it holds.
     pub async fn check(&self) -> Result<bool, JsError> {
         let engine = self.0.clone();
-        let faults = engine.with_run(|r| r.read_faults(&engine.ctx))?.await;
+        let faults = engine.with_run(|r| r.read_faults(&engine.ctx))?.await.map_err(js_err)?;
         let settled = engine.with_run(|r| r.settle(&engine.ctx, &faults))?;
         match settled {
             Ok(taken) => Ok(taken),
             Err(GpuRunError::BeyondCapacity { .. }) => {
                 // The state of the start of the submission, uploaded again with room for the
                 // patches it has now (GpuRun::regrow, which blocks, natively).
-                let m = engine.with_run(|r| r.download(&engine.ctx))?.await;
+                let m = engine.with_run(|r| r.download(&engine.ctx))?.await.map_err(js_err)?;
                 engine.with_run(|r| r.upload(&engine.ctx, &m))?.map_err(js_err)?;
                 Ok(false)
             }
@@ -108,7 +112,18 @@ impl WebGpuEngine {
     pub async fn download(&self) -> Result<GpuState, JsError> {
         let engine = self.0.clone();
         let pending = engine.with_run(|r| r.download(&engine.ctx))?;
-        Ok(GpuState(pending.await))
+        Ok(GpuState(pending.await.map_err(js_err)?))
+    }
+
+    /// Why the device can no longer be trusted (lost, an uncaptured GPU error, a readback that
+    /// did not map), or nothing while it can.
+    pub fn device_fault(&self) -> Option<String> {
+        self.0.ctx.fault()
+    }
+
+    /// Destroys the device, as a driver reset would (the browser tests force a loss with it).
+    pub fn destroy_device(&self) {
+        self.0.ctx.destroy();
     }
 
     /// Steps taken and checked.

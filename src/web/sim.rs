@@ -143,13 +143,17 @@ impl WebSim {
 
     /// Takes the state a GPU engine downloaded (`WebGpuEngine::download`) as this tissue's:
     /// what is drawn and read out from now on is measured on it, as on the CPU engine's. Its
-    /// cells must be this tissue's (the engine was uploaded from it and steps it).
+    /// cells must be this tissue's (the engine was uploaded from it and steps it). The download
+    /// carries φ only, so the velocities and Q̂ that the speed, director, strain-rate and
+    /// force views and the readouts measure are evaluated here, on the CPU, from that φ (the
+    /// trajectory is the same with or without the evaluation).
     #[cfg(feature = "gpu")]
     pub fn adopt(&mut self, state: GpuState) -> Result<(), JsError> {
-        let m = state.0;
+        let mut m = state.0;
         if m.cells().len() != self.m.cells().len() || m.params().box_size != self.m.params().box_size {
             return Err(JsError::new("adopt: the GPU's state is not this tissue's (upload it again after an edit)"));
         }
+        m.evaluate_now().map_err(js_err)?;
         self.m = m;
         self.stats_step = u64::MAX;
         self.log.record_if_due(&self.m);
@@ -374,6 +378,20 @@ impl WebSim {
         self.keys.remove(i);
         self.stats_step = u64::MAX;
         Ok(true)
+    }
+
+    /// Evaluates the velocities, Q̂ and forces at the current φ, as a GPU hand-off does
+    /// ([`WebSim::adopt`]); the CPU engine's own fields are those of its last step's
+    /// evaluation. The trajectory is the same either way (the browser tests compare the
+    /// engines at one φ with it).
+    pub fn evaluate(&mut self) -> Result<(), JsError> {
+        self.m.evaluate_now().map_err(js_err)
+    }
+
+    /// The values of `field` at every site, row-major, as the renderer colours them (the
+    /// browser tests compare the engines with it).
+    pub fn field_values(&mut self, field: FieldKind) -> Vec<f32> {
+        self.view.build(&mut self.m, &self.keys, field, 1.0).field.iter().map(|f| f[0]).collect()
     }
 
     /// What the renderer draws for `field` now; `dpr` (device pixels per CSS pixel) sets the

@@ -640,12 +640,40 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert.equal((await workerStats(q)).engine, 'cpu');
       const cpu = await stepped(q, GPU_STEPS);
       assert.equal(gpu.step, cpu.step);
+      // Every view and its marks on the GPU engine, against the CPU engine at the same φ (a
+      // hand-off evaluates the velocities and Q̂ of the downloaded φ; the CPU engine's fields
+      // are its last step's, so it evaluates once here too): speed, director, strain rate and
+      // active-force divergence within 10⁻⁴ of each field's largest value, the same numbers of
+      // ±½ defects and spiral cores.
+      const views = (page) => page.evaluate(async () => {
+        const call = window.demo.call;
+        const out = {};
+        for (const [name, kind] of [['speed', 2], ['director', 3], ['strainRate', 4], ['forceDivergence', 5]]) {
+          out[name] = Array.from(await call('field_values', kind));
+        }
+        // The strain-rate view marks the defects and the spiral cores.
+        return { ...out, ...(await call('marks', 4)) };
+      });
+      await q.evaluate(() => window.demo.call('evaluate'));
+      const [gv, cv] = [await views(p), await views(q)];
+      m.gpuEngine = { fields: {} };
+      for (const name of ['speed', 'director', 'strainRate', 'forceDivergence']) {
+        const scale = Math.max(...cv[name].map(Math.abs));
+        const diff = Math.max(...gv[name].map((v, i) => Math.abs(v - cv[name][i])));
+        m.gpuEngine.fields[name] = { scale, diff };
+        assert(scale > 0, `${name}: the CPU engine's field is zero`);
+        assert(diff <= 1e-4 * scale, `${name}: the GPU engine's field is ${diff} from the CPU engine's (largest value ${scale})`);
+      }
+      console.log(`       GPU engine's views against the CPU engine's: ${JSON.stringify(m.gpuEngine.fields)}`);
+      assert.equal(gv.defects, cv.defects, `±½ defects: GPU ${gv.defects}, CPU ${cv.defects}`);
+      assert.equal(gv.spiralCores, cv.spiralCores, `spiral cores: GPU ${gv.spiralCores}, CPU ${cv.spiralCores}`);
+      assert(gv.defects > 0, 'no defects on either engine: the comparison proves little');
       // The readouts (the Download button's CSV) have the same rows on both engines: one every
       // 10 active steps, the GPU engine handing over each of those states.
       assert.equal(gpu.rows, cpu.rows, `readout rows: GPU ${gpu.rows}, CPU ${cpu.rows}`);
       assert.equal(gpu.rows, 2, 'rows at steps 1500 and 1510');
       const worst = Math.max(...gpu.phiSum.map((v, i) => Math.abs(v - cpu.phiSum[i])));
-      m.gpuEngine = { steps: GPU_STEPS, msPerStep: gpu.ms / GPU_STEPS, cpuMsPerStep: cpu.ms / GPU_STEPS, maxPhiSumDifference: worst };
+      Object.assign(m.gpuEngine, { steps: GPU_STEPS, msPerStep: gpu.ms / GPU_STEPS, cpuMsPerStep: cpu.ms / GPU_STEPS, maxPhiSumDifference: worst });
       console.log(`       GPU engine on SwiftShader: ${(gpu.ms / GPU_STEPS).toFixed(0)} ms/step (CPU engine ${(cpu.ms / GPU_STEPS).toFixed(1)}); max |ΣφGPU − ΣφCPU| after ${GPU_STEPS} steps = ${worst.toExponential(2)}`);
       assert(worst <= 1e-4, `the GPU engine's Σφ is ${worst} from the CPU engine's after ${GPU_STEPS} steps`);
       assert(Math.abs(gpu.packing - cpu.packing) <= 1e-3, `packing ${gpu.packing} vs ${cpu.packing}`);
@@ -657,6 +685,23 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert.equal((await stepped(p, 1)).step, gpu.step + 1);
       assert.match(p.url(), /engine=cpu/);
       await p.close();
+      // A lost device (forced: the engine's device destroyed, as a driver reset would): the
+      // page goes on on the CPU engine from the last state handed over, and says so.
+      const lossy = await open(context, base, '/?preset=persistent&engine=gpu&paused', errors);
+      await waitStats(lossy);
+      await stepped(lossy, 2);
+      const handed = (await workerStats(lossy)).step;
+      await lossy.evaluate(() => window.demo.call('gpu_destroy'));
+      const after = await stepped(lossy, 3);
+      const lost = await workerStats(lossy);
+      assert.equal(lost.engine, 'cpu', `after the loss: ${JSON.stringify(lost)}`);
+      assert(after.step >= handed + 1, `the tissue did not go on: step ${handed} → ${after.step}`);
+      assert.match(lost.engineNote, /GPU device failed/);
+      assert.match(await lossy.textContent('#engine'), /Engine: CPU \(WebAssembly\).*GPU device failed/);
+      assert(await lossy.locator('#notice').isVisible(), 'no notice of the loss');
+      assert.match(await lossy.textContent('#notice'), /GPU device failed/);
+      m.gpuEngine.deviceLoss = { handedOverAt: handed, after: after.step, note: lost.engineNote };
+      await lossy.close();
       // The paper's tissue on the GPU engine: the shipped full-size state uploaded within
       // WebGPU's default limits, one step taken on it (about 20 s on SwiftShader).
       const paper = await open(context, base, '/?preset=paper&engine=gpu&paused', errors);

@@ -87,6 +87,7 @@ worker.onmessage = (e) => {
   } else if (m.type === 'engine') {
     page.stats = m.stats;
     showEngine(m.stats);
+    if (m.lost) notify([`${m.lost[0].toUpperCase()}${m.lost.slice(1)}.`]);
     onEngine?.();
   } else if (m.type === 'ready') {
     page.stats = m.stats;

@@ -210,9 +210,42 @@ async function chooseEngine(wanted) {
 // Brings `sim` level with the GPU (one readback), so that it can be drawn, measured or edited.
 async function gpuDown() {
   if (!gpuAhead) return;
-  sim.adopt(await gpu.engine.download());
+  try {
+    sim.adopt(await gpu.engine.download());
+  } catch (e) {
+    if (gpuFailed()) return;
+    throw e;
+  }
   gpuAhead = false;
   changed = true;
+}
+
+// Whether the GPU device failed (lost, a GPU error, a readback that did not map), as opposed to
+// the model (φ out of range, a cell lost); if it did, the engine is dropped (gpuLost).
+function gpuFailed() {
+  const why = gpu?.engine.device_fault();
+  if (!why) return false;
+  gpuLost(why);
+  return true;
+}
+
+// The GPU engine is gone: the tissue goes on on the CPU engine from the last state `sim` holds
+// (the last hand-off, at most a row of readouts behind the device), and the page says why. A
+// later choice of the GPU engine asks for a new adapter and device.
+function gpuLost(why) {
+  const lost = gpu;
+  gpu = null;
+  gpuAdapter = null;
+  gpuDevice = null;
+  gpuAhead = gpuEdited = false;
+  try {
+    lost.engine.free();
+  } catch {
+    // Already freed: nothing to release.
+  }
+  gpuNote = `the GPU device failed (${why}); the tissue goes on on the CPU engine from step ${sim.step_count()}`;
+  changed = true;
+  postMessage({ type: 'engine', stats: stats(), lost: gpuNote });
 }
 
 // Up to n steps on the GPU, checked; returns the steps taken (0 if they were put back to be
@@ -221,6 +254,7 @@ async function gpuDown() {
 async function gpuSteps(n) {
   if (gpuEdited) {
     await gpuDown();
+    if (!gpu) return 0;
     gpu.engine.upload(sim);
     gpuEdited = false;
   }
@@ -230,6 +264,7 @@ async function gpuSteps(n) {
     gpuAhead = true;
     return taken ? k : 0;
   } catch (e) {
+    if (gpuFailed()) return 0;
     playing = false;
     gpuAhead = true;
     await gpuDown();
@@ -243,7 +278,7 @@ async function gpuSteps(n) {
 async function gpuStepsToRow(n) {
   const toRow = sim.steps_to_next_row(gpu.engine.step_count());
   const k = await gpuSteps(Math.min(n, toRow));
-  if (k === toRow) await gpuDown();
+  if (gpu && k === toRow) await gpuDown();
   return k;
 }
 
@@ -271,7 +306,7 @@ async function gpuTurn() {
       sendFrame();
     }
   } catch (e) {
-    fatal(e);
+    if (!gpuFailed()) fatal(e);
   }
 }
 
@@ -330,18 +365,22 @@ function sendFrame() {
 // What the page and the tests may ask of the simulation, beyond stepping.
 const CALLS = {
   // Steps n now and returns the milliseconds it took.
+  // On the GPU engine, if the device fails part way, the rest are taken on the CPU engine
+  // from the last state handed over.
   step: async (n) => {
     const t0 = performance.now();
-    if (gpu) {
-      for (let left = n; left > 0;) {
-        const k = await gpuStepsToRow(left);
-        if (k === null) return null;
-        left -= k;
-      }
-      await gpuDown();
-    } else if (!takeSteps(n)) return null;
+    let left = n;
+    while (gpu && left > 0) {
+      const k = await gpuStepsToRow(left);
+      if (k === null) return null;
+      left -= k;
+    }
+    if (gpu) await gpuDown();
+    if (left > 0 && !takeSteps(left)) return null;
     return performance.now() - t0;
   },
+  // Destroys the GPU engine's device, as a driver reset would (the browser tests' forced loss).
+  gpu_destroy: () => gpu?.engine.destroy_device(),
   // The CPU core's own milliseconds per step, without the readouts: the fastest of `batches`
   // batches of n steps of a copy of the tissue (the tests' wasm/native report). The tissue shown
   // does not move.
@@ -368,6 +407,13 @@ const CALLS = {
   box_size: () => sim.box_size(),
   fingerprint: () => sim.fingerprint(),
   phi_sum: () => sim.phi_sum(),
+  field_values: (kind) => sim.field_values(kind),
+  evaluate: () => sim.evaluate(),
+  // The ±½ defects and spiral cores that the view of `kind` marks (counts), built now.
+  marks: (kind) => {
+    sim.field_values(kind);
+    return { defects: sim.defects().length / 4, spiralCores: sim.spiral_cores().length / 3 };
+  },
   defects: () => (playback ? playback.p : sim).defects(),
   spiral_cores: () => (playback ? playback.p : sim).spiral_cores(),
   stats: () => stats(),
