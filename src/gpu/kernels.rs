@@ -131,6 +131,7 @@ impl Preconditioner {
 }
 
 /// How a kernel's invocations cover the state.
+#[derive(Clone, Copy, Debug)]
 enum Grid {
     /// One invocation per lattice site, in 8 × 8 tiles.
     Lattice,
@@ -676,6 +677,35 @@ mod tests {
         }
         for (i, s) in Slot::ALL.iter().enumerate() {
             assert_eq!(s.binding() as usize, i, "{s:?}");
+        }
+    }
+
+    /// The workgroup size written in each entry point's WGSL is the one the host dispatches for
+    /// (`workgroups`): a mismatch would leave sites unvisited or visit them twice, silently.
+    #[test]
+    fn each_kernels_workgroup_is_the_one_the_host_counts_with() {
+        for k in Kernel::ALL {
+            let (source, entry) = (k.wgsl(), k.source().1);
+            let at = source.find(&format!("fn {entry}(")).unwrap_or_else(|| panic!("{entry} in its WGSL"));
+            let attr = source[..at].rfind("@workgroup_size(").unwrap_or_else(|| panic!("{entry}: no @workgroup_size"));
+            let inner = &source[attr + "@workgroup_size(".len()..];
+            let size: Vec<usize> = inner[..inner.find(')').unwrap()]
+                .split(',')
+                .map(|v| v.trim().parse().expect("a literal size"))
+                .collect();
+            let expected = match k.grid() {
+                Grid::Lattice => vec![LATTICE_TILE, LATTICE_TILE],
+                Grid::Cells | Grid::Sites => vec![SITES_PER_GROUP],
+                Grid::LatticeRows | Grid::LevelOne | Grid::Single => vec![LATTICE_GROUP],
+            };
+            assert_eq!(size, expected, "{entry} ({:?})", k.grid());
+        }
+        // The reductions' group in friction.wgsl and multigrid.wgsl is the host's.
+        for text in [FRICTION_WGSL, MULTIGRID_WGSL] {
+            if let Some(at) = text.find("const GROUP: u32 = ") {
+                let value: String = text[at + 19..].chars().take_while(char::is_ascii_digit).collect();
+                assert_eq!(value.parse::<usize>().unwrap(), LATTICE_GROUP, "WGSL GROUP");
+            }
         }
     }
 

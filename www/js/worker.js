@@ -151,7 +151,9 @@ let gpuAdapter = null;
 function gpuAdapterOnce() {
   gpuAdapter ??= (async () => {
     if (!self.navigator?.gpu) return { error: 'this browser has no WebGPU' };
-    const adapter = await navigator.gpu.requestAdapter().catch(() => null);
+    // The adapter the engine asks for (src/gpu/context.rs: high performance), so that the
+    // name shown and the software test are of the one that steps.
+    const adapter = await navigator.gpu.requestAdapter({ powerPreference: 'high-performance' }).catch(() => null);
     if (!adapter) return { error: 'WebGPU found no adapter' };
     const info = adapter.info ?? {};
     const name = [info.vendor, info.architecture, info.description].filter(Boolean).join(' ') || 'unnamed adapter';
