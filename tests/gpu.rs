@@ -1400,6 +1400,32 @@ fn a_nan_in_the_friction_solve_is_not_convergence() {
     assert!(solve.unconverged >= 1, "the unconverged solve was not counted: {solve:?}");
 }
 
+/// The true residual is checked after every solve: a solve whose own (recursive) residual met
+/// its target while u no longer solves C u = F (u disturbed at one site after the iterations,
+/// as f32 drift would) is counted as inaccurate; an undisturbed one is not.
+#[test]
+fn the_true_residual_is_checked_after_the_solve() {
+    let Some(ctx) = context() else { return };
+    let m = reduced_tissue();
+    let gpu = GpuMonolayer::new(&ctx, m).expect("the monolayer fits the device");
+    let solve = Kernel::friction_solve(gpu.preconditioner, gpu.solve_iterations);
+    let (iterate, check) = solve.split_at(solve.len() - 2);
+    assert_eq!(check, [Kernel::FrictionPull, Kernel::FrictionCheck]);
+    gpu.run(&ctx, &[&Kernel::FRICTION_SUMS[..], &solve].concat());
+    let clean = gpu.read_solve(&ctx);
+    assert!(clean.converged() && clean.inaccurate == 0, "an undisturbed solve: {clean:?}");
+    gpu.run(&ctx, &[&Kernel::FRICTION_SUMS[..], iterate].concat());
+    let n = gpu.read(&ctx, Slot::Weight);
+    let site = (0..n.len()).max_by(|&a, &b| n[a].total_cmp(&n[b])).expect("sites");
+    let u = gpu.read(&ctx, Slot::MeanVelocity);
+    let kicked = [u[2 * site] + 1.0, u[2 * site + 1]];
+    ctx.queue.write_buffer(gpu.state().buffer(Slot::MeanVelocity), (site * 8) as u64, bytemuck::cast_slice(&kicked));
+    gpu.run(&ctx, check);
+    let disturbed = gpu.read_solve(&ctx);
+    assert!(disturbed.converged(), "the CG's own residual still met its target: {disturbed:?}");
+    assert!(disturbed.inaccurate >= 1, "a u that misses the tolerance passed the true-residual check: {disturbed:?}");
+}
+
 /// `monolayer run --engine gpu`: the run's protocol stepped on the GPU, its frames and
 /// checkpoints written from the state downloaded at their steps. The record names the engine,
 /// the state at the end is the CPU run's within 10⁻⁴, and a resume on the other engine is

@@ -547,6 +547,11 @@ pub struct SolveScalars {
     pub unconverged: u32,
     /// The most iterations any solve took since the host last reset the scalars.
     pub most_iterations: u32,
+    /// Solves that met their recursive target but missed the tolerance on the true residual
+    /// since the host last reset the scalars (`friction_check`).
+    pub inaccurate: u32,
+    /// WGSL pads the struct to its alignment of 8.
+    pub _pad: u32,
 }
 
 impl SolveScalars {
@@ -605,14 +610,14 @@ fn slot_label(slot: Slot) -> &'static str {
 mod tests {
     use super::*;
 
-    /// The WGSL structs `Params` (24 four-byte fields), `Patch` (8) and `Solve` (16) have these
+    /// The WGSL structs `Params` (24 four-byte fields), `Patch` (8) and `Solve` (17, padded to 18) have these
     /// sizes; a field added on one side only changes them.
     #[test]
     fn structs_have_the_wgsl_sizes() {
         assert_eq!(std::mem::size_of::<GpuParams>(), 96);
         assert_eq!(PatchFault::from_code(3), Some(PatchFault::BeyondCapacity));
         assert_eq!(std::mem::size_of::<GpuPatch>(), 32);
-        assert_eq!(std::mem::size_of::<SolveScalars>(), 64);
+        assert_eq!(std::mem::size_of::<SolveScalars>(), 72);
     }
 
     /// The levels of the paper's and the page's lattices, as the CPU's multigrid builds them.

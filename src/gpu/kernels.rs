@@ -70,8 +70,11 @@ pub enum Kernel {
     CgBeta,
     /// p = M r + β p.
     CgDirection,
-    /// The pull ξ_c S from the solution (`FrictionSolver::pull_from_solution`).
+    /// The pull ξ_c S from the solution (`FrictionSolver::pull_from_solution`), and partial
+    /// sums of the true residual.
     FrictionPull,
+    /// The true residual against the CPU's tolerance (one workgroup).
+    FrictionCheck,
     /// z = r / diag C and partial sums of r·z: the Jacobi preconditioner.
     Jacobi,
     /// Multigrid level 1 from C (`shaders/multigrid.wgsl`, as `Multigrid::setup`).
@@ -151,7 +154,7 @@ enum Grid {
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 27] = [
+    pub const ALL: [Kernel; 28] = [
         Kernel::LatticeSums,
         Kernel::CellArea,
         Kernel::ChemicalPotential,
@@ -170,6 +173,7 @@ impl Kernel {
         Kernel::CgBeta,
         Kernel::CgDirection,
         Kernel::FrictionPull,
+        Kernel::FrictionCheck,
         Kernel::Jacobi,
         Kernel::MgCoarsenFine,
         Kernel::MgCoarsenRest,
@@ -216,7 +220,7 @@ impl Kernel {
         for _ in 0..iterations {
             out.extend_from_slice(&Kernel::cg_iteration(pc));
         }
-        out.push(Kernel::FrictionPull);
+        out.extend_from_slice(&[Kernel::FrictionPull, Kernel::FrictionCheck]);
         out
     }
 
@@ -297,6 +301,7 @@ impl Kernel {
             Kernel::CgBeta => (FRICTION_WGSL, "cg_beta"),
             Kernel::CgDirection => (FRICTION_WGSL, "cg_direction"),
             Kernel::FrictionPull => (FRICTION_WGSL, "friction_pull"),
+            Kernel::FrictionCheck => (FRICTION_WGSL, "friction_check"),
         }
     }
 
@@ -341,7 +346,8 @@ impl Kernel {
             Kernel::CgUpdate => &[Params, MeanVelocity, Residual, Direction, Product, Partials, Solve],
             Kernel::CgBeta => &[Params, Partials, Solve],
             Kernel::CgDirection => &[Params, Direction, Solve, Preconditioned],
-            Kernel::FrictionPull => &[Params, Weight, Drag, MeanVelocity, Direction, Solve],
+            Kernel::FrictionPull => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, Direction, Partials, Solve],
+            Kernel::FrictionCheck => &[Params, Partials, Solve],
             Kernel::Jacobi => &[Params, Diagonal, Residual, Partials, Solve, Preconditioned],
             Kernel::MgCoarsenFine | Kernel::MgCoarsenRest => &[Params, Weight, Drag, Diagonal, Hierarchy],
             Kernel::MgRestrict => &[Params, Weight, Diagonal, Residual, Solve, MgWork],
@@ -373,9 +379,12 @@ impl Kernel {
             | Kernel::Jacobi
             | Kernel::MgSmooth => Grid::LatticeRows,
             Kernel::MgCoarsenFine | Kernel::MgRestrict => Grid::LevelOne,
-            Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta | Kernel::MgCoarsenRest | Kernel::MgCoarseCycle => {
-                Grid::Single
-            }
+            Kernel::CgBegin
+            | Kernel::CgAlpha
+            | Kernel::CgBeta
+            | Kernel::FrictionCheck
+            | Kernel::MgCoarsenRest
+            | Kernel::MgCoarseCycle => Grid::Single,
         }
     }
 
@@ -419,10 +428,12 @@ impl Kernel {
             Kernel::CgUpdate => 8 * l2 + l2 + 4 * l2,
             // r, p and the diagonal read; p written.
             Kernel::CgDirection => 4 * l2 + l2 + 2 * l2,
-            // n and u read; the pull written.
-            Kernel::FrictionPull => l2 + 2 * l2 + 2 * l2,
+            // n, u, F and the diagonal read; the pull written.
+            Kernel::FrictionPull => l2 + 2 * l2 + 2 * l2 + 2 * l2 + l2,
             // The partial sums, one workgroup.
-            Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta => 8 * l2.div_ceil(LATTICE_GROUP as u64),
+            Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta | Kernel::FrictionCheck => {
+                8 * l2.div_ceil(LATTICE_GROUP as u64)
+            }
             // r and the diagonal read; z written.
             Kernel::Jacobi => 2 * l2 + l2 + 2 * l2,
             // n, ξ_s and the diagonal read; level 1 written.
@@ -700,6 +711,10 @@ mod tests {
             };
             assert_eq!(size, expected, "{entry} ({:?})", k.grid());
         }
+        // The margin friction_check divides by is the one the host multiplies the tolerance by.
+        let at = FRICTION_WGSL.find("const RECURSIVE_RESIDUAL_MARGIN: f32 = ").expect("the margin in friction.wgsl");
+        let value: String = FRICTION_WGSL[at + 39..].chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
+        assert_eq!(value.parse::<f64>().unwrap(), crate::gpu::buffers::RECURSIVE_RESIDUAL_MARGIN, "WGSL margin");
         // The reductions' group in friction.wgsl and multigrid.wgsl is the host's.
         for text in [FRICTION_WGSL, MULTIGRID_WGSL] {
             if let Some(at) = text.find("const GROUP: u32 = ") {

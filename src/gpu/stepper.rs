@@ -32,6 +32,8 @@ pub enum GpuRunError {
     Regrow { from: u64, reason: String },
     #[error("in steps {from}..{to}: {count} friction solves missed their tolerance in the recorded iterations; the state is back at step {from}")]
     Friction { from: u64, to: u64, count: u32 },
+    #[error("in steps {from}..{to}: {count} friction solves met their tolerance on the CG's own residual but not on the true one, F − C u (f32 drift); the state is back at step {from}")]
+    Inaccurate { from: u64, to: u64, count: u32 },
     #[error("after step {from}: {reason}")]
     Device { from: u64, reason: String },
 }
@@ -63,7 +65,10 @@ impl Faults {
             };
             return Some(GpuRunError::CellLost { from, to, cell, why });
         }
-        (self.solve.unconverged > 0).then_some(GpuRunError::Friction { from, to, count: self.solve.unconverged })
+        if self.solve.unconverged > 0 {
+            return Some(GpuRunError::Friction { from, to, count: self.solve.unconverged });
+        }
+        (self.solve.inaccurate > 0).then_some(GpuRunError::Inaccurate { from, to, count: self.solve.inaccurate })
     }
 }
 
