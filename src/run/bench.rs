@@ -263,7 +263,7 @@ pub fn bench_analysis(frames: u64) -> Result<(), RunError> {
 }
 
 fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), RunError> {
-    fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(&dir, e))?;
+    fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
     RunRecord::new(m.params().clone(), 1, 10).save(dir)?;
     for _ in 0..frames {
         m.advance(10).map_err(RunError::from)?;
@@ -289,7 +289,7 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), R
 #[cfg(feature = "gpu")]
 pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -> Result<(), RunError> {
     use crate::gpu::{GpuContext, GpuMonolayer, Kernel};
-    let ctx = GpuContext::new().map_err(RunError::from)?;
+    let ctx = GpuContext::new().map_err(RunError::gpu)?;
     println!("adapter: {}", ctx.describe());
     if ctx.runs_on_cpu() {
         println!("a CPU device: every time below is a CPU figure, not a GPU's");
@@ -297,7 +297,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let p = Params { relax_steps, ..params.clone() };
     let mut m = Monolayer::new(p.clone(), seed).map_err(RunError::from)?;
     m.advance(relax_steps + 5).map_err(RunError::from)?;
-    let mut gpu = GpuMonolayer::new(&ctx, &m).map_err(RunError::from)?;
+    let mut gpu = GpuMonolayer::new(&ctx, &m).map_err(RunError::gpu)?;
     let time = |gpu: &GpuMonolayer, kernels: &[Kernel]| -> f64 {
         gpu.run(&ctx, kernels);
         ctx.wait();
@@ -324,7 +324,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     };
     // The kernels timed one by one leave the state meaningless (a CG step without its α, a
     // corrector without its predictor): the sequences start again from the uploaded state.
-    gpu.upload(&ctx, &m).map_err(RunError::from)?;
+    gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
     // The step without a friction solve is timed on this active state as it stands: its
     // dispatches and bytes are those of a relaxation step.
     for (what, kernels) in [
@@ -341,7 +341,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     // Steps with the friction solve and the patches following the cells (`Monolayer::step`),
     // from the uploaded state on (each timed step is a step of the same run); the iterations the
     // solves took decide the dispatches that work, the rest return at once.
-    gpu.upload(&ctx, &m).map_err(RunError::from)?;
+    gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
     let step = [gpu.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat();
     let ms = time(&gpu, &step);
     let solve = gpu.read_solve(&ctx);
@@ -365,12 +365,12 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
 
     // A run as the page's GPU engine takes it (gpu::stepper::GpuRun): submissions of 50 steps,
     // each checked by one readback, the recorded iterations following what the solves need.
-    let mut run = crate::gpu::stepper::GpuRun::new(&ctx, &m).map_err(RunError::from)?;
+    let mut run = crate::gpu::stepper::GpuRun::new(&ctx, &m).map_err(RunError::gpu)?;
     let recorded = run.gpu().solve_iterations;
-    run.advance(&ctx, run.check_every).map_err(RunError::from)?;
+    run.advance(&ctx, run.check_every).map_err(RunError::gpu)?;
     let t = Instant::now();
     let steps = 2 * run.check_every;
-    run.advance(&ctx, steps).map_err(RunError::from)?;
+    run.advance(&ctx, steps).map_err(RunError::gpu)?;
     let per_step = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
     let adapted = run.gpu().solve_iterations;
     let recorded_now = [Kernel::step(run.gpu().solve()), Kernel::MOVE_PATCHES.to_vec()].concat().len();

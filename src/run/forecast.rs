@@ -502,7 +502,7 @@ pub fn forecast(
     let (scores, pooled) = cross_validate(&runs);
     let all: Vec<&RunData> = runs.iter().collect();
     let model = fit(&all, SHOWN_HORIZON, Subset::All);
-    std::fs::create_dir_all(out).map_err(|e| RunError::io(&out, e))?;
+    std::fs::create_dir_all(out).map_err(|e| RunError::io(out, e))?;
     let mut written = Vec::new();
     for (name, text) in tables(&runs, &scores, model.as_ref()) {
         let path = out.join(name);

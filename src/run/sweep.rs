@@ -478,7 +478,7 @@ fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, RunErro
         Ok(Start::Resume)
     } else {
         // Killed before its first checkpoint (runs of earlier versions): nothing to keep.
-        fs::remove_file(RunRecord::path(dir)).map_err(|e| RunError::io(&dir, e))?;
+        fs::remove_file(RunRecord::path(dir)).map_err(|e| RunError::io(dir, e))?;
         Ok(Start::Fresh)
     }
 }
@@ -499,7 +499,7 @@ impl From<RunError> for JobError {
 /// Runs (or resumes, or skips when done) one job in `OUT/runs/NAME`, single-threaded, holding
 /// the directory's lock from before it looks at the directory.
 fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() + Sync)) -> Result<(), JobError> {
-    fs::create_dir_all(dir).map_err(|e| RunError::io(&dir, e))?;
+    fs::create_dir_all(dir).map_err(|e| RunError::io(dir, e))?;
     let lock = RunLock::try_acquire(dir)?.map_err(JobError::Held)?;
     let mut run = match start_of(job, dir, frame_interval)? {
         Start::Done => return Ok(()),

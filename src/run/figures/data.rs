@@ -137,7 +137,7 @@ pub struct Made {
 }
 
 pub fn write_text(path: &Path, text: &str) -> Result<(), RunError> {
-    write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| RunError::io(&path, e)))
+    write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| RunError::io(path, e)))
 }
 
 /// Mean and standard error of the mean (0 for fewer than two values).
