@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use monolayer::formats::snapshot;
 use monolayer::run::bench::BenchOptions;
 use monolayer::run::config::{load_params, parse_assignment};
+use monolayer::run::error::RunError;
 use monolayer::run::files::{self, Engine, RunStatus};
 use monolayer::run::offline::analyze_run;
 use monolayer::run::plots::Background;
@@ -200,7 +201,7 @@ struct ParamArgs {
 }
 
 impl ParamArgs {
-    fn params(&self) -> Result<Params, String> {
+    fn params(&self) -> Result<Params, RunError> {
         // A flag beside a --set of its parameter: whichever is applied last would win unsaid.
         let flags = [
             ("--chi", "xi_substrate", self.chi.map(|v| v.to_string())),
@@ -211,10 +212,10 @@ impl ParamArgs {
         for s in &self.set {
             let (k, _) = parse_assignment("--set", s)?;
             if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
-                return Err(format!(
+                return Err(RunError::Message(format!(
                     "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
                     if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
-                ));
+                )));
             }
         }
         let mut p = load_params(self.config.as_deref(), &self.set)?;
@@ -223,7 +224,7 @@ impl ParamArgs {
         }
         if let Some(c) = self.chi {
             if !(c.is_finite() && c > 0.0) {
-                return Err(format!("--chi {c}: must be a finite number > 0"));
+                return Err(RunError::invalid("--chi", c, "a finite number > 0"));
             }
             p.set_chi(c);
         }
@@ -233,7 +234,7 @@ impl ParamArgs {
         if let Some(s) = self.relax_steps {
             p.relax_steps = s;
         }
-        p.validate().map_err(|e| e.to_string())?;
+        p.validate()?;
         Ok(p)
     }
 }
@@ -375,7 +376,9 @@ fn main() -> ExitCode {
             .transpose()
             .and_then(|threads| with_threads(threads, || run(&a))),
         Command::Bench(a) => bench(&a),
-        Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| e.to_string()),
+        Command::Params => {
+            toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| RunError::Message(e.to_string()))
+        }
         Command::Fingerprint(a) => fingerprint(&a),
         Command::RelaxedState(a) => relaxed_state(&a),
         Command::Sweep(a) => sweep(&a),
@@ -402,26 +405,26 @@ fn cores() -> usize {
 
 /// A count of threads or simulations at a time: at least 1, and at most 4 per core (results do
 /// not depend on it, and past the cores more only share them).
-fn check_threads(flag: &str, n: usize) -> Result<usize, String> {
+fn check_threads(flag: &str, n: usize) -> Result<usize, RunError> {
     let max = 4 * cores();
     if n == 0 || n > max {
-        return Err(format!("{flag} {n}: must be in [1, {max}] (4 × the {} cores here)", cores()));
+        return Err(RunError::invalid(flag, n, format!("in [1, {max}] (4 × the {} cores here)", cores())));
     }
     Ok(n)
 }
 
-fn with_threads(threads: Option<usize>, f: impl FnOnce() -> Result<(), String> + Send) -> Result<(), String> {
+fn with_threads(threads: Option<usize>, f: impl FnOnce() -> Result<(), RunError> + Send) -> Result<(), RunError> {
     match threads {
         None => f(),
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build()
-            .map_err(|e| format!("--threads {n}: {e}"))?
+            .map_err(|e| RunError::Message(format!("--threads {n}: {e}")))?
             .install(f),
     }
 }
 
-fn run(a: &RunArgs) -> Result<(), String> {
+fn run(a: &RunArgs) -> Result<(), RunError> {
     let run = match &a.resume {
         Some(dir) => {
             let run = RunDir::resume(dir)?;
@@ -489,7 +492,7 @@ fn progress_bar(total: u64, done: u64, quiet: bool) -> ProgressBar {
     bar
 }
 
-fn sweep(a: &SweepArgs) -> Result<(), String> {
+fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     let mut spec = match &a.file {
         Some(f) => SweepSpec::from_file(f)?,
         None => SweepSpec { seeds: vec![1], frame_interval: 1000, ..SweepSpec::default() },
@@ -534,7 +537,7 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     if let Some(fi) = a.frame_interval {
         for job in &jobs {
             monolayer::run::runner::check_frame_interval("--frame-interval", fi, &job.params)
-                .map_err(|e| format!("run {}: {e}", job.name))?;
+                .map_err(|e| e.context(format!("run {}", job.name)))?;
         }
     }
     if a.tables_only {
@@ -592,19 +595,22 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
         })
         .collect();
     if let Some((name, _)) = monolayer::run::runner::stop_signal() {
-        return Err(format!(
-            "stopped by {name}: {} run(s) stopped part way; the same command again continues them from their \
-             checkpoints, and the runs not yet started",
-            stopped.len()
-        ));
+        return Err(RunError::Interrupted {
+            signal: name,
+            detail: format!(
+                ": {} run(s) stopped part way; the same command again continues them from their checkpoints, and \
+                 the runs not yet started",
+                stopped.len()
+            ),
+        });
     }
     if !stopped.is_empty() {
-        return Err(format!(
+        return Err(RunError::Message(format!(
             "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \
              same command again: they continue from their checkpoints",
             stopped.len(),
             stopped.join("\n")
-        ));
+        )));
     }
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
@@ -615,9 +621,9 @@ fn sweep(a: &SweepArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn figures(a: FiguresArgs) -> Result<(), String> {
+fn figures(a: FiguresArgs) -> Result<(), RunError> {
     if a.throttle == 0 {
-        return Err("--throttle 0: must be ≥ 1".into());
+        return Err(RunError::invalid("--throttle", 0, "≥ 1"));
     }
     monolayer::run::figures::command::figures(&monolayer::run::figures::command::FiguresOptions {
         out: a.out,
@@ -642,13 +648,15 @@ fn figures(a: FiguresArgs) -> Result<(), String> {
 /// The shard of a Slurm job array, when run as one.
 /// The task's index counts from the array's first (`SLURM_ARRAY_TASK_MIN`), so that
 /// `--array=1-N` runs every shard as `--array=0-N-1` does.
-fn slurm_shard() -> Result<Option<Shard>, String> {
+fn slurm_shard() -> Result<Option<Shard>, RunError> {
     let var = |name: &str| std::env::var(name).ok();
     let (Some(id), Some(count)) = (var("SLURM_ARRAY_TASK_ID"), var("SLURM_ARRAY_TASK_COUNT")) else {
         return Ok(None);
     };
     let number = |name: &str, v: &str| {
-        v.trim().parse::<usize>().map_err(|_| format!("{name} = {v:?}: not a task number (from Slurm's environment)"))
+        v.trim()
+            .parse::<usize>()
+            .map_err(|_| RunError::Parse(format!("{name} = {v:?}: not a task number (from Slurm's environment)")))
     };
     let (id, count) = (number("SLURM_ARRAY_TASK_ID", &id)?, number("SLURM_ARRAY_TASK_COUNT", &count)?);
     let min = var("SLURM_ARRAY_TASK_MIN").map(|m| number("SLURM_ARRAY_TASK_MIN", &m)).transpose()?.unwrap_or(0);
@@ -656,53 +664,53 @@ fn slurm_shard() -> Result<Option<Shard>, String> {
     let contiguous = max.is_none_or(|max| max.checked_sub(min).map(|d| d + 1) == Some(count));
     match id.checked_sub(min) {
         Some(index) if index < count && count > 0 && contiguous => Ok(Some(Shard { index, count })),
-        _ => Err(format!(
+        _ => Err(RunError::Message(format!(
             "this Slurm array task (SLURM_ARRAY_TASK_ID = {id}, MIN = {min}, MAX = {}, COUNT = {count}) is not one of \
              a contiguous array such as --array=0-{}: give each task its share with --shard K/N",
             max.map(|m| m.to_string()).unwrap_or_else(|| "unset".into()),
             count.saturating_sub(1)
-        )),
+        ))),
     }
 }
 
-fn fingerprint(a: &FingerprintArgs) -> Result<(), String> {
+fn fingerprint(a: &FingerprintArgs) -> Result<(), RunError> {
     if a.total_steps > monolayer::model::params::MAX_STEPS {
-        return Err(format!(
-            "--total-steps {}: must be in [0, {}] (relaxation included)",
+        return Err(RunError::invalid(
+            "--total-steps",
             a.total_steps,
-            monolayer::model::params::MAX_STEPS
+            format!("in [0, {}] (relaxation included)", monolayer::model::params::MAX_STEPS),
         ));
     }
     let params = a.params.params()?;
-    params.validate().map_err(|e| e.to_string())?;
+    params.validate()?;
     monolayer::run::runner::check_memory(&params)?;
-    let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
-    m.advance(a.total_steps).map_err(|e| e.to_string())?;
+    let mut m = Monolayer::new(params, a.seed)?;
+    m.advance(a.total_steps)?;
     println!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint());
     Ok(())
 }
 
-fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), String> {
+fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), RunError> {
     // Before the relaxation, which may take long: the write would refuse it at the end.
     files::replaceable(&a.out)?;
     let params = a.params.params()?;
     monolayer::run::runner::check_memory(&params)?;
     let steps = params.relax_steps + a.advance;
     let key = snapshot::key_at(&params, a.seed, steps).expect("at or past the end of the relaxation");
-    let mut m = Monolayer::new(params, a.seed).map_err(|e| e.to_string())?;
+    let mut m = Monolayer::new(params, a.seed)?;
     let bar = progress_bar(steps, 0, false);
     bar.set_message("relaxing");
     for _ in 0..steps {
         if m.step_count() == m.params().relax_steps {
             bar.set_message("active");
         }
-        m.step().map_err(|e| format!("at step {}: {e}", m.step_count()))?;
+        let step = m.step_count();
+        m.step().map_err(|e| RunError::from(e).context(format!("at step {step}")))?;
         bar.inc(1);
     }
     bar.finish_and_clear();
     let bytes = snapshot::encode(&m.state(), key);
-    let out = a.out.display();
-    files::write_atomic(&a.out, |w| w.write_all(&bytes).map_err(|e| format!("{out}: {e}")))?;
+    files::write_atomic(&a.out, |w| w.write_all(&bytes).map_err(|e| RunError::io(&a.out, e)))?;
     eprintln!(
         "{}: step {steps}, {} cells, {} bytes, key {key:016x}, fingerprint {:016x}",
         a.out.display(),
@@ -713,9 +721,9 @@ fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn bench(a: &BenchArgs) -> Result<(), String> {
+fn bench(a: &BenchArgs) -> Result<(), RunError> {
     if a.threads.is_empty() {
-        return Err("--threads: give at least one count".into());
+        return Err(RunError::Parse("--threads: give at least one count".into()));
     }
     for &n in &a.threads {
         check_threads("--threads", n)?;
@@ -723,7 +731,7 @@ fn bench(a: &BenchArgs) -> Result<(), String> {
     let mut overrides = vec![format!("zeta={}", a.zeta)];
     overrides.extend(a.set.iter().cloned());
     let params = load_params(None, &overrides)?;
-    Params { relax_steps: a.relax_steps, ..params.clone() }.validate().map_err(|e| e.to_string())?;
+    Params { relax_steps: a.relax_steps, ..params.clone() }.validate()?;
     // The relaxed state, a copy per thread count timed, and two more for the ceiling.
     let ceiling = a.threads.contains(&1) && a.threads.contains(&2);
     let copies = if a.gpu { 1 } else { 1 + a.threads.len() as u64 + if ceiling { 2 } else { 0 } };
@@ -745,17 +753,19 @@ fn bench(a: &BenchArgs) -> Result<(), String> {
 }
 
 #[cfg(feature = "gpu")]
-fn bench_gpu(params: &Params, a: &BenchArgs) -> Result<(), String> {
+fn bench_gpu(params: &Params, a: &BenchArgs) -> Result<(), RunError> {
     monolayer::run::bench::bench_gpu(params, a.relax_steps, a.seed, a.steps as usize)
 }
 
 #[cfg(not(feature = "gpu"))]
-fn bench_gpu(_: &Params, _: &BenchArgs) -> Result<(), String> {
-    Err("--gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into())
+fn bench_gpu(_: &Params, _: &BenchArgs) -> Result<(), RunError> {
+    Err(RunError::Gpu(
+        "--gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into(),
+    ))
 }
 
 /// `forecast DIR… --out OUT`.
-fn forecast(a: &ForecastArgs) -> Result<(), String> {
+fn forecast(a: &ForecastArgs) -> Result<(), RunError> {
     let quiet = a.quiet;
     let written = monolayer::run::forecast::forecast(&a.dirs, &a.out, a.partial, |line| {
         if !quiet {
@@ -769,7 +779,7 @@ fn forecast(a: &ForecastArgs) -> Result<(), String> {
 }
 
 /// `analyze DIR`, or with --bench the timings of the measurements at full size.
-fn analyze(a: &AnalyzeArgs) -> Result<(), String> {
+fn analyze(a: &AnalyzeArgs) -> Result<(), RunError> {
     if a.bench {
         return monolayer::run::bench::bench_analysis(a.bench_frames);
     }

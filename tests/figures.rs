@@ -97,7 +97,7 @@ fn the_evidence_plan_is_the_papers_protocol_with_enough_seeds() {
 #[test]
 fn figures_and_scales_are_checked_before_anything_runs() {
     assert_eq!(Figure::parse_list("3a,3b, s1").unwrap(), vec![Figure::Fig3ab, Figure::FigS1]);
-    let e = Figure::parse_list("1c,4").unwrap_err();
+    let e = Figure::parse_list("1c,4").unwrap_err().to_string();
     assert!(e.contains("--only 4") && e.contains("S3"), "{e}");
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("f");

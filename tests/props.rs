@@ -80,7 +80,7 @@ proptest! {
         let arg = format!("{key}={v}");
         match load_params(None, std::slice::from_ref(&arg)) {
             Ok(p) => { let _ = p.validate(); }
-            Err(e) => prop_assert!(e.contains(key), "{arg}: {e}"),
+            Err(e) => { let e = e.to_string(); prop_assert!(e.contains(key), "{arg}: {e}") }
         }
     }
 
@@ -92,7 +92,7 @@ proptest! {
         let path = dir.path().join("c.toml");
         let text: String = lines.iter().map(|(k, v)| format!("{k} = {v}\n")).collect::<String>() + &junk;
         fs::write(&path, &text).unwrap();
-        if let Err(e) = load_params(Some(&path), &[]) {
+        if let Err(e) = load_params(Some(&path), &[]).map_err(|e| e.to_string()) {
             prop_assert!(e.contains("c.toml"), "{text:?}: {e}");
         }
     }
@@ -173,11 +173,11 @@ proptest! {
         fs::write(&path, lines.join("\n")).unwrap();
         match monolayer::run::sweep::SweepSpec::from_file(&path) {
             Ok(spec) => {
-                if let Err(e) = spec.jobs() {
+                if let Err(e) = spec.jobs().map_err(|e| e.to_string()) {
                     prop_assert!(e.starts_with("sweep") || e.contains("parameter"), "{}", e);
                 }
             }
-            Err(e) => prop_assert!(e.contains("s.toml, line ") || e.contains("s.toml:"), "{}", e),
+            Err(e) => { let e = e.to_string(); prop_assert!(e.contains("s.toml, line ") || e.contains("s.toml:"), "{}", e) }
         }
     }
 
@@ -198,7 +198,7 @@ proptest! {
             v["params"].as_object_mut().unwrap().remove(k);
         }
         fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
-        match RunRecord::load(dir.path()) {
+        match RunRecord::load(dir.path()).map_err(|e| e.to_string()) {
             Ok(r) => prop_assert!(removed.is_empty() && r.params == small()),
             Err(e) => prop_assert!(removed.iter().any(|k| e.contains(&format!("`params.{k}` is missing"))), "{}", e),
         }
@@ -316,7 +316,7 @@ proptest! {
         let mut resumed = RunDir::resume(dir.path());
         for _ in 0..100 {
             match &resumed {
-                Err(e) if e.contains("is writing this run directory") => {
+                Err(e) if e.to_string().contains("is writing this run directory") => {
                     std::thread::sleep(std::time::Duration::from_millis(20));
                     resumed = RunDir::resume(dir.path());
                 }
@@ -325,7 +325,7 @@ proptest! {
         }
         match resumed {
             Ok(_) => prop_assert!(false, "{key} edited, and the run resumed"),
-            Err(e) => prop_assert!(e.contains(&format!("`{key}`")) && e.contains("checkpoint"), "{}", e),
+            Err(e) => { let e = e.to_string(); prop_assert!(e.contains(&format!("`{key}`")) && e.contains("checkpoint"), "{}", e) }
         }
     }
 

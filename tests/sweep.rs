@@ -93,7 +93,7 @@ fn a_sweep_runs_every_point_once_and_resumes() {
 #[test]
 fn a_bad_sweep_is_refused_before_anything_runs() {
     let spec: SweepSpec = toml::from_str("[grid]\nchi = [0.1, -1.0]\n").unwrap();
-    let e = spec.jobs().unwrap_err();
+    let e = spec.jobs().unwrap_err().to_string();
     assert!(e.contains("chi = -1") && e.contains("xi_substrate"), "{e}");
     // As a user meets it: refused, and nothing written where the sweep would go.
     let dir = tempfile::tempdir().unwrap();
@@ -115,6 +115,6 @@ fn a_sweep_refuses_runs_made_with_other_parameters() {
     let out = dir.path();
     sweep(out);
     let changed: SweepSpec = toml::from_str(&SPEC.replace("active_steps = 150", "active_steps = 160")).unwrap();
-    let e = run_sweep(&changed.jobs().unwrap(), 50, out, 1, None, &|_, _, _| {}).unwrap_err();
+    let e = run_sweep(&changed.jobs().unwrap(), 50, out, 1, None, &|_, _, _| {}).unwrap_err().to_string();
     assert!(e.contains("other parameters"), "{e}");
 }

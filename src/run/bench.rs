@@ -14,6 +14,7 @@ use crate::analysis::Analysis;
 use crate::formats::snapshot;
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
+use crate::run::error::RunError;
 use crate::run::files::{frame_path, write_frame, RunRecord};
 use crate::run::offline::analyze_run;
 use crate::run::plots::Background;
@@ -34,8 +35,8 @@ pub struct BenchOptions {
     pub from_relaxed: Option<PathBuf>,
 }
 
-fn pool(n: usize) -> Result<rayon::ThreadPool, String> {
-    rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| format!("--threads {n}: {e}"))
+fn pool(n: usize) -> Result<rayon::ThreadPool, RunError> {
+    rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| RunError::Message(format!("--threads {n}: {e}")))
 }
 
 /// The median of a few timings (the mean of the middle two for an even count).
@@ -59,12 +60,12 @@ fn best(v: &[f64]) -> f64 {
 
 /// Times the relaxation, then for every χ the active steps on each thread count, and (when the
 /// thread counts include 1 and 2) the ceiling of two independent one-thread simulations.
-pub fn bench(o: &BenchOptions) -> Result<(), String> {
+pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
     if o.threads.is_empty() || o.threads.contains(&0) {
-        return Err(format!("--threads {:?}: every count must be ≥ 1", o.threads));
+        return Err(RunError::Message(format!("--threads {:?}: every count must be ≥ 1", o.threads)));
     }
     if o.blocks == 0 || o.blocks > o.steps {
-        return Err(format!("--blocks {}: must be in [1, --steps = {}]", o.blocks, o.steps));
+        return Err(RunError::Message(format!("--blocks {}: must be in [1, --steps = {}]", o.blocks, o.steps)));
     }
     if o.chis.is_empty() {
         return Err("--chi: give at least one value".into());
@@ -93,9 +94,9 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
             (m, None)
         }
         None => {
-            let mut m = Monolayer::new(base.clone(), o.seed).map_err(|e| e.to_string())?;
+            let mut m = Monolayer::new(base.clone(), o.seed).map_err(RunError::from)?;
             let t = Instant::now();
-            pools[0].install(|| m.advance(o.relax_steps)).map_err(|e| e.to_string())?;
+            pools[0].install(|| m.advance(o.relax_steps)).map_err(RunError::from)?;
             let relax_ms = 1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64;
             println!("relaxation, {} thread(s): {relax_ms:.3} ms/step\n{}", o.threads[0], m.counters().report());
             (m, Some(relax_ms))
@@ -104,11 +105,11 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
     for &chi in &o.chis {
         let mut p = base.clone();
         p.set_chi(chi);
-        let start = |pool: &rayon::ThreadPool| -> Result<Monolayer, String> {
+        let start = |pool: &rayon::ThreadPool| -> Result<Monolayer, RunError> {
             let mut m = relaxed.clone();
-            m.set_params(p.clone()).map_err(|e| e.to_string())?;
+            m.set_params(p.clone()).map_err(RunError::from)?;
             // The first solve starts from rest; time the steady state.
-            pool.install(|| m.advance(5)).map_err(|e| e.to_string())?;
+            pool.install(|| m.advance(5)).map_err(RunError::from)?;
             m.counters_mut().reset();
             Ok(m)
         };
@@ -128,20 +129,20 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
                 let r = pool.install(|| m.advance(steps));
                 *total += t.elapsed().as_secs_f64();
                 if let Err(e) = r {
-                    stopped = Some(e.to_string());
+                    stopped = Some(RunError::from(e));
                     break 'blocks;
                 }
                 times.push(1e3 * t.elapsed().as_secs_f64() / steps as f64);
             }
             if ceiling {
                 let t = Instant::now();
-                let results: Vec<Result<(), String>> = std::thread::scope(|s| {
+                let results: Vec<Result<(), RunError>> = std::thread::scope(|s| {
                     let handles: Vec<_> = pair
                         .iter_mut()
                         .map(|m| {
                             s.spawn(move || {
                                 let one = pool(1)?;
-                                one.install(|| m.advance(steps)).map_err(|e| e.to_string())
+                                one.install(|| m.advance(steps)).map_err(RunError::from)
                             })
                         })
                         .collect();
@@ -193,7 +194,7 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
             );
         }
         if let Some(e) = stopped {
-            return Err(format!("χ = {chi}: stopped: {e}"));
+            return Err(e.context(format!("χ = {chi}: stopped")));
         }
     }
     Ok(())
@@ -201,18 +202,19 @@ pub fn bench(o: &BenchOptions) -> Result<(), String> {
 
 /// The relaxed state in `file` (the format of `monolayer relaxed-state`), checked against the key
 /// of `params` and `seed`: a file made with other relaxation parameters is refused, naming it.
-pub fn relaxed_start(file: &Path, params: &Params, seed: u64) -> Result<Monolayer, String> {
+pub fn relaxed_start(file: &Path, params: &Params, seed: u64) -> Result<Monolayer, RunError> {
     // A relaxed state holds less than the simulation it starts: a larger file is not one.
     let max = crate::run::runner::memory_estimate(params);
     let bytes = crate::run::files::read_input(file, "a relaxed state (--from-relaxed)", max)
-        .map_err(|e| format!("--from-relaxed {e}"))?;
+        .map_err(|e| RunError::Message(format!("--from-relaxed {e}")))?;
     let state = snapshot::decode_relaxed(&bytes, params, seed).map_err(|e| {
-        format!(
+        RunError::Message(format!(
             "--from-relaxed {}: {e} (give the relaxation's parameters: --relax-steps, --seed, --set box_size=…, n_cells=…, gamma=…)",
             file.display()
-        )
+        ))
     })?;
-    Monolayer::from_state(params.clone(), seed, state).map_err(|e| format!("--from-relaxed {}: {e}", file.display()))
+    Monolayer::from_state(params.clone(), seed, state)
+        .map_err(|e| RunError::from(e).context(format!("--from-relaxed {}", file.display())))
 }
 
 /// Wall time of a run of `relax_steps` relaxation and `active_steps` active steps, in minutes,
@@ -240,11 +242,11 @@ fn paper_length_line(threads: usize, relax_ms: f64, active_ms: f64) -> String {
 
 /// Times [`Analysis::measure`] on a full-size active state, and `analyze` over `frames` frames
 /// of it written to a temporary run directory (removed afterwards).
-pub fn bench_analysis(frames: u64) -> Result<(), String> {
+pub fn bench_analysis(frames: u64) -> Result<(), RunError> {
     let p = Params { relax_steps: 3000, zeta: 0.5, ..Params::default() };
-    let mut m = Monolayer::new(p.clone(), 1).map_err(|e| e.to_string())?;
-    m.advance(p.relax_steps + 20).map_err(|e| e.to_string())?;
-    m.evaluate_now().map_err(|e| e.to_string())?;
+    let mut m = Monolayer::new(p.clone(), 1).map_err(RunError::from)?;
+    m.advance(p.relax_steps + 20).map_err(RunError::from)?;
+    m.evaluate_now().map_err(RunError::from)?;
     let mut analysis = Analysis::new(m.params());
     analysis.measure(&m);
     let reps = 200;
@@ -260,12 +262,12 @@ pub fn bench_analysis(frames: u64) -> Result<(), String> {
     result
 }
 
-fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), String> {
-    fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
+fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), RunError> {
+    fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
     RunRecord::new(m.params().clone(), 1, 10).save(dir)?;
     for _ in 0..frames {
-        m.advance(10).map_err(|e| e.to_string())?;
-        m.evaluate_now().map_err(|e| e.to_string())?;
+        m.advance(10).map_err(RunError::from)?;
+        m.evaluate_now().map_err(RunError::from)?;
         let path = frame_path(dir, m.step_count());
         write_frame(m, &path)?;
     }
@@ -285,17 +287,17 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), S
 /// to the friction solve's right-hand side, a Heun step without a friction solve (relaxation)
 /// and one with it (the active phase, on fixed patches), each in one submission.
 #[cfg(feature = "gpu")]
-pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -> Result<(), String> {
+pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -> Result<(), RunError> {
     use crate::gpu::{GpuContext, GpuMonolayer, Kernel};
-    let ctx = GpuContext::new().map_err(|e| e.to_string())?;
+    let ctx = GpuContext::new().map_err(RunError::gpu)?;
     println!("adapter: {}", ctx.describe());
     if ctx.runs_on_cpu() {
         println!("a CPU device: every time below is a CPU figure, not a GPU's");
     }
     let p = Params { relax_steps, ..params.clone() };
-    let mut m = Monolayer::new(p.clone(), seed).map_err(|e| e.to_string())?;
-    m.advance(relax_steps + 5).map_err(|e| e.to_string())?;
-    let mut gpu = GpuMonolayer::new(&ctx, &m).map_err(|e| e.to_string())?;
+    let mut m = Monolayer::new(p.clone(), seed).map_err(RunError::from)?;
+    m.advance(relax_steps + 5).map_err(RunError::from)?;
+    let mut gpu = GpuMonolayer::new(&ctx, &m).map_err(RunError::gpu)?;
     let time = |gpu: &GpuMonolayer, kernels: &[Kernel]| -> f64 {
         gpu.run(&ctx, kernels);
         ctx.wait();
@@ -322,7 +324,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     };
     // The kernels timed one by one leave the state meaningless (a CG step without its α, a
     // corrector without its predictor): the sequences start again from the uploaded state.
-    gpu.upload(&ctx, &m).map_err(|e| e.to_string())?;
+    gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
     // The step without a friction solve is timed on this active state as it stands: its
     // dispatches and bytes are those of a relaxation step.
     for (what, kernels) in [
@@ -339,7 +341,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     // Steps with the friction solve and the patches following the cells (`Monolayer::step`),
     // from the uploaded state on (each timed step is a step of the same run); the iterations the
     // solves took decide the dispatches that work, the rest return at once.
-    gpu.upload(&ctx, &m).map_err(|e| e.to_string())?;
+    gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
     let step = [gpu.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat();
     let ms = time(&gpu, &step);
     let solve = gpu.read_solve(&ctx);
@@ -363,12 +365,12 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
 
     // A run as the page's GPU engine takes it (gpu::stepper::GpuRun): submissions of 50 steps,
     // each checked by one readback, the recorded iterations following what the solves need.
-    let mut run = crate::gpu::stepper::GpuRun::new(&ctx, &m).map_err(|e| e.to_string())?;
+    let mut run = crate::gpu::stepper::GpuRun::new(&ctx, &m).map_err(RunError::gpu)?;
     let recorded = run.gpu().solve_iterations;
-    run.advance(&ctx, run.check_every).map_err(|e| e.to_string())?;
+    run.advance(&ctx, run.check_every).map_err(RunError::gpu)?;
     let t = Instant::now();
     let steps = 2 * run.check_every;
-    run.advance(&ctx, steps).map_err(|e| e.to_string())?;
+    run.advance(&ctx, steps).map_err(RunError::gpu)?;
     let per_step = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
     let adapted = run.gpu().solve_iterations;
     let recorded_now = [Kernel::step(run.gpu().solve()), Kernel::MOVE_PATCHES.to_vec()].concat().len();
@@ -492,11 +494,11 @@ mod tests {
             from_relaxed: None,
         };
         bench(&o).unwrap();
-        let e = bench(&BenchOptions { blocks: 9, ..o.clone() }).unwrap_err();
+        let e = bench(&BenchOptions { blocks: 9, ..o.clone() }).unwrap_err().to_string();
         assert!(e.contains("--blocks"), "{e}");
-        let e = bench(&BenchOptions { threads: vec![0], ..o.clone() }).unwrap_err();
+        let e = bench(&BenchOptions { threads: vec![0], ..o.clone() }).unwrap_err().to_string();
         assert!(e.contains("--threads"), "{e}");
-        let e = bench(&BenchOptions { chis: vec![], ..o.clone() }).unwrap_err();
+        let e = bench(&BenchOptions { chis: vec![], ..o.clone() }).unwrap_err().to_string();
         assert!(e.contains("--chi"), "{e}");
     }
 
@@ -513,13 +515,13 @@ mod tests {
         fs::write(&file, snapshot::encode(&relaxed.state(), relaxation_key(&p, 3))).unwrap();
         let start = relaxed_start(&file, &p, 3).unwrap();
         assert_eq!(start.fingerprint(), relaxed.fingerprint());
-        let e = relaxed_start(&file, &Params { gamma: 0.07, ..p.clone() }, 3).err().unwrap();
+        let e = relaxed_start(&file, &Params { gamma: 0.07, ..p.clone() }, 3).err().unwrap().to_string();
         assert!(e.contains("--from-relaxed") && e.contains("r.bin"), "{e}");
         assert!(relaxed_start(&file, &p, 4).is_err(), "another seed");
         let mut later = relaxed.clone();
         later.advance(1).unwrap();
         fs::write(&file, snapshot::encode(&later.state(), relaxation_key(&p, 3))).unwrap();
-        let e = relaxed_start(&file, &p, 3).err().unwrap();
+        let e = relaxed_start(&file, &p, 3).err().unwrap().to_string();
         assert!(e.contains("saved at step 21"), "{e}");
         bench(&BenchOptions {
             params: Params { zeta: 0.5, ..p.clone() },

@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use crate::model::params::Params;
+use crate::run::error::RunError;
 
 /// A value typed on the command line: TOML syntax (`0.3`, `true`, `"x"`), and where that fails a
 /// number as Rust reads it (`.5`, `1e999`, `NaN`: the checks below then say what is wrong with
@@ -23,21 +24,21 @@ pub fn parse_value(text: &str) -> toml::Value {
 }
 
 /// `KEY=VALUE` as given to `flag` (e.g. `--set`).
-pub fn parse_assignment(flag: &str, arg: &str) -> Result<(String, toml::Value), String> {
+pub fn parse_assignment(flag: &str, arg: &str) -> Result<(String, toml::Value), RunError> {
     let (k, v) = split(flag, arg, "VALUE")?;
     Ok((k, parse_value(v)))
 }
 
 /// `KEY=V1,V2,…` as given to `flag` (e.g. `--grid`).
-pub fn parse_list(flag: &str, arg: &str) -> Result<(String, Vec<toml::Value>), String> {
+pub fn parse_list(flag: &str, arg: &str) -> Result<(String, Vec<toml::Value>), RunError> {
     let (k, vs) = split(flag, arg, "V1,V2,…")?;
     Ok((k, vs.split(',').map(parse_value).collect()))
 }
 
-fn split<'a>(flag: &str, arg: &'a str, what: &str) -> Result<(String, &'a str), String> {
+fn split<'a>(flag: &str, arg: &'a str, what: &str) -> Result<(String, &'a str), RunError> {
     match arg.split_once('=') {
         Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v)),
-        _ => Err(format!("{flag} {arg}: expected KEY={what}, e.g. {flag} zeta=0.4")),
+        _ => Err(RunError::Parse(format!("{flag} {arg}: expected KEY={what}, e.g. {flag} zeta=0.4"))),
     }
 }
 
@@ -52,9 +53,9 @@ fn show(v: &toml::Value) -> String {
 /// The value of one parameter brought to the type its default has, or an error naming it. Whole
 /// numbers are taken where reals are wanted and reals with no fraction where counts are wanted
 /// (`active_steps = 1e5`); anything that is not a finite number is refused where a number is.
-fn coerce(key: &str, v: &toml::Value, default: &toml::Value) -> Result<toml::Value, String> {
+fn coerce(key: &str, v: &toml::Value, default: &toml::Value) -> Result<toml::Value, RunError> {
     use toml::Value as V;
-    let bad = |what: String| Err(format!("parameter `{key}` = {}: {what}", show(v)));
+    let bad = |what: String| Err(RunError::Parse(format!("parameter `{key}` = {}: {what}", show(v))));
     match (default, v) {
         (V::Float(_), V::Float(x)) if x.is_finite() => Ok(V::Float(*x)),
         (V::Float(_), V::Integer(i)) => Ok(V::Float(*i as f64)),
@@ -70,7 +71,7 @@ fn coerce(key: &str, v: &toml::Value, default: &toml::Value) -> Result<toml::Val
         (V::String(_), V::String(_)) => Ok(v.clone()),
         (V::String(_), _) => {
             // The variant names are in serde's message for a string that is none of them.
-            let e = single(key, V::String(String::new())).unwrap_err();
+            let e = single(key, V::String(String::new())).unwrap_err().to_string();
             bad(e.rsplit_once("expected ").map(|(_, names)| format!("expected {names}")).unwrap_or(e))
         }
         _ => Ok(v.clone()),
@@ -79,16 +80,16 @@ fn coerce(key: &str, v: &toml::Value, default: &toml::Value) -> Result<toml::Val
 
 /// Deserialises a table holding only `key` (the others default), so that serde's message is
 /// about that key.
-fn single(key: &str, v: toml::Value) -> Result<Params, String> {
+fn single(key: &str, v: toml::Value) -> Result<Params, RunError> {
     let mut t = toml::Table::new();
     t.insert(key.to_string(), v);
-    t.try_into().map_err(|e: toml::de::Error| e.message().trim().to_string())
+    t.try_into().map_err(|e: toml::de::Error| RunError::Parse(e.message().trim().to_string()))
 }
 
 /// [`Params`] from a table of values by parameter name (defaults fill the rest), checked one
 /// key at a time; `origin` prefixes every error (the file, `--set`, or the run of a sweep). The
 /// ranges are left to [`Params::validate`], once the caller has applied its own options.
-pub fn params_from_table(table: &toml::Table, origin: &str) -> Result<Params, String> {
+pub fn params_from_table(table: &toml::Table, origin: &str) -> Result<Params, RunError> {
     params_from_table_at(table, origin, &|_| None)
 }
 
@@ -98,24 +99,27 @@ fn params_from_table_at(
     table: &toml::Table,
     origin: &str,
     at: &dyn Fn(&str) -> Option<String>,
-) -> Result<Params, String> {
+) -> Result<Params, RunError> {
     let defaults = toml::Table::try_from(Params::default()).expect("the defaults serialise");
     let mut checked = toml::Table::new();
     for (k, v) in table {
         let origin = at(k).unwrap_or_else(|| origin.to_string());
         let Some(d) = defaults.get(k) else {
             let names: Vec<&str> = defaults.keys().map(String::as_str).collect();
-            return Err(format!("{origin}: unknown parameter `{k}` (the parameters: {})", names.join(", ")));
+            return Err(RunError::Parse(format!(
+                "{origin}: unknown parameter `{k}` (the parameters: {})",
+                names.join(", ")
+            )));
         };
-        let v = coerce(k, v, d).map_err(|e| format!("{origin}: {e}"))?;
-        single(k, v.clone()).map_err(|e| format!("{origin}: parameter `{k}` = {}: {e}", show(&v)))?;
+        let v = coerce(k, v, d).map_err(|e| e.context(origin.clone()))?;
+        single(k, v.clone()).map_err(|e| e.context(format!("{origin}: parameter `{k}` = {}", show(&v))))?;
         checked.insert(k.clone(), v);
     }
-    checked.try_into().map_err(|e: toml::de::Error| format!("{origin}: {}", e.message()))
+    checked.try_into().map_err(|e: toml::de::Error| RunError::Parse(format!("{origin}: {}", e.message())))
 }
 
 /// A TOML document read into `T`; an error names `origin`, the line and the key (its path).
-pub fn from_toml<T: serde::de::DeserializeOwned>(text: &str, origin: &str) -> Result<T, String> {
+pub fn from_toml<T: serde::de::DeserializeOwned>(text: &str, origin: &str) -> Result<T, RunError> {
     let error = |e: &toml::de::Error, key: Option<String>| {
         let line =
             e.span().map(|s| text.as_bytes()[..s.start.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1);
@@ -130,14 +134,14 @@ pub fn from_toml<T: serde::de::DeserializeOwned>(text: &str, origin: &str) -> Re
         {
             message = format!("{message} `{}`", name.trim());
         }
-        format!("{origin}{at}:{key} {message}")
+        RunError::Parse(format!("{origin}{at}:{key} {message}"))
     };
     let de = toml::Deserializer::parse(text).map_err(|e| error(&e, None))?;
     serde_path_to_error::deserialize(de).map_err(|e| error(e.inner(), Some(e.path().to_string())))
 }
 
 /// A finite real number for a key that is not a parameter itself (a sweep's `chi`).
-pub fn number(key: &str, v: &toml::Value) -> Result<f64, String> {
+pub fn number(key: &str, v: &toml::Value) -> Result<f64, RunError> {
     match coerce(key, v, &toml::Value::Float(0.0))? {
         toml::Value::Float(x) => Ok(x),
         _ => unreachable!("coerce brings a number to the default's type"),
@@ -145,7 +149,7 @@ pub fn number(key: &str, v: &toml::Value) -> Result<f64, String> {
 }
 
 /// Parameters from an optional TOML file and `KEY=VALUE` overrides (later ones win).
-pub fn load_params(config: Option<&Path>, overrides: &[String]) -> Result<Params, String> {
+pub fn load_params(config: Option<&Path>, overrides: &[String]) -> Result<Params, RunError> {
     // Where each key of the file is: a wrong value is named by its line and column.
     let mut places = std::collections::BTreeMap::new();
     let (mut table, origin) = match config {
@@ -180,7 +184,7 @@ mod tests {
     use std::fs;
 
     fn set(args: &[&str]) -> Result<Params, String> {
-        load_params(None, &args.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+        load_params(None, &args.iter().map(|s| s.to_string()).collect::<Vec<_>>()).map_err(|e| e.to_string())
     }
 
     #[test]
@@ -217,7 +221,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("c.toml");
         fs::write(&path, "zeta = \"abc\"\n").unwrap();
-        let e = load_params(Some(&path), &[]).unwrap_err();
+        let e = load_params(Some(&path), &[]).unwrap_err().to_string();
         assert!(e.contains("c.toml") && e.contains("parameter `zeta` = \"abc\""), "{e}");
     }
 

@@ -24,6 +24,7 @@ use std::time::Instant;
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
 use crate::run::config::load_params;
+use crate::run::error::RunError;
 use crate::run::sweep::{steps_to_run, Job};
 
 /// How many runs, how long, how large.
@@ -98,12 +99,11 @@ impl Scale {
 }
 
 impl std::str::FromStr for Scale {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Scale::ALL
-            .into_iter()
-            .find(|c| c.name() == s)
-            .ok_or_else(|| format!("--scale {s}: the scale is one of smoke, standard, evidence, paper"))
+    type Err = RunError;
+    fn from_str(s: &str) -> Result<Self, RunError> {
+        Scale::ALL.into_iter().find(|c| c.name() == s).ok_or_else(|| {
+            RunError::Parse(format!("--scale {s}: the scale is one of smoke, standard, evidence, paper"))
+        })
     }
 }
 
@@ -183,7 +183,7 @@ impl Figure {
     }
 
     /// `--only 1c,3d,S1` (3a and 3b are one figure of two panels).
-    pub fn parse_list(s: &str) -> Result<Vec<Figure>, String> {
+    pub fn parse_list(s: &str) -> Result<Vec<Figure>, RunError> {
         let mut out = BTreeSet::new();
         for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
             let p = part.trim_start_matches("fig").trim_start_matches("Fig");
@@ -263,7 +263,7 @@ pub struct Plan {
 impl Plan {
     /// The runs `figures` need at `scale`, with `sets` (`KEY=VALUE`) over the scale's base.
     /// Every run's parameters are validated here, before anything runs.
-    pub fn new(scale: Scale, figures: &[Figure], sets: &[String]) -> Result<Plan, String> {
+    pub fn new(scale: Scale, figures: &[Figure], sets: &[String]) -> Result<Plan, RunError> {
         let spec = scale.spec();
         let mut all: Vec<String> = vec![format!("zeta={UNSTATED_ZETA}")];
         all.extend(spec.overrides.iter().map(|s| s.to_string()));
@@ -385,7 +385,7 @@ impl Plan {
 }
 
 /// The base with a point's values.
-fn point_params(base: &Params, p: &Point) -> Result<Params, String> {
+fn point_params(base: &Params, p: &Point) -> Result<Params, RunError> {
     let mut q = base.clone();
     q.zeta = p.zeta;
     q.gamma = p.gamma;
@@ -438,9 +438,10 @@ impl Speed {
     /// steps from the small initial disks, and the first solves from rest, cost more than the
     /// rest of a run). The tissue is not yet confluent this early, so this is an estimate, not a
     /// bound; it is what the machine does now, not what a README says.
-    pub fn measure(jobs: &[&Job], warm_up: u64, steps: u64) -> Result<Speed, String> {
+    pub fn measure(jobs: &[&Job], warm_up: u64, steps: u64) -> Result<Speed, RunError> {
         let mut sizes: Vec<((usize, usize), (f64, f64))> = Vec::new();
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| e.to_string())?;
+        let pool =
+            rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| RunError::Message(e.to_string()))?;
         for job in jobs {
             let key = (job.params.box_size, job.params.n_cells);
             if sizes.iter().any(|s| s.0 == key) {
@@ -471,7 +472,7 @@ impl Speed {
                         timed = Some(t);
                         break;
                     }
-                    Err(e) => last = e,
+                    Err(e) => last = e.to_string(),
                 }
             }
             let timed = timed.ok_or_else(|| {
@@ -505,7 +506,7 @@ impl Speed {
 }
 
 /// (relaxation, active) ms per step of `p` at χ = 0.001, after `warm_up` untimed steps of each.
-fn time_steps(pool: &rayon::ThreadPool, mut p: Params, warm_up: u64, steps: u64) -> Result<(f64, f64), String> {
+fn time_steps(pool: &rayon::ThreadPool, mut p: Params, warm_up: u64, steps: u64) -> Result<(f64, f64), RunError> {
     p.relax_steps = warm_up + steps;
     if p.xi_cell == 0.0 {
         p.xi_cell = 1.0;
@@ -515,9 +516,9 @@ fn time_steps(pool: &rayon::ThreadPool, mut p: Params, warm_up: u64, steps: u64)
     let mut m = (1..=10)
         .find_map(|seed| Monolayer::new(p.clone(), seed).ok())
         .ok_or_else(|| format!("timing a run at L = {}, N = {}: no seed of 1–10 starts", p.box_size, p.n_cells))?;
-    let mut timed = |n: u64| -> Result<f64, String> {
+    let mut timed = |n: u64| -> Result<f64, RunError> {
         let t = Instant::now();
-        pool.install(|| m.advance(n)).map_err(|e| e.to_string())?;
+        pool.install(|| m.advance(n)).map_err(RunError::from)?;
         Ok(1e3 * t.elapsed().as_secs_f64() / n as f64)
     };
     timed(warm_up)?;
@@ -539,20 +540,20 @@ pub enum Stage {
 }
 
 impl std::str::FromStr for Stage {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = RunError;
+    fn from_str(s: &str) -> Result<Self, RunError> {
         match s {
             "all" => Ok(Stage::All),
             "runs" => Ok(Stage::Runs),
             "figures" => Ok(Stage::Figures),
-            _ => Err(format!("--stage {s}: the stage is one of all, runs, figures")),
+            _ => Err(RunError::Message(format!("--stage {s}: the stage is one of all, runs, figures"))),
         }
     }
 }
 
 /// Draws every figure of the plan from its runs in `out/runs` into `out`: the figures, their CSVs,
 /// `plan.csv` and `figures.md`. Returns the files written.
-pub fn make_figures(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<PathBuf>, String> {
+pub fn make_figures(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<PathBuf>, RunError> {
     let runs = data::measure_runs(plan, out, workers)?;
     let mut written = Vec::new();
     let plan_path = out.join("plan.csv");

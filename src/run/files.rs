@@ -19,13 +19,18 @@ use crate::formats::frame_file_name;
 use crate::model::lattice::Patch;
 use crate::model::monolayer::{Monolayer, State};
 use crate::model::params::Params;
+use crate::run::error::RunError;
 
 pub use crate::formats::run_record::{Engine, RunRecord, RunStatus, FORMAT, FORMAT_VERSION};
 
-pub type IoResult<T> = Result<T, String>;
+pub type IoResult<T> = Result<T, RunError>;
 
-fn err(path: &Path, e: impl std::fmt::Display) -> String {
-    format!("{}: {e}", path.display())
+fn err(path: &Path, e: impl std::fmt::Display) -> RunError {
+    RunError::file(path, e)
+}
+
+fn io(path: &Path, e: std::io::Error) -> RunError {
+    RunError::io(path, e)
 }
 
 /// The exact state a run continues from (`--resume`), in the run's directory.
@@ -47,11 +52,11 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
     let name = path.file_name().ok_or_else(|| err(path, "not a file name"))?.to_string_lossy();
     let call = CALLS.fetch_add(1, Ordering::Relaxed);
     let tmp = dir.join(format!(".{name}.{}.{call}.tmp", std::process::id()));
-    let file = File::create(&tmp).map_err(|e| err(&tmp, e))?;
+    let file = File::create(&tmp).map_err(|e| io(&tmp, e))?;
     let mut w = BufWriter::new(file);
     let result = write(&mut w).and_then(|_| {
-        let file = w.into_inner().map_err(|e| err(&tmp, e))?;
-        file.sync_all().map_err(|e| err(&tmp, e))
+        let file = w.into_inner().map_err(|e| io(&tmp, e.into_error()))?;
+        file.sync_all().map_err(|e| io(&tmp, e))
     });
     if let Err(e) = result {
         let _ = fs::remove_file(&tmp);
@@ -59,7 +64,7 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
     }
     fs::rename(&tmp, path).map_err(|e| {
         let _ = fs::remove_file(&tmp);
-        err(path, e)
+        io(path, e)
     })
 }
 
@@ -70,7 +75,7 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
 pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
     let link = match fs::symlink_metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
-        Err(e) => return Err(err(path, e)),
+        Err(e) => return Err(io(path, e)),
         Ok(m) => m.file_type().is_symlink(),
     };
     let target = match fs::metadata(path) {
@@ -78,7 +83,7 @@ pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
         Err(e) if link => {
             return Err(err(path, format!("a symbolic link to nothing readable ({e}): refused as an output file")))
         }
-        Err(e) => return Err(err(path, e)),
+        Err(e) => return Err(io(path, e)),
     };
     if !target.is_file() {
         let kind = file_kind(&target.file_type());
@@ -92,7 +97,7 @@ pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
         ));
     }
     if link {
-        return fs::canonicalize(path).map_err(|e| err(path, e));
+        return fs::canonicalize(path).map_err(|e| io(path, e));
     }
     Ok(path.to_path_buf())
 }
@@ -129,7 +134,7 @@ pub const MAX_TEXT_INPUT_BYTES: u64 = 1 << 20;
 /// most `max_bytes`, before it is opened: opening a FIFO blocks until a writer comes, and a
 /// device such as `/dev/zero` never ends. A symbolic link is followed to what it points at.
 pub fn check_input(path: &Path, what: &str, max_bytes: u64) -> IoResult<()> {
-    let meta = fs::metadata(path).map_err(|e| err(path, e))?;
+    let meta = fs::metadata(path).map_err(|e| io(path, e))?;
     if !meta.is_file() {
         let kind = file_kind(&meta.file_type());
         return Err(err(path, format!("is {kind}, not a regular file: refused as {what}")));
@@ -145,7 +150,7 @@ pub fn check_input(path: &Path, what: &str, max_bytes: u64) -> IoResult<()> {
 pub fn read_input(path: &Path, what: &str, max_bytes: u64) -> IoResult<Vec<u8>> {
     check_input(path, what, max_bytes)?;
     let mut bytes = Vec::new();
-    File::open(path).and_then(|f| f.take(max_bytes + 1).read_to_end(&mut bytes)).map_err(|e| err(path, e))?;
+    File::open(path).and_then(|f| f.take(max_bytes + 1).read_to_end(&mut bytes)).map_err(|e| io(path, e))?;
     if bytes.len() as u64 > max_bytes {
         return Err(err(path, format!("grew past {max_bytes} bytes while read: larger than any {what}")));
     }
@@ -214,10 +219,12 @@ impl RunLock {
     pub fn acquire(dir: &Path) -> IoResult<Self> {
         Self::try_acquire(dir)?.map_err(|holder| {
             let who = holder.map(|pid| format!("process {pid}")).unwrap_or_else(|| "another process".into());
-            format!(
-                "{}: {who} is writing this run directory (one writer per directory): wait for it to end, or stop \
-                 it, then try again",
-                dir.display()
+            err(
+                dir,
+                format!(
+                    "{who} is writing this run directory (one writer per directory): wait for it to end, or stop it, \
+                     then try again"
+                ),
             )
         })
     }
@@ -246,7 +253,7 @@ impl RunLock {
             Ok(m) if m.file_type().is_symlink() => {
                 err(&path, "a symbolic link, not this program's lock file: remove it, then try again")
             }
-            _ => err(&path, e),
+            _ => io(&path, e),
         })?;
         match file.try_lock() {
             Ok(()) => {}
@@ -255,10 +262,10 @@ impl RunLock {
                 let _ = file.read_to_string(&mut holder);
                 return Ok(Err(holder.trim().parse::<u32>().ok()));
             }
-            Err(fs::TryLockError::Error(e)) => return Err(err(&path, e)),
+            Err(fs::TryLockError::Error(e)) => return Err(io(&path, e)),
         }
-        file.set_len(0).map_err(|e| err(&path, e))?;
-        writeln!(file, "{}", std::process::id()).map_err(|e| err(&path, e))?;
+        file.set_len(0).map_err(|e| io(&path, e))?;
+        writeln!(file, "{}", std::process::id()).map_err(|e| io(&path, e))?;
         Ok(Ok(RunLock { _file: file }))
     }
 }
@@ -270,14 +277,14 @@ impl RunRecord {
 
     pub fn save(&self, dir: &Path) -> IoResult<()> {
         let path = Self::path(dir);
-        write_atomic(&path, |w| w.write_all(self.to_json().as_bytes()).map_err(|e| err(&path, e)))
+        write_atomic(&path, |w| w.write_all(self.to_json().as_bytes()).map_err(|e| io(&path, e)))
     }
 
     /// Reads and checks `DIR/run.json`, naming what is wrong.
     pub fn load(dir: &Path) -> IoResult<Self> {
         let path = Self::path(dir);
         if !dir.is_dir() {
-            return Err(format!("{}: no such directory", dir.display()));
+            return Err(err(dir, "no such directory"));
         }
         if !path.exists() {
             return Err(err(&path, "no such file (is this a run directory?)"));
@@ -312,7 +319,7 @@ impl RunRecord {
         let mut de = serde_json::Deserializer::from_str(&text);
         let record: RunRecord = serde_path_to_error::deserialize(&mut de)
             .map_err(|e| err(&path, format!("`{}`: {}", e.path(), e.inner())))?;
-        record.params.validate().map_err(|e| err(&path, e))?;
+        record.params.validate().map_err(|e| RunError::from(e).context(path.display().to_string()))?;
         if record.frame_interval == 0 {
             return Err(err(&path, "`frame_interval` = 0: must be ≥ 1"));
         }
@@ -325,7 +332,7 @@ pub fn frame_path(dir: &Path, step: u64) -> PathBuf {
     dir.join("frames").join(frame_file_name(step))
 }
 
-fn npz_err(path: &Path) -> impl Fn(ndarray_npy::WriteNpzError) -> String + '_ {
+fn npz_err(path: &Path) -> impl Fn(ndarray_npy::WriteNpzError) -> RunError + '_ {
     move |e| err(path, e)
 }
 
@@ -344,7 +351,7 @@ fn write_npz(path: &Path, build: impl FnOnce(&mut Npz) -> Result<(), ndarray_npy
     let mut z = NpzWriter::new_compressed(Cursor::new(Vec::new()));
     build(&mut z).map_err(&e)?;
     let bytes = z.finish().map_err(&e)?.into_inner();
-    write_atomic(path, |w| w.write_all(&bytes).map_err(|x| err(path, x)))
+    write_atomic(path, |w| w.write_all(&bytes).map_err(|x| io(path, x)))
 }
 
 /// Per-cell arrays of a frame or checkpoint: patches (x0, y0, w, h) and the concatenated fields.
@@ -367,7 +374,7 @@ fn complex_field(v: &[C64], l: usize) -> Array3<f64> {
 /// belong to this φ), atomically; the format is [`frame_file::frame_bytes`]'s.
 pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
     let bytes = frame_file::frame_bytes(m).map_err(npz_err(path))?;
-    write_atomic(path, |w| w.write_all(&bytes).map_err(|x| err(path, x)))
+    write_atomic(path, |w| w.write_all(&bytes).map_err(|x| io(path, x)))
 }
 
 /// The array of a checkpoint that holds the seed and parameters it was stepped with (JSON text as
@@ -411,14 +418,14 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
 /// ([`frame_file::check_npz_headers`]).
 fn check_npz_file_headers(path: &Path, max_values: u64) -> IoResult<()> {
     check_input(path, "a checkpoint", MAX_FRAME_BYTES)?;
-    let file = File::open(path).map_err(|e| err(path, e))?;
+    let file = File::open(path).map_err(|e| io(path, e))?;
     frame_file::check_npz_headers(BufReader::new(file), max_values).map_err(|e| err(path, e))
 }
 
 /// Reads a checkpoint written by [`write_checkpoint`].
 pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     check_npz_file_headers(path, frame_file::max_array_values(l))?;
-    let file = File::open(path).map_err(|e| err(path, e))?;
+    let file = File::open(path).map_err(|e| io(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let e = |name: &str| {
         let name = name.to_string();
@@ -502,7 +509,7 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
 /// their parameters are not checked.
 pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> {
     check_npz_file_headers(path, frame_file::max_array_values(record.params.box_size))?;
-    let file = File::open(path).map_err(|e| err(path, e))?;
+    let file = File::open(path).map_err(|e| io(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let has_key = z.names().map_err(|x| err(path, x))?.iter().any(|n| n.trim_end_matches(".npy") == RUN_PARAMS);
     if !has_key {
@@ -525,15 +532,17 @@ pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> 
         None => Ok(()),
         Some((k, s, g)) => {
             let show = |v: Option<&serde_json::Value>| v.map(|v| v.to_string()).unwrap_or_default();
-            Err(format!(
-                "{}: `{k}` = {} there, but the checkpoint {} was written with {k} = {}: a run continues only with \
-                 the parameters it started with (was run.json edited?); restore `{k}` to {}, or start a new run \
-                 with these parameters in another --out",
-                RunRecord::path(path.parent().unwrap_or(Path::new("."))).display(),
-                show(g),
-                path.display(),
-                show(s),
-                show(s)
+            Err(err(
+                &RunRecord::path(path.parent().unwrap_or(Path::new("."))),
+                format!(
+                    "`{k}` = {} there, but the checkpoint {} was written with {k} = {}: a run continues only with \
+                     the parameters it started with (was run.json edited?); restore `{k}` to {}, or start a new run \
+                     with these parameters in another --out",
+                    show(g),
+                    path.display(),
+                    show(s),
+                    show(s)
+                ),
             ))
         }
     }
@@ -562,15 +571,15 @@ impl RunFrames {
     /// and it must have at least one frame. Frames are written by an atomic rename, so every
     /// `frame_*.npz` present is complete (a frame being written is a hidden temporary file,
     /// skipped): a run in progress is read up to its last complete frame.
-    pub fn open(dir: &Path) -> Result<Self, String> {
+    pub fn open(dir: &Path) -> Result<Self, RunError> {
         let record = RunRecord::load(dir)?;
         let frames_dir = dir.join("frames");
         let entries = fs::read_dir(&frames_dir).map_err(|e| {
-            format!("{}: {e} (a run's frames are in DIR/frames; has this run written any yet?)", frames_dir.display())
+            err(&frames_dir, format!("{e} (a run's frames are in DIR/frames; has this run written any yet?)"))
         })?;
         let mut frames = Vec::new();
         for entry in entries {
-            let entry = entry.map_err(|e| format!("{}: {e}", frames_dir.display()))?;
+            let entry = entry.map_err(|e| io(&frames_dir, e))?;
             let name = entry.file_name().to_string_lossy().into_owned();
             if entry.file_type().is_ok_and(|t| t.is_dir()) {
                 continue;
@@ -578,20 +587,19 @@ impl RunFrames {
             if let Some(step) = name.strip_prefix("frame_").and_then(|s| s.strip_suffix(".npz")) {
                 // A FIFO or a device would block the reader, or never end.
                 if !fs::metadata(entry.path()).is_ok_and(|m| m.is_file()) {
-                    return Err(format!("{}: not a regular file: not a frame", entry.path().display()));
+                    return Err(err(&entry.path(), "not a regular file: not a frame"));
                 }
-                let step: u64 = step
-                    .parse()
-                    .map_err(|_| format!("{}: not a frame name (frame_<step>.npz)", entry.path().display()))?;
+                let step: u64 = step.parse().map_err(|_| err(&entry.path(), "not a frame name (frame_<step>.npz)"))?;
                 frames.push((step, entry.path()));
             }
         }
         if frames.is_empty() {
-            return Err(format!(
-                "{}: no frames yet (status \"{}\"); frames are written every {} active steps",
-                frames_dir.display(),
-                record.status,
-                record.frame_interval
+            return Err(err(
+                &frames_dir,
+                format!(
+                    "no frames yet (status \"{}\"); frames are written every {} active steps",
+                    record.status, record.frame_interval
+                ),
             ));
         }
         frames.sort();
@@ -600,13 +608,13 @@ impl RunFrames {
             let own = frame_path(dir, step);
             let foreign: Vec<String> =
                 frames.iter().filter(|f| f.0 == step && f.1 != own).map(|f| f.1.display().to_string()).collect();
-            return Err(format!(
+            return Err(RunError::Message(format!(
                 "{} and {} both hold step {step}: remove what this run did not write ({}; its own is {})",
                 w[0].1.display(),
                 w[1].1.display(),
                 foreign.join(", "),
                 own.display()
-            ));
+            )));
         }
         // A gap would be measured as one frame interval: holes would seem to open and close
         // faster, and a lifetime would end early. The frames need not start at the end of the
@@ -615,24 +623,28 @@ impl RunFrames {
         if let Some(w) = frames.windows(2).find(|w| w[1].0 - w[0].0 != fi) {
             let (a, b) = (w[0].0, w[1].0);
             if (b - a) % fi != 0 {
-                return Err(format!(
-                    "{}: step {b} is not a frame interval after the frame before it ({}, step {a}; run.json: \
-                     frame_interval = {fi}): not a frame of this run",
-                    w[1].1.display(),
-                    w[0].1.display()
+                return Err(err(
+                    &w[1].1,
+                    format!(
+                        "step {b} is not a frame interval after the frame before it ({}, step {a}; run.json: \
+                         frame_interval = {fi}): not a frame of this run",
+                        w[0].1.display()
+                    ),
                 ));
             }
             let missing: Vec<u64> = (1..(b - a) / fi).map(|k| a + k * fi).collect();
             let shown: Vec<String> = missing.iter().take(10).map(u64::to_string).collect();
             let more = if missing.len() > 10 { format!(" and {} more", missing.len() - 10) } else { String::new() };
-            return Err(format!(
-                "{}: frames missing at step{} {}{more}, between {} and {} (run.json: a frame every frame_interval = \
-                 {fi} steps): restore them, or move the frames after the gap out of the run to measure up to it",
-                frames_dir.display(),
-                if missing.len() == 1 { "" } else { "s" },
-                shown.join(", "),
-                w[0].1.display(),
-                w[1].1.display()
+            return Err(err(
+                &frames_dir,
+                format!(
+                    "frames missing at step{} {}{more}, between {} and {} (run.json: a frame every frame_interval = \
+                     {fi} steps): restore them, or move the frames after the gap out of the run to measure up to it",
+                    if missing.len() == 1 { "" } else { "s" },
+                    shown.join(", "),
+                    w[0].1.display(),
+                    w[1].1.display()
+                ),
             ));
         }
         Ok(RunFrames { dir: dir.to_path_buf(), record, frames })
@@ -645,16 +657,16 @@ const MAX_FRAME_BYTES: u64 = 1 << 32;
 
 /// Reads one frame of a run on an L×L lattice ([`frame_file::decode_frame_of_box`], the decoder
 /// the page uses), checking every array's shape.
-pub fn read_frame(path: &Path, l: usize) -> Result<Frame, String> {
+pub fn read_frame(path: &Path, l: usize) -> Result<Frame, RunError> {
     // A FIFO or a device would block the reader, or never end.
-    let meta = fs::metadata(path).map_err(|e| err(path, e))?;
+    let meta = fs::metadata(path).map_err(|e| io(path, e))?;
     if !meta.is_file() {
         return Err(err(path, "not a regular file: not a frame"));
     }
     if meta.len() > MAX_FRAME_BYTES {
         return Err(err(path, format!("{} bytes: larger than any frame ({MAX_FRAME_BYTES} at most)", meta.len())));
     }
-    let bytes = fs::read(path).map_err(|e| err(path, e))?;
+    let bytes = fs::read(path).map_err(|e| io(path, e))?;
     let data = frame_file::decode_frame_of_box(&path.display().to_string(), &bytes, l)?;
     Ok(Frame { path: path.to_path_buf(), data })
 }
@@ -694,7 +706,7 @@ mod tests {
         let r = write_atomic(&path, |_| Err("boom".into()));
         assert!(r.is_err());
         assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 0);
-        write_atomic(&path, |w| w.write_all(b"ok").map_err(|e| e.to_string())).unwrap();
+        write_atomic(&path, |w| w.write_all(b"ok").map_err(|e| io(&path, e))).unwrap();
         assert_eq!(fs::read(&path).unwrap(), b"ok");
     }
 }

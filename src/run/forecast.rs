@@ -21,6 +21,7 @@ use crate::analysis::forecast::{
 use crate::analysis::holes::HoleTracker;
 use crate::analysis::precursors::{Precursor, DEPTH};
 use crate::analysis::Analysis;
+use crate::run::error::RunError;
 
 /// The fit sees every tearing site and one in this many of the others; the intercept is
 /// corrected by ln of it, and no ranking depends on it.
@@ -62,15 +63,15 @@ impl Subset {
 }
 
 /// Reads and measures one run's frames (finished runs only unless `partial`).
-fn measure_run(dir: &Path, partial: bool) -> Result<RunData, String> {
+fn measure_run(dir: &Path, partial: bool) -> Result<RunData, RunError> {
     let run = RunFrames::open(dir)?;
     let record = &run.record;
     if !partial && record.status != RunStatus::Finished {
-        return Err(format!(
+        return Err(RunError::Message(format!(
             "{}: the run has not finished ({}); --partial scores the frames written so far",
             dir.display(),
             record.status
-        ));
+        )));
     }
     let params = &record.params;
     let mut a = Analysis::new(params);
@@ -409,7 +410,7 @@ struct RocFigure<'a> {
 }
 
 impl Draw for RocFigure<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, plotters::coord::Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, plotters::coord::Shift>) -> Result<(), RunError> {
         root.fill(&WHITE).map_err(plot_err)?;
         let panels = root.split_evenly((1, 2));
         let horizon = HORIZONS[SHOWN_HORIZON];
@@ -470,7 +471,12 @@ impl Draw for RocFigure<'_> {
 /// `monolayer forecast DIR… --out OUT`: measures every run (all frames read before anything is
 /// written), scores the forecast leaving one seed out, and writes the tables and the ROC figure
 /// to `out`. `progress` is told each run as it is read. Returns the files written.
-pub fn forecast(dirs: &[PathBuf], out: &Path, partial: bool, progress: impl Fn(&str)) -> Result<Vec<PathBuf>, String> {
+pub fn forecast(
+    dirs: &[PathBuf],
+    out: &Path,
+    partial: bool,
+    progress: impl Fn(&str),
+) -> Result<Vec<PathBuf>, RunError> {
     if dirs.is_empty() {
         return Err("RUN_DIR: give at least one run directory".into());
     }
@@ -488,19 +494,19 @@ pub fn forecast(dirs: &[PathBuf], out: &Path, partial: bool, progress: impl Fn(&
     }
     let seeds: BTreeSet<u64> = runs.iter().map(|r| r.seed).collect();
     if seeds.len() < 2 {
-        return Err(format!(
+        return Err(RunError::Message(format!(
             "the runs have {} seed(s): leaving one seed out needs runs of at least two seeds",
             seeds.len()
-        ));
+        )));
     }
     let (scores, pooled) = cross_validate(&runs);
     let all: Vec<&RunData> = runs.iter().collect();
     let model = fit(&all, SHOWN_HORIZON, Subset::All);
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    std::fs::create_dir_all(out).map_err(|e| RunError::io(out, e))?;
     let mut written = Vec::new();
     for (name, text) in tables(&runs, &scores, model.as_ref()) {
         let path = out.join(name);
-        write_atomic(&path, |w| w.write_all(text.as_bytes()).map_err(|e| format!("{}: {e}", path.display())))?;
+        write_atomic(&path, |w| w.write_all(text.as_bytes()).map_err(|e| RunError::io(&path, e)))?;
         written.push(path);
     }
     written.extend(both_of(&out.join("forecast_roc"), (1400, 650), &RocFigure { pooled: &pooled, scores: &scores })?);
@@ -513,7 +519,7 @@ const FIG1B_NUCLEATIONS: usize = 3;
 
 /// Fig. 1b one frame before [`FIG1B_NUCLEATIONS`] nucleations: those whose site was still
 /// covered then first, in the order of the runs given, then the others.
-fn fig1b(runs: &[RunData], out: &Path) -> Result<Vec<PathBuf>, String> {
+fn fig1b(runs: &[RunData], out: &Path) -> Result<Vec<PathBuf>, RunError> {
     let mut chosen: Vec<(&RunData, &ThinningRow)> = Vec::new();
     for covered in [true, false] {
         for r in runs {

@@ -2,6 +2,7 @@
 //!
 //! - [`bench`](mod@bench): `monolayer bench`, stage by stage, and the two-thread ceiling;
 //! - [`config`]: parameters from config files, `--set` and `--grid`, the one KEY=VALUE parser;
+//! - [`error`]: the errors of this layer, by cause ([`RunError`]);
 //! - [`files`]: frames, checkpoints and `run.json`, the writer and the reader of each together;
 //! - [`runner`]: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume);
 //! - [`sweep`]: a grid of runs, one per core, resumable, its summary and regime map;
@@ -13,6 +14,7 @@
 
 pub mod bench;
 pub mod config;
+pub mod error;
 pub mod figures;
 pub mod files;
 pub mod forecast;
@@ -20,3 +22,5 @@ pub mod offline;
 pub mod plots;
 pub mod runner;
 pub mod sweep;
+
+pub use error::{RunError, RunResult};

@@ -19,6 +19,7 @@ use crate::analysis::precursors::Precursors;
 use crate::analysis::{Analysis, FrameSummary};
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
+use crate::run::error::RunError;
 use crate::run::files::{frame_path, write_atomic};
 
 /// What a frame contributes to the tables.
@@ -270,13 +271,13 @@ impl RunAnalysis {
         snapshot: Option<&Frame>,
         field: Background,
         params: &Params,
-    ) -> Result<Vec<PathBuf>, String> {
+    ) -> Result<Vec<PathBuf>, RunError> {
         static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
         let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         super::files::remove_dead_temporaries(out);
         let stage = out.join(format!(".staging.{}.{call}", std::process::id()));
         let staged = fs::create_dir_all(&stage)
-            .map_err(|e| format!("{}: {e}", stage.display()))
+            .map_err(|e| RunError::io(&stage, e))
             .and_then(|_| self.write_into(&stage, snapshot, field, params));
         let moved = staged.and_then(|files| {
             // Every target checked before the first is moved: one that cannot be replaced leaves
@@ -291,9 +292,7 @@ impl RunAnalysis {
             files
                 .iter()
                 .zip(targets)
-                .map(|(f, (to, target))| {
-                    fs::rename(f, &target).map(|_| to.clone()).map_err(|e| format!("{}: {e}", to.display()))
-                })
+                .map(|(f, (to, target))| fs::rename(f, &target).map(|_| to.clone()).map_err(|e| RunError::io(&to, e)))
                 .collect::<Result<Vec<_>, _>>()
         });
         let _ = fs::remove_dir_all(&stage);
@@ -306,11 +305,11 @@ impl RunAnalysis {
         snapshot: Option<&Frame>,
         field: Background,
         params: &Params,
-    ) -> Result<Vec<PathBuf>, String> {
+    ) -> Result<Vec<PathBuf>, RunError> {
         let mut written = Vec::new();
         for (name, text) in self.tables() {
             let path = out.join(name);
-            write_atomic(&path, |w| w.write_all(text.as_bytes()).map_err(|e| format!("{}: {e}", path.display())))?;
+            write_atomic(&path, |w| w.write_all(text.as_bytes()).map_err(|e| RunError::io(&path, e)))?;
             written.push(path);
         }
         written.extend(plots::hole_areas(&out.join("hole_area"), &self.tracker.holes)?);
@@ -335,7 +334,7 @@ pub fn analyze_run(
     out: Option<&Path>,
     snapshot_step: Option<u64>,
     field: Background,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, RunError> {
     let run = RunFrames::open(dir)?;
     let params = &run.record.params;
     let mut ra = RunAnalysis::new(params);
@@ -356,13 +355,17 @@ fn measure_frames(
     frames: &[(u64, PathBuf)],
     params: &Params,
     keep: Option<u64>,
-) -> Result<Option<Frame>, String> {
+) -> Result<Option<Frame>, RunError> {
     let mut kept = None;
     for (step, path) in frames {
         let frame = read_frame(path, params.box_size)?;
         check_frame(&frame, params)?;
         if frame.data.step != *step {
-            return Err(format!("{}: holds step {}, its name says {step}", path.display(), frame.data.step));
+            return Err(RunError::Message(format!(
+                "{}: holds step {}, its name says {step}",
+                path.display(),
+                frame.data.step
+            )));
         }
         ra.push_frame(&frame);
         if Some(*step) == keep {
@@ -373,7 +376,7 @@ fn measure_frames(
 }
 
 /// The frame [`RunAnalysis::snapshot_step`] chooses, read from the run's directory.
-fn snapshot_frame(ra: &RunAnalysis, dir: &Path, l: usize) -> Result<Option<Frame>, String> {
+fn snapshot_frame(ra: &RunAnalysis, dir: &Path, l: usize) -> Result<Option<Frame>, RunError> {
     ra.snapshot_step().map(|s| read_frame(&frame_path(dir, s), l)).transpose()
 }
 
@@ -391,7 +394,7 @@ impl LiveRun {
     /// Starts on the run in `dir` at step `step`, measuring the frames it already has up to
     /// there (a resumed run). Frames after `step` were written before a kill that came before
     /// their checkpoint: the run writes them again, and measures them then.
-    pub fn start(dir: &Path, params: &Params, step: u64) -> Result<Self, String> {
+    pub fn start(dir: &Path, params: &Params, step: u64) -> Result<Self, RunError> {
         let mut ra = RunAnalysis::new(params);
         let mut frames = match RunFrames::open(dir) {
             Ok(run) => run.frames,
@@ -406,7 +409,7 @@ impl LiveRun {
     }
 
     /// Measures the state whose frame was just written and rewrites `DIR/analysis`.
-    pub fn frame(&mut self, m: &Monolayer) -> Result<(), String> {
+    pub fn frame(&mut self, m: &Monolayer) -> Result<(), RunError> {
         self.ra.push_monolayer(m);
         let snapshot = snapshot_frame(&self.ra, &self.dir, self.params.box_size)?;
         let out = self.dir.join("analysis");
@@ -418,7 +421,7 @@ impl LiveRun {
                 let path = out.join(format!("{}.{ext}", snapshot_name(old)));
                 match fs::remove_file(&path) {
                     Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                        return Err(format!("{}: {e}", path.display()));
+                        return Err(RunError::Message(format!("{}: {e}", path.display())));
                     }
                     _ => {}
                 }

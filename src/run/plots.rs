@@ -22,6 +22,7 @@ use super::files::Frame;
 use crate::analysis::holes::Hole;
 use crate::analysis::Analysis;
 use crate::model::cell::Cell;
+use crate::run::error::RunError;
 use crate::run::files::write_atomic;
 
 pub(crate) const FONT: &str = "sans-serif";
@@ -35,17 +36,17 @@ fn register_font() {
     });
 }
 
-pub(crate) fn plot_err(e: impl std::fmt::Display) -> String {
-    format!("plot: {e}")
+pub(crate) fn plot_err(e: impl std::fmt::Display) -> RunError {
+    RunError::Plot(e.to_string())
 }
 
 /// A generic drawing function usable with both backends.
 pub(crate) trait Draw {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), RunError>;
 }
 
 /// Draws `d` into `base.png` and `base.svg`, each written atomically.
-pub(crate) fn both_of(base: &Path, size: (u32, u32), d: &impl Draw) -> Result<Vec<PathBuf>, String> {
+pub(crate) fn both_of(base: &Path, size: (u32, u32), d: &impl Draw) -> Result<Vec<PathBuf>, RunError> {
     register_font();
     let png = base.with_extension("png");
     let svg = base.with_extension("svg");
@@ -59,7 +60,7 @@ pub(crate) fn both_of(base: &Path, size: (u32, u32), d: &impl Draw) -> Result<Ve
     write_atomic(&png, |out| {
         image::codecs::png::PngEncoder::new(out)
             .write_image(&pixels, w, h, image::ColorType::Rgb8)
-            .map_err(|e| format!("{}: {e}", png.display()))
+            .map_err(|e| RunError::file(&png, e))
     })?;
     let mut text = String::new();
     {
@@ -67,14 +68,14 @@ pub(crate) fn both_of(base: &Path, size: (u32, u32), d: &impl Draw) -> Result<Ve
         d.draw(&root)?;
         root.present().map_err(plot_err)?;
     }
-    write_atomic(&svg, |out| out.write_all(text.as_bytes()).map_err(|e| format!("{}: {e}", svg.display())))?;
+    write_atomic(&svg, |out| out.write_all(text.as_bytes()).map_err(|e| RunError::io(&svg, e)))?;
     Ok(vec![png, svg])
 }
 
 /// The series legend, in the same style on every plot.
 fn draw_legend<'a, DB: DrawingBackend + 'a>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
-) -> Result<(), String> {
+) -> Result<(), RunError> {
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
@@ -100,7 +101,7 @@ pub(crate) const PALETTE: [RGBColor; 8] = [
 struct HoleAreas<'a>(&'a [Hole]);
 
 impl Draw for HoleAreas<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), RunError> {
         root.fill(&WHITE).map_err(plot_err)?;
         let holes = self.0;
         let t = |f: fn(f64, f64) -> f64, init: f64| holes.iter().flat_map(|h| &h.history).map(|p| p.0).fold(init, f);
@@ -134,7 +135,7 @@ impl Draw for HoleAreas<'_> {
 }
 
 /// Area of every hole against time: `base.png`, `base.svg`.
-pub fn hole_areas(base: &Path, holes: &[Hole]) -> Result<Vec<PathBuf>, String> {
+pub fn hole_areas(base: &Path, holes: &[Hole]) -> Result<Vec<PathBuf>, RunError> {
     both_of(base, (900, 600), &HoleAreas(holes))
 }
 
@@ -146,7 +147,7 @@ struct Correlations<'a> {
 }
 
 impl Draw for Correlations<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), RunError> {
         root.fill(&WHITE).map_err(plot_err)?;
         let rmax = self.cv.len().saturating_sub(1).max(1) as f64;
         let lo = self.cv.iter().chain(self.cq).copied().filter(|v| v.is_finite()).fold(0.0, f64::min);
@@ -186,7 +187,7 @@ pub fn correlations(
     cq: &[f64],
     lengths: (Option<f64>, Option<f64>),
     frames: usize,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, RunError> {
     both_of(base, (900, 600), &Correlations { cv, cq, lengths, frames })
 }
 
@@ -202,14 +203,16 @@ pub enum Background {
 }
 
 impl std::str::FromStr for Background {
-    type Err = String;
+    type Err = RunError;
 
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, RunError> {
         match s {
             "strain-rate" => Ok(Background::StrainRate),
             "active-force-divergence" => Ok(Background::ActiveForceDivergence),
             "speed" => Ok(Background::Speed),
-            _ => Err(format!("`{s}`: the field is one of strain-rate, active-force-divergence, speed")),
+            _ => {
+                Err(RunError::Parse(format!("`{s}`: the field is one of strain-rate, active-force-divergence, speed")))
+            }
         }
     }
 }
@@ -263,7 +266,7 @@ struct Snapshot<'a> {
 }
 
 impl Draw for Snapshot<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), RunError> {
         let (a, frame) = (self.a, self.frame);
         let l = a.l;
         let lf = l as f64;
@@ -334,7 +337,7 @@ impl Draw for Snapshot<'_> {
 
 /// The frame's cells, defects, spiral cores and holes over a field: `base.png`, `base.svg`.
 /// `a` must hold the measurements of `frame`.
-pub fn snapshot(base: &Path, frame: &Frame, a: &Analysis, background: Background) -> Result<Vec<PathBuf>, String> {
+pub fn snapshot(base: &Path, frame: &Frame, a: &Analysis, background: Background) -> Result<Vec<PathBuf>, RunError> {
     both_of(base, (900, 930), &Snapshot { frame, a, background })
 }
 
@@ -346,7 +349,7 @@ pub(crate) fn regime_marker<DB: DrawingBackend>(
     (x, y): (f64, f64),
     regime: crate::analysis::regime::Regime,
     failed: bool,
-) -> Result<(), String> {
+) -> Result<(), RunError> {
     use crate::analysis::regime::Regime;
     let (red, blue, green) = (PALETTE[3], PALETTE[0], PALETTE[2]);
     match regime {
@@ -386,7 +389,7 @@ impl NucleationFields<'_> {
 }
 
 impl Draw for NucleationFields<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), RunError> {
         let a = self.a;
         let l = a.l;
         let half = 4.0 * a.radius;
@@ -471,6 +474,11 @@ impl Draw for NucleationFields<'_> {
 }
 
 /// The paper's Fig. 1b about (x, y) in the frame `a` measured: `base.png`, `base.svg`.
-pub fn nucleation_fields(base: &Path, a: &Analysis, site: (f64, f64), caption: String) -> Result<Vec<PathBuf>, String> {
+pub fn nucleation_fields(
+    base: &Path,
+    a: &Analysis,
+    site: (f64, f64),
+    caption: String,
+) -> Result<Vec<PathBuf>, RunError> {
     both_of(base, (1500, 560), &NucleationFields { a, centre: site, caption })
 }

@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use crate::model::monolayer::Monolayer;
 use crate::model::params::Params;
 use crate::model::precision::STORE_NAME;
+use crate::run::error::RunError;
 use crate::run::files::{
     check_checkpoint_params, checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint,
     write_frame, Engine, RunLock, RunRecord, RunStatus, LAST_GOOD_STATE,
@@ -30,9 +31,9 @@ pub enum Event {
 /// Why the protocol stopped early.
 enum Stop {
     /// The simulation failed: a result of the run.
-    Simulation(String),
+    Simulation(RunError),
     /// Writing its files failed: the machine's problem, and the run can go on from its checkpoint.
-    Io(String),
+    Io(RunError),
     /// SIGTERM or SIGINT (Slurm, Ctrl-C): the step under way was finished; the run goes on from its
     /// checkpoint.
     Signal(&'static str),
@@ -44,14 +45,18 @@ static SIGINT_SEEN: AtomicBool = AtomicBool::new(false);
 /// Turns SIGTERM and SIGINT into a graceful stop for this process: a run finishes the step under
 /// way, records `stopped: signal …` and returns (then [`stop_signal`] says which); a second
 /// signal of the same kind ends the process at once, as the first would have.
-pub fn stop_gracefully_on_signals() -> Result<(), String> {
+pub fn stop_gracefully_on_signals() -> Result<(), RunError> {
     use signal_hook::consts::{SIGINT, SIGTERM};
     for (sig, seen) in [(SIGTERM, &SIGTERM_SEEN), (SIGINT, &SIGINT_SEEN)] {
         // The default action first, armed by the flag the second handler sets.
-        signal_hook::flag::register_conditional_default(sig, seen).map_err(|e| format!("signal handler: {e}"))?;
-        signal_hook::flag::register(sig, seen).map_err(|e| format!("signal handler: {e}"))?;
+        signal_hook::flag::register_conditional_default(sig, seen).map_err(signal_handler)?;
+        signal_hook::flag::register(sig, seen).map_err(signal_handler)?;
     }
     Ok(())
+}
+
+fn signal_handler(e: std::io::Error) -> RunError {
+    RunError::Message(format!("signal handler: {e}"))
 }
 
 /// The signal that asked this process to stop, if one did: (name, number).
@@ -79,10 +84,14 @@ pub fn memory_estimate(params: &Params) -> u64 {
 }
 
 /// `MONOLAYER_MEMORY_LIMIT_MB` read: a whole number of megabytes ≥ 1, or an error naming it.
-pub fn parse_memory_limit_mb(text: &str) -> Result<u64, String> {
+pub fn parse_memory_limit_mb(text: &str) -> Result<u64, RunError> {
     match text.trim().parse::<u64>() {
         Ok(mb) if mb >= 1 => Ok(mb.saturating_mul(1 << 20)),
-        _ => Err(format!("MONOLAYER_MEMORY_LIMIT_MB = {text:?}: must be a whole number of megabytes ≥ 1, e.g. 4096")),
+        _ => Err(RunError::invalid(
+            "MONOLAYER_MEMORY_LIMIT_MB =",
+            format!("{text:?}"),
+            "a whole number of megabytes ≥ 1, e.g. 4096",
+        )),
     }
 }
 
@@ -147,12 +156,16 @@ fn address_space_limit() -> Option<u64> {
 /// The memory a run may use, and what sets it: the least of `MONOLAYER_MEMORY_LIMIT_MB` (else
 /// Linux's MemAvailable), the room of the process's cgroups and of its RLIMIT_AS; None where
 /// none is known. An unreadable `MONOLAYER_MEMORY_LIMIT_MB` is an error.
-fn memory_limit() -> Result<Option<(u64, &'static str)>, String> {
+fn memory_limit() -> Result<Option<(u64, &'static str)>, RunError> {
     let mut limits: Vec<(u64, &'static str)> = Vec::new();
     match std::env::var("MONOLAYER_MEMORY_LIMIT_MB") {
         Ok(v) => limits.push((parse_memory_limit_mb(&v)?, "MONOLAYER_MEMORY_LIMIT_MB")),
         Err(std::env::VarError::NotUnicode(v)) => {
-            return Err(format!("MONOLAYER_MEMORY_LIMIT_MB = {v:?}: must be a whole number of megabytes ≥ 1"))
+            return Err(RunError::invalid(
+                "MONOLAYER_MEMORY_LIMIT_MB =",
+                format!("{v:?}"),
+                "a whole number of megabytes ≥ 1",
+            ))
         }
         Err(std::env::VarError::NotPresent) => {
             let available = fs::read_to_string("/proc/meminfo").ok().and_then(|info| {
@@ -179,23 +192,23 @@ fn memory_limit() -> Result<Option<(u64, &'static str)>, String> {
 }
 
 /// Refuses a run that would not fit in memory, before it starts, with what it would need.
-pub fn check_memory(params: &Params) -> Result<(), String> {
+pub fn check_memory(params: &Params) -> Result<(), RunError> {
     check_memory_of(params, 1)
 }
 
 /// [`check_memory`] for `copies` simulations of `params` held at once (`bench` keeps one per
 /// thread count it times).
-pub fn check_memory_of(params: &Params, copies: u64) -> Result<(), String> {
+pub fn check_memory_of(params: &Params, copies: u64) -> Result<(), RunError> {
     let need = memory_estimate(params).saturating_mul(copies.max(1));
     let held = if copies > 1 { format!(" for the {copies} simulations held at once") } else { String::new() };
     match memory_limit()? {
-        Some((limit, what)) if need > limit => Err(format!(
+        Some((limit, what)) if need > limit => Err(RunError::Message(format!(
             "box_size = {}, n_cells = {} need about {} MB{held}, more than {what} ({} MB): lower box_size or n_cells",
             params.box_size,
             params.n_cells,
             need >> 20,
             limit >> 20
-        )),
+        ))),
         _ => Ok(()),
     }
 }
@@ -203,16 +216,16 @@ pub fn check_memory_of(params: &Params, copies: u64) -> Result<(), String> {
 /// Refuses a frame interval (given as `flag`) longer than the active phase of `params`: such a
 /// run writes no frame of its activity, only the one at the end of the relaxation. A run of no
 /// active steps has no interval to check.
-pub fn check_frame_interval(flag: &str, frame_interval: u64, params: &Params) -> Result<(), String> {
+pub fn check_frame_interval(flag: &str, frame_interval: u64, params: &Params) -> Result<(), RunError> {
     if frame_interval == 0 {
-        return Err(format!("{flag} 0: must be ≥ 1"));
+        return Err(RunError::invalid(flag, 0, "≥ 1"));
     }
     if params.active_steps > 0 && frame_interval > params.active_steps {
-        return Err(format!(
+        return Err(RunError::Message(format!(
             "{flag} {frame_interval}: larger than active_steps = {}, so the run would write no frame of its \
              active phase: give a frame interval in [1, {0}]",
             params.active_steps
-        ));
+        )));
     }
     Ok(())
 }
@@ -228,28 +241,33 @@ pub struct RunDir {
 
 impl RunDir {
     /// Starts a new run in `dir` (created), refusing a directory that holds a run already.
-    pub fn create(dir: &Path, params: Params, seed: u64, frame_interval: u64) -> Result<Self, String> {
+    pub fn create(dir: &Path, params: Params, seed: u64, frame_interval: u64) -> Result<Self, RunError> {
         if frame_interval == 0 {
-            return Err("frame interval 0: must be ≥ 1".into());
+            return Err(RunError::invalid("frame interval", 0, "≥ 1"));
         }
-        params.validate().map_err(|e| e.to_string())?;
+        params.validate()?;
         check_memory(&params)?;
         if RunRecord::path(dir).exists() {
             return Err(already_a_run(dir));
         }
-        let monolayer = Monolayer::new(params, seed).map_err(|e| e.to_string())?;
-        fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let monolayer = Monolayer::new(params, seed)?;
+        fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
         let lock = RunLock::acquire(dir)?;
         Self::create_locked(lock, dir, monolayer, frame_interval)
     }
 
     /// [`RunDir::create`] in a directory whose lock the caller holds.
-    pub fn create_locked(lock: RunLock, dir: &Path, monolayer: Monolayer, frame_interval: u64) -> Result<Self, String> {
+    pub fn create_locked(
+        lock: RunLock,
+        dir: &Path,
+        monolayer: Monolayer,
+        frame_interval: u64,
+    ) -> Result<Self, RunError> {
         // Checked again under the lock: another writer may have started here meanwhile.
         if RunRecord::path(dir).exists() {
             return Err(already_a_run(dir));
         }
-        fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
+        fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
         remove_stale_temporaries(dir);
         remove_stale_temporaries(&dir.join("frames"));
         // A checkpoint of the start, before the record: a run killed at any point after its
@@ -261,7 +279,7 @@ impl RunDir {
     }
 
     /// Opens the run in `dir` at its last checkpoint.
-    pub fn resume(dir: &Path) -> Result<Self, String> {
+    pub fn resume(dir: &Path) -> Result<Self, RunError> {
         // Refuse what is not a run before putting a lock file into it.
         RunRecord::load(dir)?;
         let lock = RunLock::acquire(dir)?;
@@ -269,24 +287,28 @@ impl RunDir {
     }
 
     /// [`RunDir::resume`] in a directory whose lock the caller holds.
-    pub fn resume_locked(lock: RunLock, dir: &Path) -> Result<Self, String> {
+    pub fn resume_locked(lock: RunLock, dir: &Path) -> Result<Self, RunError> {
         let mut record = RunRecord::load(dir)?;
         if record.storage != STORE_NAME {
-            return Err(format!(
-                "{}: the run stores the cells' fields in {} (`storage`), this build in {STORE_NAME}: it would \
-                 continue on another trajectory; resume it with a build of the run's precision (docs/performance.md, \
-                 \"Storage precision\")",
-                RunRecord::path(dir).display(),
-                record.storage
+            return Err(RunError::file(
+                &RunRecord::path(dir),
+                format!(
+                    "the run stores the cells' fields in {} (`storage`), this build in {STORE_NAME}: it would \
+                     continue on another trajectory; resume it with a build of the run's precision \
+                     (docs/performance.md, \"Storage precision\")",
+                    record.storage
+                ),
             ));
         }
         let checkpoint = checkpoint_path(dir);
         if !checkpoint.exists() {
-            return Err(format!(
-                "{}: no checkpoint: the run stopped before it wrote one, so there is nothing to continue; delete \
-                 {} and start the run again with --out",
-                checkpoint.display(),
-                dir.display()
+            return Err(RunError::file(
+                &checkpoint,
+                format!(
+                    "no checkpoint: the run stopped before it wrote one, so there is nothing to continue; delete {} \
+                     and start the run again with --out",
+                    dir.display()
+                ),
             ));
         }
         let state = read_checkpoint(&checkpoint, record.params.box_size)?;
@@ -295,18 +317,22 @@ impl RunDir {
         let scheduled =
             step == 0 || step == p.relax_steps || (step > p.relax_steps && (step - p.relax_steps).is_multiple_of(fi));
         if step > p.total_steps() || !scheduled {
-            return Err(format!(
-                "{}: step {step} is not a step this run writes a checkpoint at (0, then relax_steps = {}, then every \
-                 {fi} to {}): not this run's checkpoint",
-                checkpoint.display(),
-                p.relax_steps,
-                p.total_steps()
+            return Err(RunError::file(
+                &checkpoint,
+                format!(
+                    "step {step} is not a step this run writes a checkpoint at (0, then relax_steps = {}, then \
+                     every {fi} to {}): not this run's checkpoint",
+                    p.relax_steps,
+                    p.total_steps()
+                ),
             ));
         }
         if let Some(last) = record.last_frame_step.filter(|&last| step < last) {
-            return Err(format!(
-                "{}: step {step} is before the run's last frame (step {last} in run.json): not this run's checkpoint",
-                checkpoint.display()
+            return Err(RunError::file(
+                &checkpoint,
+                format!(
+                    "step {step} is before the run's last frame (step {last} in run.json): not this run's checkpoint"
+                ),
             ));
         }
         // A frame is written before the checkpoint of its step: a kill between that checkpoint
@@ -315,8 +341,8 @@ impl RunDir {
             record.last_frame_step = Some(step);
         }
         let monolayer = Monolayer::from_state(record.params.clone(), record.seed, state)
-            .map_err(|e| format!("{}: {e}", checkpoint.display()))?;
-        fs::create_dir_all(dir.join("frames")).map_err(|e| format!("{}: {e}", dir.display()))?;
+            .map_err(|e| RunError::from(e).context(checkpoint.display().to_string()))?;
+        fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
         remove_stale_temporaries(dir);
         remove_stale_temporaries(&dir.join("frames"));
         Ok(RunDir { dir: dir.to_path_buf(), record, monolayer, _lock: lock })
@@ -324,26 +350,25 @@ impl RunDir {
 
     /// The engine that steps this run. A new run (no step taken yet) takes `engine`; a resumed
     /// one must ask for the engine it started on, which its record names.
-    pub fn with_engine(mut self, engine: Engine) -> Result<Self, String> {
-        let recorded = Engine::parse(&self.record.engine)?;
+    pub fn with_engine(mut self, engine: Engine) -> Result<Self, RunError> {
+        let recorded = Engine::parse(&self.record.engine).map_err(RunError::Parse)?;
         if recorded == engine {
             return Ok(self);
         }
         if self.monolayer.step_count() > 0 || self.record.last_frame_step.is_some() {
-            return Err(format!(
-                "{}: the run was stepped by the {} engine (`engine`), not {}: it would continue on another \
-                 trajectory; resume it with --engine {}",
-                RunRecord::path(&self.dir).display(),
-                recorded.name(),
-                engine.name(),
-                recorded.flag()
+            return Err(RunError::file(
+                &RunRecord::path(&self.dir),
+                format!(
+                    "the run was stepped by the {} engine (`engine`), not {}: it would continue on another \
+                     trajectory; resume it with --engine {}",
+                    recorded.name(),
+                    engine.name(),
+                    recorded.flag()
+                ),
             ));
         }
         if engine == Engine::Gpu && !cfg!(feature = "gpu") {
-            return Err(
-                "--engine gpu: this binary was built without the GPU kernels: cargo build --release --features gpu"
-                    .into(),
-            );
+            return Err(no_gpu());
         }
         self.record.engine = engine.name().into();
         self.record.save(&self.dir)?;
@@ -353,7 +378,7 @@ impl RunDir {
     /// Steps to the end of the protocol, writing a frame and a checkpoint every frame interval
     /// of the active phase (and a checkpoint when relaxation ends), then records how it ended.
     /// With `analyze`, `DIR/analysis` is brought up to date at every frame.
-    pub fn execute(&mut self, analyze: bool, watch: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), String> {
+    pub fn execute(&mut self, analyze: bool, watch: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), RunError> {
         let mut live = match analyze {
             true => Some(LiveRun::start(&self.dir, self.monolayer.params(), self.monolayer.step_count())?),
             false => None,
@@ -361,34 +386,32 @@ impl RunDir {
         let outcome = match Engine::parse(&self.record.engine) {
             Ok(Engine::Cpu) => self.protocol(live.as_mut(), watch),
             Ok(Engine::Gpu) => self.protocol_gpu(live.as_mut(), watch),
-            Err(e) => Err(Stop::Simulation(e)),
+            Err(e) => Err(Stop::Simulation(RunError::Parse(e))),
         };
         self.record.status = match &outcome {
             Ok(()) => RunStatus::Finished,
-            Err(Stop::Simulation(e)) => RunStatus::Failed(e.clone()),
-            Err(Stop::Io(e)) => RunStatus::Stopped(e.clone()),
+            Err(Stop::Simulation(e)) => RunStatus::Failed(e.to_string()),
+            Err(Stop::Io(e)) => RunStatus::Stopped(e.to_string()),
             Err(Stop::Signal(name)) => RunStatus::Stopped(format!("signal {name}")),
         };
         let saved = self.record.save(&self.dir);
         match outcome {
             Ok(()) => saved,
             Err(Stop::Simulation(e)) => Err(e),
-            Err(Stop::Signal(name)) => Err(format!(
-                "stopped by {name} at step {}: `run --resume {}` (or the same sweep again) continues it from its \
-                 last checkpoint",
-                self.monolayer.step_count(),
-                self.dir.display()
-            )),
-            Err(Stop::Io(e)) => Err(format!(
-                "{e}\n  the run itself is sound: once this is fixed, `run --resume {}` (or the same sweep again) \
-                 continues it from its last checkpoint",
-                self.dir.display()
-            )),
+            Err(Stop::Signal(signal)) => Err(RunError::Interrupted {
+                signal,
+                detail: format!(
+                    " at step {}: `run --resume {}` (or the same sweep again) continues it from its last checkpoint",
+                    self.monolayer.step_count(),
+                    self.dir.display()
+                ),
+            }),
+            Err(Stop::Io(e)) => Err(RunError::Resumable { source: Box::new(e), dir: self.dir.clone() }),
         }
     }
 
     fn protocol(&mut self, live: Option<&mut LiveRun>, watch: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), Stop> {
-        self.drive(live, watch, |m| m.step().map_err(|e| e.to_string()))
+        self.drive(live, watch, |m| Ok(m.step()?))
     }
 
     /// The protocol on the GPU: steps to each step that writes something (the end of the
@@ -405,8 +428,9 @@ impl RunDir {
         let p = self.monolayer.params().clone();
         let total = p.total_steps();
         let fi = self.record.frame_interval;
-        let ctx = crate::gpu::GpuContext::new().map_err(|e| Stop::Simulation(format!("--engine gpu: {e}")))?;
-        let mut run = GpuRun::new(&ctx, &self.monolayer).map_err(|e| Stop::Simulation(format!("--engine gpu: {e}")))?;
+        let gpu = |e: crate::gpu::GpuError| Stop::Simulation(RunError::gpu(e).context("--engine gpu"));
+        let ctx = crate::gpu::GpuContext::new().map_err(gpu)?;
+        let mut run = GpuRun::new(&ctx, &self.monolayer).map_err(gpu)?;
         self.drive(live, watch, |m| {
             let s = run.step_count();
             // The next step that writes, at most one check's worth of steps ahead (so that a
@@ -416,7 +440,7 @@ impl RunDir {
             let to = next.min(total).min(s + run.check_every);
             let stepped = run.advance(&ctx, to - s);
             *m = run.download_now(&ctx);
-            stepped.map_err(|e| e.to_string())
+            stepped.map_err(RunError::gpu)
         })
     }
 
@@ -427,7 +451,7 @@ impl RunDir {
         &mut self,
         mut live: Option<&mut LiveRun>,
         watch: &mut dyn FnMut(&Monolayer, &Event),
-        mut advance: impl FnMut(&mut Monolayer) -> Result<(), String>,
+        mut advance: impl FnMut(&mut Monolayer) -> Result<(), RunError>,
     ) -> Result<(), Stop> {
         let total = self.monolayer.params().total_steps();
         let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
@@ -436,7 +460,7 @@ impl RunDir {
                 return Err(Stop::Signal(name));
             }
             if let Err(e) = advance(m) {
-                return Err(unstable(m, dir, &e));
+                return Err(unstable(m, dir, e));
             }
             watch(m, &Event::Step);
             write_scheduled(m, dir, record, live.as_deref_mut(), watch)?;
@@ -446,24 +470,18 @@ impl RunDir {
 
     #[cfg(not(feature = "gpu"))]
     fn protocol_gpu(&mut self, _: Option<&mut LiveRun>, _: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), Stop> {
-        Err(Stop::Simulation(
-            "--engine gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into(),
-        ))
+        Err(Stop::Simulation(no_gpu()))
     }
 }
 
 /// A run that went unstable: `m` (its last good state) is written to `last_good_state.npz`
 /// and the error names it beside the last periodic checkpoint.
-fn unstable(m: &Monolayer, dir: &Path, e: &dyn std::fmt::Display) -> Stop {
+fn unstable(m: &Monolayer, dir: &Path, e: RunError) -> Stop {
     let last_good = dir.join(LAST_GOOD_STATE);
     if let Err(io) = write_checkpoint(m, &last_good) {
         return Stop::Io(io);
     }
-    Stop::Simulation(format!(
-        "{e}\n  the last good state is in {} (the last periodic one in {})",
-        last_good.display(),
-        checkpoint_path(dir).display()
-    ))
+    Stop::Simulation(RunError::Unstable { source: Box::new(e), last_good, checkpoint: checkpoint_path(dir) })
 }
 
 /// What the protocol writes at the monolayer's step, if anything: a frame every frame interval
@@ -480,10 +498,10 @@ fn write_scheduled(
     let s = m.step_count();
     let frame = s >= p.relax_steps && (s - p.relax_steps).is_multiple_of(record.frame_interval);
     if frame {
-        m.evaluate_now().map_err(|e| Stop::Simulation(e.to_string()))?;
+        m.evaluate_now().map_err(|e| Stop::Simulation(e.into()))?;
         write_frame(m, &frame_path(dir, s)).map_err(Stop::Io)?;
         if let Some(Err(e)) = live.map(|live| live.frame(m)) {
-            watch(m, &Event::AnalysisFailed(e));
+            watch(m, &Event::AnalysisFailed(e.to_string()));
         }
     }
     if frame || s == p.relax_steps {
@@ -502,8 +520,8 @@ fn write_scheduled(
     Ok(())
 }
 
-fn already_a_run(dir: &Path) -> String {
-    if checkpoint_path(dir).exists() {
+fn already_a_run(dir: &Path) -> RunError {
+    RunError::Message(if checkpoint_path(dir).exists() {
         format!("{} already holds a run: continue it with --resume {0}, or choose another --out", dir.display())
     } else {
         format!(
@@ -511,5 +529,12 @@ fn already_a_run(dir: &Path) -> String {
              another --out",
             dir.display()
         )
-    }
+    })
+}
+
+/// `--engine gpu` in a build without feature `gpu`.
+fn no_gpu() -> RunError {
+    RunError::Gpu(
+        "--engine gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into(),
+    )
 }

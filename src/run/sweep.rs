@@ -30,6 +30,7 @@ use crate::analysis::regime::{classify, fitted_lifetime, Regime};
 use crate::analysis::FrameSummary;
 use crate::model::params::Params;
 use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
+use crate::run::error::RunError;
 use crate::run::files::{check_frame, read_frame, RunFrames};
 use crate::run::files::{checkpoint_path, write_atomic, RunLock, RunRecord, RunStatus};
 use crate::run::offline::RunAnalysis;
@@ -83,31 +84,31 @@ fn value_text(v: &toml::Value) -> String {
 }
 
 impl SweepSpec {
-    pub fn from_file(path: &Path) -> Result<Self, String> {
+    pub fn from_file(path: &Path) -> Result<Self, RunError> {
         let text = crate::run::files::read_text_input(path, "a sweep file")?;
         crate::run::config::from_toml(&text, &path.display().to_string())
     }
 
     /// `KEY=V1,V2,…` from the command line into the grid (values in TOML syntax; bare words
     /// are strings).
-    pub fn add_grid(&mut self, arg: &str) -> Result<(), String> {
+    pub fn add_grid(&mut self, arg: &str) -> Result<(), RunError> {
         let (k, values) = parse_list("--grid", arg)?;
         if self.grid.contains_key(&k) {
-            return Err(format!(
+            return Err(RunError::Message(format!(
                 "--grid {arg}: `{k}` is already a grid axis (give its values in one --grid {k}=V1,V2,…)"
-            ));
+            )));
         }
         self.grid.insert(k, toml::Value::Array(values));
         Ok(())
     }
 
     /// `K1=V1,K2=V2,…` from the command line as one point (values in TOML syntax, one each).
-    pub fn add_point(&mut self, arg: &str) -> Result<(), String> {
+    pub fn add_point(&mut self, arg: &str) -> Result<(), RunError> {
         let mut point = toml::Table::new();
         for pair in arg.split(',') {
             let (k, v) = parse_assignment("--point", pair)?;
             if point.insert(k.clone(), v).is_some() {
-                return Err(format!("--point {arg}: sets `{k}` twice"));
+                return Err(RunError::Message(format!("--point {arg}: sets `{k}` twice")));
             }
         }
         self.points.push(point);
@@ -117,24 +118,24 @@ impl SweepSpec {
     /// The listed points as (key, value) lists in key order, or the one empty point; checked:
     /// every point sets the same keys, and none that the grid varies (a point listed twice is
     /// refused by [`Self::jobs`], as two runs of one name).
-    fn starting_points(&self) -> Result<Vec<Vec<(String, toml::Value)>>, String> {
+    fn starting_points(&self) -> Result<Vec<Vec<(String, toml::Value)>>, RunError> {
         let Some(first) = self.points.first() else { return Ok(vec![Vec::new()]) };
         let keys: Vec<&String> = first.keys().collect();
         if keys.is_empty() {
-            return Err("sweep: a point sets no parameter".into());
+            return Err(RunError::Sweep("a point sets no parameter".into()));
         }
         if let Some(k) = keys.iter().find(|k| self.grid.contains_key(k.as_str())) {
-            return Err(format!("sweep: `{k}` is set both by the points and by the grid"));
+            return Err(RunError::Sweep(format!("`{k}` is set both by the points and by the grid")));
         }
         let mut out = Vec::new();
         for p in &self.points {
             if p.keys().collect::<Vec<_>>() != keys {
                 let names = |t: &toml::Table| t.keys().cloned().collect::<Vec<_>>().join(", ");
-                return Err(format!(
-                    "sweep: every point must set the same parameters: {} against {}",
+                return Err(RunError::Sweep(format!(
+                    "every point must set the same parameters: {} against {}",
                     names(first),
                     names(p)
-                ));
+                )));
             }
             out.push(p.iter().map(|(k, v)| (k.clone(), v.clone())).collect());
         }
@@ -143,33 +144,33 @@ impl SweepSpec {
 
     /// Every run of the sweep, each one's parameters validated: a bad sweep fails here, before
     /// anything runs, naming the run and the parameter.
-    pub fn jobs(&self) -> Result<Vec<Job>, String> {
+    pub fn jobs(&self) -> Result<Vec<Job>, RunError> {
         if self.seeds.is_empty() {
-            return Err("sweep: `seeds` is empty".into());
+            return Err(RunError::Sweep("`seeds` is empty".into()));
         }
         if self.frame_interval == 0 {
-            return Err("sweep: `frame_interval` must be ≥ 1".into());
+            return Err(RunError::Sweep("`frame_interval` must be ≥ 1".into()));
         }
         // Two jobs of one name would share a directory, and the tables would count them twice.
         if self.seeds.len() > MAX_RUNS {
-            return Err(format!("sweep: {} seeds, more than a sweep's {MAX_RUNS} runs", self.seeds.len()));
+            return Err(RunError::Sweep(format!("{} seeds, more than a sweep's {MAX_RUNS} runs", self.seeds.len())));
         }
         let mut seen = std::collections::HashSet::new();
         if let Some(seed) = self.seeds.iter().find(|s| !seen.insert(**s)) {
-            return Err(format!("sweep: `seeds` lists {seed} twice"));
+            return Err(RunError::Sweep(format!("`seeds` lists {seed} twice")));
         }
         let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
         for (k, v) in &self.grid {
             let values = match v {
                 toml::Value::Array(a) if !a.is_empty() => a.clone(),
-                toml::Value::Array(_) => return Err(format!("sweep: grid `{k}` is an empty list")),
+                toml::Value::Array(_) => return Err(RunError::Sweep(format!("grid `{k}` is an empty list"))),
                 other => vec![other.clone()],
             };
             if values.len() > MAX_RUNS {
-                return Err(format!(
-                    "sweep: grid `{k}` lists {} values, more than a sweep's {MAX_RUNS} runs",
+                return Err(RunError::Sweep(format!(
+                    "grid `{k}` lists {} values, more than a sweep's {MAX_RUNS} runs",
                     values.len()
-                ));
+                )));
             }
             // Equal as numbers is equal (`zeta = [1, 1.0]`): two runs of one point.
             let mut seen = std::collections::HashMap::new();
@@ -180,9 +181,9 @@ impl SweepSpec {
                 };
                 if let Some(first) = seen.insert(id, v) {
                     let (a, b) = (value_text(first), value_text(v));
-                    return Err(format!(
-                        "sweep: grid `{k}` lists {a} twice ({a} and {b} are one value: two identical runs)"
-                    ));
+                    return Err(RunError::Sweep(format!(
+                        "grid `{k}` lists {a} twice ({a} and {b} are one value: two identical runs)"
+                    )));
                 }
             }
             axes.push((k.clone(), values));
@@ -195,28 +196,30 @@ impl SweepSpec {
                 || self.points.iter().any(|p| p.contains_key(key))
         };
         if sets("chi") && sets("xi_substrate") {
-            return Err("sweep: sets both `chi` and `xi_substrate` (χ sets ξ_s = χ·ξ_cell, so one would override \
+            return Err(RunError::Sweep(
+                "sets both `chi` and `xi_substrate` (χ sets ξ_s = χ·ξ_cell, so one would override \
                         the other): give one of them"
-                .into());
+                    .into(),
+            ));
         }
         // A grid or point value replaces the base's: one of the two would be dropped unsaid.
         if let Some(k) =
             self.base.keys().find(|k| self.grid.contains_key(*k) || self.points.iter().any(|p| p.contains_key(*k)))
         {
             let by = if self.grid.contains_key(k) { "the grid" } else { "the points" };
-            return Err(format!(
-                "sweep: `{k}` is set both by [base] (or --set) and by {by}, whose value would replace the base's: give \
+            return Err(RunError::Sweep(format!(
+                "`{k}` is set both by [base] (or --set) and by {by}, whose value would replace the base's: give \
                  it in one of them"
-            ));
+            )));
         }
         let runs = axes
             .iter()
             .try_fold(self.points.len().max(1).saturating_mul(self.seeds.len()), |n, (_, v)| n.checked_mul(v.len()))
             .filter(|&n| n <= MAX_RUNS);
         if runs.is_none() {
-            return Err(format!(
-                "sweep: more than {MAX_RUNS} runs (the paper's whole plan is 1,002): split it into several sweeps"
-            ));
+            return Err(RunError::Sweep(format!(
+                "more than {MAX_RUNS} runs (the paper's whole plan is 1,002): split it into several sweeps"
+            )));
         }
         let mut points = self.starting_points()?;
         for (k, values) in &axes {
@@ -264,10 +267,10 @@ impl SweepSpec {
                 name.push_str(&format!("seed{seed}"));
                 if let Some(&other) = names.get(&name) {
                     let other: &Job = &jobs[other];
-                    return Err(format!(
-                        "sweep: runs {:?} and {:?} would share the directory {name}",
+                    return Err(RunError::Sweep(format!(
+                        "runs {:?} and {:?} would share the directory {name}",
                         other.values, label
-                    ));
+                    )));
                 }
                 names.insert(name.clone(), jobs.len());
                 jobs.push(Job { name, values: label.clone(), params: params.clone(), seed });
@@ -286,9 +289,9 @@ pub struct Shard {
 }
 
 impl std::str::FromStr for Shard {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || format!("--shard {s}: expected K/N with 0 ≤ K < N");
+    type Err = RunError;
+    fn from_str(s: &str) -> Result<Self, RunError> {
+        let bad = || RunError::Parse(format!("--shard {s}: expected K/N with 0 ≤ K < N"));
         let (k, n) = s.split_once('/').ok_or_else(bad)?;
         let (index, count) = (k.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
         if count == 0 || index >= count {
@@ -388,7 +391,7 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
 }
 
 /// Measures the frames of the run in `dir`.
-pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, String> {
+pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, RunError> {
     let record = RunRecord::load(dir)?;
     let mut s = RunSummary {
         name: job.name.clone(),
@@ -445,29 +448,29 @@ enum Start {
 
 /// The run's record if `dir` holds one, checked against the job: a sweep never continues a run
 /// made with other parameters, seed or frame interval.
-fn existing_record(job: &Job, dir: &Path, frame_interval: u64) -> Result<Option<RunRecord>, String> {
+fn existing_record(job: &Job, dir: &Path, frame_interval: u64) -> Result<Option<RunRecord>, RunError> {
     if !RunRecord::path(dir).exists() {
         return Ok(None);
     }
     let record = RunRecord::load(dir)?;
     if record.params != job.params || record.seed != job.seed {
-        return Err(format!(
+        return Err(RunError::Message(format!(
             "{} was run with other parameters or seed than this sweep gives it: use another --out",
             dir.display()
-        ));
+        )));
     }
     if record.frame_interval != frame_interval {
-        return Err(format!(
+        return Err(RunError::Message(format!(
             "{} was run with a frame interval of {}, this sweep asks for {frame_interval}: use the same \
              --frame-interval, or another --out",
             dir.display(),
             record.frame_interval
-        ));
+        )));
     }
     Ok(Some(record))
 }
 
-fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, String> {
+fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, RunError> {
     let Some(record) = existing_record(job, dir, frame_interval)? else { return Ok(Start::Fresh) };
     if record.status.is_complete() {
         Ok(Start::Done)
@@ -475,7 +478,7 @@ fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, String>
         Ok(Start::Resume)
     } else {
         // Killed before its first checkpoint (runs of earlier versions): nothing to keep.
-        fs::remove_file(RunRecord::path(dir)).map_err(|e| format!("{}: {e}", dir.display()))?;
+        fs::remove_file(RunRecord::path(dir)).map_err(|e| RunError::io(dir, e))?;
         Ok(Start::Fresh)
     }
 }
@@ -484,11 +487,11 @@ fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, String>
 enum JobError {
     /// Another process holds the run's lock (its process id, when the lock file says).
     Held(Option<u32>),
-    Other(String),
+    Other(RunError),
 }
 
-impl From<String> for JobError {
-    fn from(e: String) -> Self {
+impl From<RunError> for JobError {
+    fn from(e: RunError) -> Self {
         JobError::Other(e)
     }
 }
@@ -496,15 +499,15 @@ impl From<String> for JobError {
 /// Runs (or resumes, or skips when done) one job in `OUT/runs/NAME`, single-threaded, holding
 /// the directory's lock from before it looks at the directory.
 fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() + Sync)) -> Result<(), JobError> {
-    fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    fs::create_dir_all(dir).map_err(|e| RunError::io(dir, e))?;
     let lock = RunLock::try_acquire(dir)?.map_err(JobError::Held)?;
     let mut run = match start_of(job, dir, frame_interval)? {
         Start::Done => return Ok(()),
         Start::Resume => RunDir::resume_locked(lock, dir)?,
         Start::Fresh => {
-            job.params.validate().map_err(|e| e.to_string())?;
+            job.params.validate().map_err(RunError::from)?;
             crate::run::runner::check_memory(&job.params)?;
-            let m = crate::model::monolayer::Monolayer::new(job.params.clone(), job.seed).map_err(|e| e.to_string())?;
+            let m = crate::model::monolayer::Monolayer::new(job.params.clone(), job.seed).map_err(RunError::from)?;
             RunDir::create_locked(lock, dir, m, frame_interval)?
         }
     };
@@ -536,9 +539,9 @@ pub fn run_sweep(
     workers: usize,
     shard: Option<Shard>,
     progress: &(dyn Fn(u64, usize, usize) + Sync),
-) -> Result<Vec<RunSummary>, String> {
+) -> Result<Vec<RunSummary>, RunError> {
     let runs_dir = out.join("runs");
-    fs::create_dir_all(&runs_dir).map_err(|e| format!("{}: {e}", runs_dir.display()))?;
+    fs::create_dir_all(&runs_dir).map_err(|e| RunError::io(&runs_dir, e))?;
     // Check every existing directory against its job before any work starts.
     for job in jobs {
         existing_record(job, &runs_dir.join(&job.name), frame_interval)?;
@@ -606,7 +609,7 @@ pub fn run_sweep(
         ));
     }
     if !errors.is_empty() {
-        return Err(errors.join("\n"));
+        return Err(RunError::Message(errors.join("\n")));
     }
     let seconds = seconds.into_inner().expect("no panics hold it");
     let mut summaries = measure_existing(jobs, out)?;
@@ -619,7 +622,7 @@ pub fn run_sweep(
 /// Measures every run of `jobs` that has a directory in `OUT/runs/`, finished or not, running
 /// nothing (`sweep --tables-only`, and the end of every sweep). A run still being written is
 /// read as far as its frames go: each frame is renamed into place whole.
-pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, String> {
+pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, RunError> {
     let runs_dir = out.join("runs");
     let mut summaries = Vec::new();
     for job in jobs {
@@ -635,13 +638,13 @@ pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, Str
 /// seed and parameters its `run.json` records, and the grid values its directory name carries
 /// (`chi0.1_zeta0.5_seed1`, as [`SweepSpec::jobs`] names runs) where every name reads so with the
 /// same keys; otherwise the parameters in which the runs differ.
-pub fn jobs_of_runs(out: &Path) -> Result<Vec<Job>, String> {
+pub fn jobs_of_runs(out: &Path) -> Result<Vec<Job>, RunError> {
     let runs_dir = out.join("runs");
     let entries = fs::read_dir(&runs_dir)
         .map_err(|e| format!("{}: {e} (a sweep's runs are in OUT/runs; give --out of a sweep)", runs_dir.display()))?;
     let mut runs = Vec::new();
     for entry in entries {
-        let entry = entry.map_err(|e| format!("{}: {e}", runs_dir.display()))?;
+        let entry = entry.map_err(|e| RunError::io(&runs_dir, e))?;
         let name = entry.file_name().to_string_lossy().into_owned();
         let dir = entry.path();
         // Hidden entries are writers' temporaries; a run linked in from another sweep counts.
@@ -890,7 +893,7 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
 
 /// Writes `OUT/summary.csv`, `OUT/regimes.csv` (and the regime map plot where the grid has χ
 /// and ζ); returns the files written.
-pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, String> {
+pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, RunError> {
     // A sweep takes no lock on OUT (several shards write these tables), so only the temporaries
     // of writers no longer alive are taken.
     crate::run::files::remove_dead_temporaries(out);
@@ -900,7 +903,7 @@ pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>
         let path = out.join(name);
         write_atomic(&path, |w| {
             use std::io::Write;
-            w.write_all(text.as_bytes()).map_err(|e| format!("{}: {e}", path.display()))
+            w.write_all(text.as_bytes()).map_err(|e| RunError::io(&path, e))
         })?;
         written.push(path);
     }
@@ -911,7 +914,7 @@ pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>
 /// The regime map like the paper's Fig. 3d, χ (log scale) against ζ: red circles no holes, blue
 /// squares only short-lived, green triangles short- and long-lived; a cross where a run blew up.
 /// Drawn only when the grid varies both `chi` and `zeta`.
-fn plot_regime_map(base: &Path, points: &[RegimePoint]) -> Result<Vec<PathBuf>, String> {
+fn plot_regime_map(base: &Path, points: &[RegimePoint]) -> Result<Vec<PathBuf>, RunError> {
     use crate::run::plots::{both_of, plot_err, regime_marker, Draw, FONT};
     use plotters::coord::Shift;
     use plotters::prelude::*;
@@ -924,7 +927,7 @@ fn plot_regime_map(base: &Path, points: &[RegimePoint]) -> Result<Vec<PathBuf>, 
     }
     struct Map(Vec<(f64, f64, Regime, bool)>);
     impl Draw for Map {
-        fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), RunError> {
             root.fill(&WHITE).map_err(plot_err)?;
             let f = |g: fn(f64, f64) -> f64, i: fn(&(f64, f64, Regime, bool)) -> f64, init| {
                 self.0.iter().map(i).fold(init, g)
@@ -1047,10 +1050,10 @@ mod tests {
         assert!((jobs[0].params.xi_substrate - 0.1).abs() < 1e-15);
         assert_eq!(jobs[0].params.active_steps, 10);
         let bad: SweepSpec = toml::from_str("[grid]\nzeta = [0.3, 40.0]\n").unwrap();
-        let e = bad.jobs().unwrap_err();
+        let e = bad.jobs().unwrap_err().to_string();
         assert!(e.contains("zeta = 40") && e.contains("`zeta`"), "{e}");
         let typo: SweepSpec = toml::from_str("[grid]\nzetta = [0.3]\n").unwrap();
-        assert!(typo.jobs().unwrap_err().contains("zetta"));
+        assert!(typo.jobs().unwrap_err().to_string().contains("zetta"));
         assert!(toml::from_str::<SweepSpec>("sedes = [1]\n").is_err());
         assert_eq!("2/4".parse::<Shard>().unwrap(), Shard { index: 2, count: 4 });
     }
@@ -1071,7 +1074,7 @@ mod tests {
         assert_eq!(spec.jobs().unwrap()[0].name, "chi0.1_zeta0.5_gamma0.05_seed1");
         assert_eq!(spec.jobs().unwrap().len(), 8);
         // Refused, each naming why.
-        let err = |spec: &SweepSpec| spec.jobs().unwrap_err();
+        let err = |spec: &SweepSpec| spec.jobs().unwrap_err().to_string();
         let mut overlap = spec.clone();
         overlap.add_grid("zeta=0.3").unwrap();
         assert!(err(&overlap).contains("`zeta` is set both"), "{}", err(&overlap));
@@ -1082,7 +1085,7 @@ mod tests {
         twice.add_point("chi=0.1,zeta=0.5").unwrap();
         assert!(err(&twice).contains("would share the directory chi0.1_zeta0.5_gamma0.05_seed1"), "{}", err(&twice));
         let empty = || toml::from_str::<SweepSpec>("").unwrap();
-        assert!(empty().add_point("chi=0.1,chi=0.2").unwrap_err().contains("twice"));
+        assert!(empty().add_point("chi=0.1,chi=0.2").unwrap_err().to_string().contains("twice"));
         let mut bad = empty();
         bad.add_point("chi=0.1,zeta=40").unwrap();
         assert!(err(&bad).contains("zeta"), "{}", err(&bad));

@@ -9,6 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::slurm::{self, SlurmOptions};
 use super::{make_figures, Figure, Plan, Scale, Speed, Stage};
+use crate::run::error::RunError;
 use crate::run::sweep::{run_sweep, steps_to_run, Job, Shard};
 
 /// What the command line asked for.
@@ -42,7 +43,7 @@ fn hours(seconds: f64) -> String {
 }
 
 /// Runs `monolayer figures`; the files written are printed, the rest goes to stderr.
-pub fn figures(o: &FiguresOptions) -> Result<(), String> {
+pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
     let figures = match &o.only {
         Some(list) => Figure::parse_list(list)?,
         None => Figure::ALL.to_vec(),
@@ -67,7 +68,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
     // Before the estimate, which steps a simulation of every size in the plan (and would abort
     // where one does not fit): the largest must fit, as every run must.
     if let Some(job) = plan.jobs.iter().max_by_key(|j| crate::run::runner::memory_estimate(&j.params)) {
-        job.params.validate().map_err(|e| e.to_string())?;
+        job.params.validate().map_err(RunError::from)?;
         crate::run::runner::check_memory(&job.params)?;
     }
     let todo: Vec<&Job> =
@@ -111,20 +112,22 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
     }
     // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
     if matches!(o.scale, Scale::Paper | Scale::Evidence) && !o.yes && o.shard.is_none() && !todo.is_empty() {
-        return Err(format!(
+        return Err(RunError::Message(format!(
             "--scale {} runs {} simulations here, about {} on {} core(s): refused without --yes; \
              on a cluster, --slurm submits them as a job array (--slurm --dry-run prints the scripts)",
             o.scale.name(),
             todo.len(),
             hours(core_seconds / workers as f64),
             workers
-        ));
+        )));
     }
     if !todo.is_empty() {
         execute(&plan, &mine, o, steps)?;
     }
     if let Some((name, _)) = crate::run::runner::stop_signal() {
-        return Err(format!("stopped by {name}: the same command again continues the runs from their checkpoints"));
+        return Err(RunError::Message(format!(
+            "stopped by {name}: the same command again continues the runs from their checkpoints"
+        )));
     }
     if o.stage == Stage::All {
         draw(&plan, &o.out, o.jobs)?;
@@ -132,7 +135,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), String> {
     Ok(())
 }
 
-fn draw(plan: &Plan, out: &Path, workers: usize) -> Result<(), String> {
+fn draw(plan: &Plan, out: &Path, workers: usize) -> Result<(), RunError> {
     let t = Instant::now();
     let written = make_figures(plan, out, workers)?;
     for path in &written {
@@ -143,7 +146,7 @@ fn draw(plan: &Plan, out: &Path, workers: usize) -> Result<(), String> {
 }
 
 /// The runs through the sweep machinery, with a bar over all their steps.
-fn execute(plan: &Plan, mine: &[&Job], o: &FiguresOptions, steps: u64) -> Result<(), String> {
+fn execute(plan: &Plan, mine: &[&Job], o: &FiguresOptions, steps: u64) -> Result<(), RunError> {
     let jobs: Vec<Job> = mine.iter().map(|j| (*j).clone()).collect();
     let bar = if o.quiet {
         ProgressBar::hidden()
@@ -178,7 +181,7 @@ fn execute(plan: &Plan, mine: &[&Job], o: &FiguresOptions, steps: u64) -> Result
     Ok(())
 }
 
-fn submit(plan: &Plan, o: &FiguresOptions, speed: &Speed) -> Result<(), String> {
+fn submit(plan: &Plan, o: &FiguresOptions, speed: &Speed) -> Result<(), RunError> {
     if o.stage != Stage::All || o.shard.is_some() {
         return Err("--slurm submits the whole plan: it takes neither --stage nor --shard".into());
     }
@@ -189,10 +192,10 @@ fn submit(plan: &Plan, o: &FiguresOptions, speed: &Speed) -> Result<(), String> 
     for (what, text) in [("--out", out.display().to_string()), ("--partition", o.partition.clone().unwrap_or_default())]
     {
         if let Some(c) = text.chars().find(|c| c.is_whitespace() || c.is_control() || "%\"'\\$`".contains(*c)) {
-            return Err(format!(
+            return Err(RunError::Message(format!(
                 "{what} {text:?}: holds {c:?}, which an #SBATCH line cannot hold (spaces, %, quotes, $, `, \\ and \
                  control characters): choose one without"
-            ));
+            )));
         }
     }
     let binary = std::env::current_exe().map_err(|e| format!("the path of this program: {e}"))?;

@@ -16,6 +16,7 @@ use crate::analysis::correlations::correlation_length;
 use crate::analysis::holes::{counted_holes, CountedHole, HoleCounting};
 use crate::analysis::precursors::{Precursor, DEPTH};
 use crate::analysis::regime::{classify, fitted_lifetime, Regime};
+use crate::run::error::RunError;
 use crate::run::files::{read_frame, write_atomic, RunFrames, RunRecord, RunStatus};
 use crate::run::offline::RunAnalysis;
 
@@ -50,7 +51,7 @@ impl RunData {
 
 /// Measures every run of the plan, `workers` at a time; refuses, naming them, when runs are
 /// missing or unfinished (the figures would silently be drawn from fewer runs).
-pub fn measure_runs(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<RunData>, String> {
+pub fn measure_runs(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<RunData>, RunError> {
     let runs_dir = out.join("runs");
     let mut missing = Vec::new();
     for job in &plan.jobs {
@@ -58,10 +59,10 @@ pub fn measure_runs(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<RunDa
         match RunRecord::load(&dir) {
             Ok(r) if r.status.is_complete() => {
                 if r.params != job.params || r.seed != job.seed {
-                    return Err(format!(
+                    return Err(RunError::Message(format!(
                         "{} was run with other parameters or seed than this plan gives it (another scale or --set?): use another --out",
                         dir.display()
-                    ));
+                    )));
                 }
             }
             Ok(r) => missing.push(format!("{} ({})", job.name, r.status)),
@@ -70,20 +71,23 @@ pub fn measure_runs(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<RunDa
     }
     if !missing.is_empty() {
         let shown: Vec<&str> = missing.iter().take(5).map(String::as_str).collect();
-        return Err(format!(
+        return Err(RunError::Message(format!(
             "{} of the plan's {} runs in {} are not finished: {}{}; run them first (`monolayer figures --stage runs` with the same --scale, --only and --set, or the Slurm array)",
             missing.len(),
             plan.jobs.len(),
             runs_dir.display(),
             shown.join(", "),
             if missing.len() > shown.len() { ", …" } else { "" }
-        ));
+        )));
     }
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(workers.max(1)).build().map_err(|e| e.to_string())?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(workers.max(1))
+        .build()
+        .map_err(|e| RunError::Message(e.to_string()))?;
     pool.install(|| plan.jobs.par_iter().map(|job| measure_run(&runs_dir.join(&job.name))).collect())
 }
 
-fn measure_run(dir: &Path) -> Result<RunData, String> {
+fn measure_run(dir: &Path) -> Result<RunData, RunError> {
     let record = RunRecord::load(dir)?;
     let p = &record.params;
     let mut data = RunData {
@@ -132,8 +136,8 @@ pub struct Made {
     pub measured: Vec<String>,
 }
 
-pub fn write_text(path: &Path, text: &str) -> Result<(), String> {
-    write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| format!("{}: {e}", path.display())))
+pub fn write_text(path: &Path, text: &str) -> Result<(), RunError> {
+    write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| RunError::io(path, e)))
 }
 
 /// Mean and standard error of the mean (0 for fewer than two values).
@@ -198,7 +202,7 @@ fn seeds_note(plan: &Plan, figure: Figure) -> String {
 }
 
 /// Draws one figure and writes its table(s).
-pub fn figure(plan: &Plan, figure: Figure, runs: &[RunData], out: &Path) -> Result<Made, String> {
+pub fn figure(plan: &Plan, figure: Figure, runs: &[RunData], out: &Path) -> Result<Made, RunError> {
     let base = out.join(figure.stem());
     let mut made = Made { figure, files: Vec::new(), runs: seeds_note(plan, figure), measured: Vec::new() };
     match figure {
@@ -215,7 +219,7 @@ pub fn figure(plan: &Plan, figure: Figure, runs: &[RunData], out: &Path) -> Resu
     Ok(made)
 }
 
-fn csv(base: &Path, suffix: &str, text: &str, made: &mut Made) -> Result<(), String> {
+fn csv(base: &Path, suffix: &str, text: &str, made: &mut Made) -> Result<(), RunError> {
     let path = PathBuf::from(format!("{}{suffix}.csv", base.display()));
     write_text(&path, text)?;
     made.files.push(path);
@@ -224,7 +228,13 @@ fn csv(base: &Path, suffix: &str, text: &str, made: &mut Made) -> Result<(), Str
 
 /// Figs. 1c, 1d and S2: a precursor measure against frames before nucleation, one curve per χ,
 /// averaged over every hole of every run at that χ.
-fn precursor_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+fn precursor_figure(
+    plan: &Plan,
+    figure: Figure,
+    runs: &[RunData],
+    base: &Path,
+    made: &mut Made,
+) -> Result<(), RunError> {
     // Each measure with the sign of (measure − chance) the paper's claim predicts.
     let columns: Vec<(&str, &str, Column, f64)> = match figure {
         Figure::Fig1c => {
@@ -378,7 +388,7 @@ fn precursor_line(sel: &[&RunData], desc: &str, column: Column, sign: f64) -> St
 /// The mechanism's tangential alignment: per χ, the mean angle between a cell's elongation axis
 /// and the nearest hole boundary's tangent, for the cells bordering a hole and for the cells away
 /// from holes (45°: random axes), with its table.
-fn alignment_panel(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<Panel, String> {
+fn alignment_panel(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<Panel, RunError> {
     use crate::analysis::alignment::{AWAY_RADII, BORDER_RADII};
     let mut text = String::from("chi,where,cell_frames,mean_angle_degrees,sem_degrees\n");
     let mut panel = Panel::new(
@@ -440,7 +450,7 @@ pub fn fmt(x: f64) -> String {
 
 /// Fig. 2: P(hole | ε̇) per (χ, ζ), pooled over runs, with exponential fits; beside it the
 /// paper's inset: the fitted coefficient against χ^0.1/ζ.
-fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+fn fig2(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), RunError> {
     use crate::analysis::nucleation::{
         best_collapse_exponent, binomial_fit, collapse_scatter, least_squares_fit, STRAIN_RATE_BIN,
     };
@@ -619,7 +629,7 @@ pub fn survival(mut d: Vec<(f64, bool)>) -> Vec<(f64, usize, usize, f64)> {
 
 /// Fig. 3c: the survival of holes against τ/t_total per (χ, ζ), with the exponential of the
 /// fitted lifetime (maximum likelihood, open holes censored: the regime criterion's fit).
-fn fig3c(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+fn fig3c(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), RunError> {
     let mut text = String::from("chi,zeta,tau_over_total,at_risk,closed,survival\n");
     let mut fits = String::from("chi,zeta,runs,holes,closed,t_total,fitted_lifetime,fitted_lifetime_over_total\n");
     let mut panel = Panel::new("Fig. 3c: hole survival", "τ_hole / t_total", "survival probability");
@@ -681,7 +691,7 @@ fn fig3c(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<
 }
 
 /// Fig. 3d: the regime of every (χ, ζ), seeds pooled, by the paper's criterion.
-fn fig3d(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+fn fig3d(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), RunError> {
     let mut text = String::from("chi,zeta,runs,failed,holes,fitted_lifetime,t_total,regime\n");
     let mut cells = Vec::new();
     for chi in CHI_REGIMES {
@@ -729,7 +739,7 @@ type Pick = Box<dyn Fn(&Point) -> bool>;
 
 /// Figs. 3a–b (against ζ, a curve per χ) and S3 (against γ): the largest hole over the box and
 /// the number of holes per run, mean and standard error over runs.
-fn holes_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+fn holes_figure(plan: &Plan, figure: Figure, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), RunError> {
     let s3 = figure == Figure::FigS3;
     let mut text = String::from(if s3 { "gamma" } else { "chi,zeta" });
     text += ",runs,failed,max_hole_area_over_box_mean,max_hole_area_over_box_sem,holes_mean,holes_sem\n";
@@ -803,7 +813,7 @@ fn plan_seeds(plan: &Plan, figure: Figure) -> u64 {
 }
 
 /// Fig. S1: C_v(r) and C_Q(r) after the whole run, averaged over seeds, per χ and the dry limit.
-fn fig_s1(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), String> {
+fn fig_s1(plan: &Plan, runs: &[RunData], base: &Path, made: &mut Made) -> Result<(), RunError> {
     let mut text = String::from("chi,r,velocity_correlation,nematic_correlation\n");
     let mut lengths = String::from("chi,runs,velocity_correlation_length,nematic_correlation_length\n");
     let size =

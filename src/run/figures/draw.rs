@@ -7,6 +7,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::analysis::regime::Regime;
+use crate::run::error::RunError;
 use crate::run::plots::{self, both_of, plot_err, regime_marker, Draw, FONT};
 
 /// The first six of the shared palette: the figures cycle through six colours.
@@ -129,7 +130,7 @@ fn colour(s: &Series) -> RGBColor {
     PALETTE[s.colour % PALETTE.len()]
 }
 
-fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> Result<(), String> {
+fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> Result<(), RunError> {
     let ((x0, x1), (y0, y1)) = p.ranges();
     let (caption, label) = (20, 14);
     let mut builder = ChartBuilder::on(area);
@@ -234,7 +235,7 @@ struct Panels<'a> {
 }
 
 impl Draw for Panels<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), RunError> {
         root.fill(&WHITE).map_err(plot_err)?;
         let areas = root.split_evenly((1, self.panels.len().max(1)));
         for (area, p) in areas.iter().zip(self.panels) {
@@ -245,7 +246,7 @@ impl Draw for Panels<'_> {
 }
 
 /// One or more panels side by side: `base.png`, `base.svg`.
-pub fn panels(base: &Path, panels: &[Panel]) -> Result<Vec<PathBuf>, String> {
+pub fn panels(base: &Path, panels: &[Panel]) -> Result<Vec<PathBuf>, RunError> {
     let w = 640 * panels.len().max(1) as u32;
     both_of(base, (w, 500), &Panels { panels })
 }
@@ -253,7 +254,7 @@ pub fn panels(base: &Path, panels: &[Panel]) -> Result<Vec<PathBuf>, String> {
 struct RegimeMap<'a>(&'a [(f64, f64, Regime, bool)]);
 
 impl Draw for RegimeMap<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), RunError> {
         root.fill(&WHITE).map_err(plot_err)?;
         let xs = self.0.iter().map(|p| p.0);
         let (x0, x1) = if self.0.is_empty() {
@@ -285,6 +286,6 @@ impl Draw for RegimeMap<'_> {
 
 /// The regime map (χ log scale against ζ): red circles no holes, blue squares only short-lived,
 /// green triangles short- and long-lived, a cross where a run failed.
-pub fn regime_map(base: &Path, cells: &[(f64, f64, Regime, bool)]) -> Result<Vec<PathBuf>, String> {
+pub fn regime_map(base: &Path, cells: &[(f64, f64, Regime, bool)]) -> Result<Vec<PathBuf>, RunError> {
     both_of(base, (640, 500), &RegimeMap(cells))
 }

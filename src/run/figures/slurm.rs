@@ -12,6 +12,7 @@ use std::process::Command;
 
 use super::data::write_text;
 use super::Plan;
+use crate::run::error::RunError;
 
 /// Slurm's default MaxArraySize is 1001 (indices 0–1000): more runs than that share tasks.
 pub const MAX_ARRAY_TASKS: usize = 1000;
@@ -140,9 +141,9 @@ pub fn scripts(plan: &Plan, out: &Path, o: &SlurmOptions) -> (String, String, St
 }
 
 /// Writes the scripts into `out/slurm/`; returns their paths.
-pub fn write_scripts(plan: &Plan, out: &Path, o: &SlurmOptions) -> Result<Vec<PathBuf>, String> {
+pub fn write_scripts(plan: &Plan, out: &Path, o: &SlurmOptions) -> Result<Vec<PathBuf>, RunError> {
     let dir = out.join("slurm");
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    std::fs::create_dir_all(&dir).map_err(|e| RunError::io(&dir, e))?;
     let (runs, figures, submit) = scripts(plan, out, o);
     let mut written = Vec::new();
     for (name, text) in [("runs.sbatch", runs), ("figures.sbatch", figures), ("submit.sh", submit)] {
@@ -154,14 +155,18 @@ pub fn write_scripts(plan: &Plan, out: &Path, o: &SlurmOptions) -> Result<Vec<Pa
 }
 
 /// Submits the array, then the figures job depending on it; returns their job ids.
-pub fn submit(out: &Path) -> Result<(String, String), String> {
+pub fn submit(out: &Path) -> Result<(String, String), RunError> {
     let dir = out.join("slurm");
-    let sbatch = |args: &[&str]| -> Result<String, String> {
+    let sbatch = |args: &[&str]| -> Result<String, RunError> {
         let o = Command::new("sbatch").args(args).current_dir(&dir).output().map_err(|e| {
             format!("sbatch: {e} (is this a Slurm login node? --dry-run prints the scripts without submitting)")
         })?;
         if !o.status.success() {
-            return Err(format!("sbatch {}: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim()));
+            return Err(RunError::Message(format!(
+                "sbatch {}: {}",
+                args.join(" "),
+                String::from_utf8_lossy(&o.stderr).trim()
+            )));
         }
         let id = String::from_utf8_lossy(&o.stdout).trim().to_string();
         // --parsable prints `id` or `id;cluster`.
