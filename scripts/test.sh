@@ -47,5 +47,10 @@ if [ ! -x /usr/bin/chromium ]; then
 fi
 bash scripts/serve.sh --build-only
 (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
-cargo build --release --bin monolayer --features gpu
+# The native binary the page is compared with (target/release/monolayer): the one the tests step
+# built for the integration tests. Asked for with that step's own command, since a plain
+# `cargo build --bin monolayer` resolves features without the dev-dependencies (proptest turns on
+# bitflags' `std`), which would rebuild bitflags, wgpu and naga here a second time; with the same
+# command nothing is compiled again.
+cargo test --release --features gpu --no-run
 node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/demo.test.mjs tests/browser/viewer.test.mjs

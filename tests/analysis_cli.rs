@@ -6,7 +6,7 @@ mod common;
 use std::fs;
 use std::path::Path;
 
-use common::{lines, monolayer, small_run, stderr};
+use common::{lines, monolayer, quick_run, small_run, stderr};
 
 /// The tables have a row per frame (and per hole), the plots are real PNG and SVG files, and
 /// `run --analyze` writes the same tables as `analyze` afterwards.
@@ -161,24 +161,7 @@ fn analyze_refuses_what_is_not_a_complete_run_and_writes_nothing() {
 
     // A frame of another lattice size (another run's frame copied in).
     let other = dir.path().join("other");
-    let o = monolayer(&[
-        "run",
-        "--quiet",
-        "--set",
-        "box_size=50",
-        "--set",
-        "n_cells=12",
-        "--relax-steps",
-        "50",
-        "--steps",
-        "10",
-        "--frame-interval",
-        "10",
-        "--threads",
-        "1",
-        "--out",
-        other.to_str().unwrap(),
-    ]);
+    let o = quick_run(&other, 50, 12, "50", "10", &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     fs::copy(other.join("frames").join("frame_0000060.npz"), damaged.join("frames").join("frame_0000330.npz")).unwrap();
     check(&damaged, "a 50×50 lattice, the run's run.json has box_size = 60");

@@ -3,19 +3,10 @@
 
 mod common;
 
-use common::csv_files;
+use common::{csv_files, monolayer, stderr};
 use std::path::Path;
-use std::process::{Command, Output};
 
 use monolayer::run::figures::{Figure, Plan, Scale};
-
-fn monolayer(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 #[test]
 fn the_paper_plan_has_the_papers_counts_and_shares_runs() {

@@ -7,7 +7,7 @@ mod common;
 
 use std::fs;
 
-use common::{arg, monolayer, stderr};
+use common::{arg, monolayer, quick_run, stderr};
 use monolayer::formats::frame_file::{decode_frame, encode_frame};
 use monolayer::formats::frame_file_name;
 use monolayer::run::files::{read_frame, write_frame, RunFrames, RunRecord};
@@ -18,24 +18,7 @@ use monolayer::{Monolayer, Params};
 fn frames_written_by_monolayer_run_decode_to_the_arrays_analyze_reads() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let o = monolayer(&[
-        "run",
-        "--quiet",
-        "--set",
-        "box_size=40",
-        "--set",
-        "n_cells=6",
-        "--relax-steps",
-        "60",
-        "--steps",
-        "20",
-        "--frame-interval",
-        "10",
-        "--threads",
-        "1",
-        "--out",
-        arg(&run),
-    ]);
+    let o = quick_run(&run, 40, 6, "60", "20", &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let frames = RunFrames::open(&run).unwrap();
     assert_eq!(frames.frames.len(), 3, "frames at the end of relaxation and every 10 steps");

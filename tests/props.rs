@@ -9,6 +9,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use common::npz::{npy, replace_npz_entry};
 use monolayer::run::config::load_params;
 use monolayer::run::files::{read_checkpoint, read_frame, write_checkpoint, write_frame, RunRecord};
 use monolayer::{Monolayer, Params};
@@ -229,41 +230,6 @@ proptest! {
             prop_assert!(s.substrate.iter().all(|&v| v.is_finite() && v > 0.0));
         }
     }
-}
-
-/// An `.npy` whose header declares `shape` of `descr`, followed by `data` bytes only.
-fn npy(descr: &str, shape: &[u64], data: &[u8]) -> Vec<u8> {
-    let dims: Vec<String> = shape.iter().map(|d| format!("{d},")).collect();
-    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}), }}", dims.join(" "));
-    while (10 + dict.len() + 1) % 64 != 0 {
-        dict.push(' ');
-    }
-    dict.push('\n');
-    let mut v = b"\x93NUMPY\x01\x00".to_vec();
-    v.extend((dict.len() as u16).to_le_bytes());
-    v.extend(dict.as_bytes());
-    v.extend(data);
-    v
-}
-
-/// Rewrites the `.npz` at `path` with the entry `name.npy` replaced by `bytes`.
-fn replace_npz_entry(path: &Path, name: &str, bytes: &[u8]) {
-    use std::io::{Read, Write};
-    let mut zip = zip::ZipArchive::new(fs::File::open(path).unwrap()).unwrap();
-    let mut entries = Vec::new();
-    for i in 0..zip.len() {
-        let mut e = zip.by_index(i).unwrap();
-        let mut data = Vec::new();
-        e.read_to_end(&mut data).unwrap();
-        entries.push((e.name().to_string(), data));
-    }
-    let mut w = zip::ZipWriter::new(fs::File::create(path).unwrap());
-    let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
-    for (n, data) in entries {
-        w.start_file(n.as_str(), options).unwrap();
-        w.write_all(if n == format!("{name}.npy") { bytes } else { &data }).unwrap();
-    }
-    w.finish().unwrap();
 }
 
 /// The parameters a hand edit of `run.json` may change, with `seed`.

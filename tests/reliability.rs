@@ -9,6 +9,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::Duration;
 
+use common::npz::{edit_npz, npy, read_npz, replace_npz_entry, write_npz, Npy};
 use common::{arg, lines, monolayer, stderr};
 use monolayer::run::files::{
     checkpoint_path, frame_path, write_atomic, write_checkpoint, RunFrames, RunLock, RunRecord, RunStatus,
@@ -16,8 +17,6 @@ use monolayer::run::files::{
 use monolayer::run::runner::{memory_estimate, RunDir};
 use monolayer::run::sweep::{run_sweep, tables, SweepSpec};
 use monolayer::{Monolayer, Params};
-use ndarray::{ArrayD, IxDyn};
-use ndarray_npy::{NpzReader, NpzWriter};
 
 /// A small quick protocol: 6 cells on a 48×48 box, on one thread, relaxation to step 100.
 const SMALL_RUN: [&str; 10] =
@@ -59,52 +58,7 @@ fn refused(o: &Output, expect: &[&str]) {
 /// past `kb` KiB fails (with the signal that would kill it ignored, as a full disk sends none).
 fn with_file_size_limit(blocks_of_512: u32, args: &[&str]) -> Output {
     let script = format!("trap '' XFSZ; ulimit -f {blocks_of_512}; exec \"$0\" \"$@\"");
-    Command::new("sh").arg("-c").arg(script).arg(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("sh runs")
-}
-
-/// Every array of an `.npz`, as i64 or f64 arrays by name.
-enum Npy {
-    I(ArrayD<i64>),
-    F(ArrayD<f64>),
-    U(ArrayD<u8>),
-}
-
-fn read_npz(path: &Path) -> Vec<(String, Npy)> {
-    let mut z = NpzReader::new(fs::File::open(path).unwrap()).unwrap();
-    let names = z.names().unwrap();
-    names
-        .into_iter()
-        .map(|n| {
-            let name = n.trim_end_matches(".npy").to_string();
-            let a = match z.by_name::<ndarray::OwnedRepr<i64>, IxDyn>(&name) {
-                Ok(a) => Npy::I(a),
-                Err(_) => match z.by_name::<ndarray::OwnedRepr<u8>, IxDyn>(&name) {
-                    Ok(a) => Npy::U(a),
-                    Err(_) => Npy::F(z.by_name::<ndarray::OwnedRepr<f64>, IxDyn>(&name).unwrap()),
-                },
-            };
-            (name, a)
-        })
-        .collect()
-}
-
-fn write_npz(path: &Path, arrays: &[(String, Npy)]) {
-    let mut z = NpzWriter::new_compressed(fs::File::create(path).unwrap());
-    for (name, a) in arrays {
-        match a {
-            Npy::I(a) => z.add_array(name.as_str(), a).unwrap(),
-            Npy::F(a) => z.add_array(name.as_str(), a).unwrap(),
-            Npy::U(a) => z.add_array(name.as_str(), a).unwrap(),
-        }
-    }
-    z.finish().unwrap();
-}
-
-/// Rewrites one array of an `.npz` file.
-fn edit_npz(path: &Path, name: &str, edit: impl FnOnce(&mut Npy)) {
-    let mut arrays = read_npz(path);
-    edit(&mut arrays.iter_mut().find(|(n, _)| n == name).unwrap_or_else(|| panic!("no array {name}")).1);
-    write_npz(path, &arrays);
+    Command::new("sh").arg("-c").arg(script).arg(common::BIN).args(args).output().expect("sh runs")
 }
 
 fn edit_record(dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
@@ -135,7 +89,7 @@ fn killed_at(dir: &Path, step: u64) {
 fn a_second_writer_is_refused_and_the_lock_dies_with_its_holder() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("race");
-    let mut first = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+    let mut first = common::command()
         .args(["run", "--quiet", "--threads", "1", "--set", "box_size=48", "--set", "n_cells=6"])
         .args(["--relax-steps", "1000000", "--steps", "0", "--out", arg(&run)])
         .stderr(Stdio::null())
@@ -295,7 +249,7 @@ fn absurd_numbers_are_refused() {
     huge.validate().unwrap();
     assert!(memory_estimate(&huge) > 8 << 30, "{} bytes", memory_estimate(&huge));
     assert!(memory_estimate(&Params::default()) < 64 << 20);
-    let o = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+    let o = common::command()
         .args(["run", "--set", "box_size=4096", "--set", "n_cells=100000", "--out", arg(&run)])
         .env("MONOLAYER_MEMORY_LIMIT_MB", "4000")
         .output()
@@ -688,41 +642,6 @@ fn figures_jobs_are_bounded() {
     refused(&o, &["--jobs 1000: must be in [1, "]);
 }
 
-/// An `.npy` whose header declares `shape` of f64 (or `descr`), followed by `data` bytes only.
-fn npy(descr: &str, shape: &[u64], data: &[u8]) -> Vec<u8> {
-    let dims: Vec<String> = shape.iter().map(|d| format!("{d},")).collect();
-    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}), }}", dims.join(" "));
-    while (10 + dict.len() + 1) % 64 != 0 {
-        dict.push(' ');
-    }
-    dict.push('\n');
-    let mut v = b"\x93NUMPY\x01\x00".to_vec();
-    v.extend((dict.len() as u16).to_le_bytes());
-    v.extend(dict.as_bytes());
-    v.extend(data);
-    v
-}
-
-/// Rewrites the `.npz` at `path` with the entry `name.npy` replaced by `bytes`.
-fn replace_npz_entry(path: &Path, name: &str, bytes: &[u8]) {
-    use std::io::{Read, Write};
-    let mut zip = zip::ZipArchive::new(fs::File::open(path).unwrap()).unwrap();
-    let mut entries = Vec::new();
-    for i in 0..zip.len() {
-        let mut e = zip.by_index(i).unwrap();
-        let mut data = Vec::new();
-        e.read_to_end(&mut data).unwrap();
-        entries.push((e.name().to_string(), data));
-    }
-    let mut w = zip::ZipWriter::new(fs::File::create(path).unwrap());
-    let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
-    for (n, data) in entries {
-        w.start_file(n.as_str(), options).unwrap();
-        w.write_all(if n == format!("{name}.npy") { bytes } else { &data }).unwrap();
-    }
-    w.finish().unwrap();
-}
-
 /// An `.npz` header declaring a huge shape is refused before anything is
 /// allocated, in `analyze` (a frame) and in `--resume` (the checkpoint); no abort.
 #[test]
@@ -750,8 +669,7 @@ fn a_fifo_among_the_frames_is_refused() {
     let run = dir.path().join("r");
     ok(&small(&run, 50, &[]));
     let fifo = frame_path(&run, 1000);
-    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
-    assert!(made.success());
+    common::make_fifo(&fifo);
     refused(&analyzed(&run, &dir.path().join("a")), &["frame_0001000.npz", "not a regular file"]);
 }
 
@@ -770,12 +688,8 @@ fn a_signal_stops_a_run_gracefully_and_it_resumes_to_the_same_bits() {
     ok(&monolayer(&args(&whole).iter().map(String::as_str).collect::<Vec<_>>()));
     for (signal, status) in [("TERM", 143), ("INT", 130)] {
         let run = dir.path().join(signal);
-        let mut child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
-            .args(args(&run))
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
+        let mut child =
+            common::command().args(args(&run)).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
         // Once it is in its active phase (a frame written), the signal.
         wait_for_file(&mut child, &frame_path(&run, 200), "the run");
         let sent = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
@@ -803,7 +717,7 @@ fn the_memory_check_reads_its_variable_and_the_process_limits() {
     let fingerprint = |env: Option<&str>, limit_kb: Option<u64>, size: &str| {
         let ulimit = limit_kb.map(|k| format!("ulimit -v {k}; ")).unwrap_or_default();
         let mut c = Command::new("sh");
-        c.arg("-c").arg(format!("{ulimit}exec \"$0\" \"$@\"")).arg(env!("CARGO_BIN_EXE_monolayer"));
+        c.arg("-c").arg(format!("{ulimit}exec \"$0\" \"$@\"")).arg(common::BIN);
         c.args(["fingerprint", "--total-steps", "1", "--set", size, "--set", "n_cells=6"]);
         if let Some(v) = env {
             c.env("MONOLAYER_MEMORY_LIMIT_MB", v);
@@ -891,7 +805,7 @@ fn one_based_slurm_arrays_run_every_shard() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s");
     let sweep = |id: &str, extra: &[(&str, &str)]| {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_monolayer"));
+        let mut c = common::command();
         c.args(["sweep", "--quiet", "--out", arg(&out), "--grid", "zeta=0.2,0.4", "--frame-interval", "50"]);
         c.args(["--set", "box_size=48", "--set", "n_cells=6", "--set", "relax_steps=50", "--set", "active_steps=50"]);
         c.env("SLURM_ARRAY_TASK_ID", id).env("SLURM_ARRAY_TASK_COUNT", "2");
@@ -1008,12 +922,7 @@ fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
         "--set",
         "active_steps=3000",
     ];
-    let mut child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
-        .args(args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = common::command().args(args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
     let first = out.join("runs/zeta0.2_seed1");
     wait_for_file(&mut child, &frame_path(&first, 200), "the sweep");
     assert!(Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap().success());
@@ -1029,10 +938,6 @@ fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
 }
 
 // ---- Outputs renamed into place ----
-
-fn mkfifo(path: &Path) {
-    assert!(Command::new("mkfifo").arg(path).status().unwrap().success(), "mkfifo {}", path.display());
-}
 
 fn is_fifo(path: &Path) -> bool {
     use std::os::unix::fs::FileTypeExt;
@@ -1059,7 +964,7 @@ fn relaxed_state(out: &Path) -> Output {
 fn an_output_that_is_not_a_regular_file_is_refused_and_kept() {
     let dir = tempfile::tempdir().unwrap();
     let fifo = dir.path().join("fifo");
-    mkfifo(&fifo);
+    common::make_fifo(&fifo);
     refused(&relaxed_state(&fifo), &[arg(&fifo), "a FIFO", "not a regular file"]);
     assert!(is_fifo(&fifo), "the FIFO was replaced");
 
@@ -1086,7 +991,7 @@ fn an_output_that_is_not_a_regular_file_is_refused_and_kept() {
     let analysis = dir.path().join("a");
     fs::create_dir_all(&analysis).unwrap();
     let holes = analysis.join("holes.csv");
-    mkfifo(&holes);
+    common::make_fifo(&holes);
     refused(&analyzed(&run, &analysis), &[arg(&holes), "a FIFO"]);
     assert!(is_fifo(&holes));
     let left: Vec<_> = fs::read_dir(&analysis).unwrap().map(|e| e.unwrap().file_name()).collect();

@@ -8,7 +8,7 @@ mod common;
 
 use std::fs;
 
-use common::{arg, monolayer, stderr};
+use common::{quick_run, stderr};
 use monolayer::formats::version::code_version;
 use monolayer::run::files::{RunRecord, RunStatus};
 use monolayer::web::readouts::run_record_json;
@@ -66,24 +66,7 @@ fn the_pages_writer_writes_the_bytes_it_always_wrote() {
 fn both_writers_record_the_same_version_with_the_commit() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let o = monolayer(&[
-        "run",
-        "--quiet",
-        "--set",
-        "box_size=40",
-        "--set",
-        "n_cells=6",
-        "--relax-steps",
-        "10",
-        "--steps",
-        "10",
-        "--frame-interval",
-        "10",
-        "--threads",
-        "1",
-        "--out",
-        arg(&run),
-    ]);
+    let o = quick_run(&run, 40, 6, "10", "10", &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let native = version_of(&fs::read_to_string(run.join("run.json")).unwrap());
     let page = version_of(&run_record_json(&Monolayer::new(params(), 1).unwrap()));

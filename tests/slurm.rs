@@ -7,14 +7,10 @@
 
 mod common;
 
-use common::csv_files;
+use common::{csv_files, monolayer};
 use std::collections::BTreeMap;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
-
-fn monolayer(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
-}
 
 fn text(o: &Output) -> (String, String) {
     (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())

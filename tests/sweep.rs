@@ -1,6 +1,8 @@
 //! Parameter sweeps on small boxes: every run done once, resumable, summarised, refused early when
 //! the sweep is bad.
 
+mod common;
+
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -98,12 +100,12 @@ fn a_bad_sweep_is_refused_before_anything_runs() {
     // As a user meets it: refused, and nothing written where the sweep would go.
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sweep");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_monolayer"))
+    let o = common::command()
         .args(["sweep", "--quiet", "--grid", "chi=0.1,-1.0", "--set", "box_size=48", "--set", "n_cells=6", "--out"])
         .arg(&out)
         .output()
         .unwrap();
-    let e = String::from_utf8_lossy(&o.stderr);
+    let e = common::stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{e}");
     assert!(e.contains("xi_substrate"), "{e}");
     assert!(!out.exists() && std::fs::read_dir(dir.path()).unwrap().next().is_none(), "the refused sweep wrote files");

@@ -16,18 +16,17 @@
 import { describe, before, after, it } from 'node:test';
 import assert from 'node:assert/strict';
 import { chromium } from 'playwright-core';
-import { createServer } from 'node:http';
-import { readFile, mkdir, writeFile, mkdtemp, rm } from 'node:fs/promises';
+import { mkdir, writeFile, mkdtemp, rm } from 'node:fs/promises';
 import { mkdirSync, writeFileSync } from 'node:fs';
 import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { parseReadouts } from './readouts.mjs';
+import { serve } from './server.mjs';
 import { SHIPPED_STATES, DEFAULT_PRESET } from '../../www/js/state.js';
 
 const ROOT = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
-const WWW = path.join(ROOT, 'www');
 const OUT = path.join(ROOT, 'test-output', 'browser');
 const NATIVE = process.env.MONOLAYER_BIN
   ?? path.join(process.env.CARGO_TARGET_DIR ?? path.join(ROOT, 'target'), 'release', 'monolayer');
@@ -46,25 +45,6 @@ const MODES = {
   },
   webgl2: { backend: 'WebGL2', flags: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'] },
 };
-
-// --- a static server for www/ ---------------------------------------------------------------------
-const TYPES = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.wasm': 'application/wasm', '.png': 'image/png' };
-function serve() {
-  const server = createServer(async (req, res) => {
-    const url = new URL(req.url, 'http://x');
-    const rel = decodeURIComponent(url.pathname === '/' ? '/index.html' : url.pathname);
-    const file = path.join(WWW, path.normalize(rel));
-    if (!file.startsWith(WWW)) return res.writeHead(403).end();
-    try {
-      const body = await readFile(file);
-      res.writeHead(200, { 'content-type': TYPES[path.extname(file)] ?? 'application/octet-stream' });
-      res.end(body);
-    } catch {
-      res.writeHead(404).end();
-    }
-  });
-  return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
-}
 
 // --- the hang guard ---------------------------------------------------------------------------
 const HANG_MS = Number(process.env.HANG_MS ?? 30 * 60 * 1000);

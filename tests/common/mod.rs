@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod npz;
+
 use std::sync::OnceLock;
 
 use monolayer::model::lattice::Patch;
@@ -63,9 +65,17 @@ pub fn phi_bits(m: &Monolayer) -> Vec<u64> {
 
 // ---- The command line as a user drives it ----
 
+/// The path of the `monolayer` binary Cargo built for these tests.
+pub const BIN: &str = env!("CARGO_BIN_EXE_monolayer");
+
+/// A command that runs the `monolayer` binary, for a test that sets more than its arguments.
+pub fn command() -> std::process::Command {
+    std::process::Command::new(BIN)
+}
+
 /// Runs the `monolayer` binary with `args`.
 pub fn monolayer(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_monolayer")).args(args).output().expect("the binary runs")
+    command().args(args).output().expect("the binary runs")
 }
 
 pub fn stderr(o: &std::process::Output) -> String {
@@ -100,7 +110,7 @@ pub fn csv_files(dir: &std::path::Path) -> std::collections::BTreeMap<String, St
 /// `seconds`: a command that blocks (reading a FIFO) fails its test instead of hanging it.
 pub fn monolayer_within(seconds: u64, args: &[&str], env: &[(&str, &str)]) -> std::process::Output {
     use std::process::{Command, Stdio};
-    let mut child = Command::new(env!("CARGO_BIN_EXE_monolayer"))
+    let mut child = Command::new(BIN)
         .args(args)
         .envs(env.iter().copied())
         .stdin(Stdio::piped())
@@ -131,15 +141,29 @@ pub fn make_fifo(path: &std::path::Path) {
 /// A small, quick run: 18 cells on a 60×60 box on one thread, relaxation to step 300, then
 /// `steps` active steps with a frame every 10; `extra` flags after these.
 pub fn small_run(out: &std::path::Path, steps: &str, extra: &[&str]) -> std::process::Output {
+    quick_run(out, 60, 18, "300", steps, extra)
+}
+
+/// A quick run of `n_cells` cells on a `box_size`² box on one thread: relaxation to step
+/// `relax_steps`, then `steps` active steps with a frame every 10; `extra` flags after these.
+pub fn quick_run(
+    out: &std::path::Path,
+    box_size: usize,
+    n_cells: usize,
+    relax_steps: &str,
+    steps: &str,
+    extra: &[&str],
+) -> std::process::Output {
+    let (box_size, n_cells) = (format!("box_size={box_size}"), format!("n_cells={n_cells}"));
     let mut args = vec![
         "run",
         "--quiet",
         "--set",
-        "box_size=60",
+        &box_size,
         "--set",
-        "n_cells=18",
+        &n_cells,
         "--relax-steps",
-        "300",
+        relax_steps,
         "--steps",
         steps,
         "--frame-interval",
