@@ -55,7 +55,7 @@ enum Command {
     /// several seeds: each nucleation's thinning, the precursors against sites of the same
     /// thinning, and a forecast of where a hole opens next (strain rate, spiral core, thinning,
     /// and their combination) scored on each seed's runs with the combination fitted on the other
-    /// seeds. Tables and the ROC figure to --out (docs/figures-precursors.md).
+    /// seeds. Tables and the ROC figure to --out (docs/figures.md, "Forecast").
     Forecast(ForecastArgs),
 }
 

@@ -1,5 +1,5 @@
 //! Does collective motion tell where the tissue tears, beyond where it has already thinned?
-//! (docs/figures-precursors.md, "Thinning, matched chance and the forecast").
+//! (docs/figures.md, "Forecast"; thinning and matched chance in docs/figures-precursors.md).
 //!
 //! A run's frames are kept as [`RunHistory`]: per frame the precursor points and strain rate
 //! ([`FramePoints`]), Σφ, and the local thinning on a sub-grid of sites; and every nucleation

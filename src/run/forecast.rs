@@ -3,7 +3,7 @@
 //! (and against random sites); and a forecast of where a hole nucleates next, scored on the
 //! runs of each seed with the combination fitted on the other seeds only (leave one seed out).
 //! The measures are `analysis::forecast`'s; this file reads the runs and writes the tables and
-//! the ROC figure (docs/figures-precursors.md, "Thinning, matched chance and the forecast").
+//! the ROC figure (docs/figures.md, "Forecast").
 
 use std::collections::BTreeSet;
 use std::fmt::Write as _;

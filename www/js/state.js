@@ -72,7 +72,7 @@ export const FIELDS = new Map([
   [FieldKind.StrainRate, { label: 'Strain rate ε̇ = ∇·v/2 with ±½ defects and spiral cores', units: ' per time unit' }],
   [FieldKind.ForceDivergence, { label: 'Active-force divergence ∇·fᵃ with ±½ defects', units: '' }],
   // The recorded forecast (src/analysis/forecast.rs, SHIPPED_MODEL); its score on runs it never
-  // saw is in docs/figures-precursors.md, "Thinning, matched chance and the forecast".
+  // saw is in docs/figures.md, "Forecast".
   [FieldKind.Forecast, { label: 'Forecast of the next hole within 3,000 steps (held-out AUC 0.95)', units: '' }],
 ]);
 export const fieldName = (kind) => FieldKind[kind].toLowerCase();
