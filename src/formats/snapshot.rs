@@ -28,8 +28,6 @@ const VERSION: u32 = 1;
 const HAS_WARM_START: u8 = 1;
 const HAS_SUBSTRATE: u8 = 2;
 const HAS_CORRECTOR_SHIFT: u8 = 4;
-/// Where the step sits in the header: after the magic bytes, the version and the key.
-const STEP_AT: usize = MAGIC.len() + 4 + 8;
 
 /// The key of a relaxed state: the seed and every parameter the relaxation reads. Those it does
 /// not read (activity, the friction of the active phase and its solve, the active steps, the
@@ -87,18 +85,14 @@ pub fn key_at(params: &Params, seed: u64, step: u64) -> Option<u64> {
 /// trajectory). Refused if it was made with other parameters, another seed or precision, or
 /// saved before the end of the relaxation.
 pub fn decode_shipped(bytes: &[u8], params: &Params, seed: u64) -> Result<State, SimError> {
-    // The step is read from the header before the checksum is checked: a damaged file is
-    // refused by `decode` whatever its header says.
-    let step = bytes.get(STEP_AT..STEP_AT + 8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
-    match step.and_then(|s| key_at(params, seed, s)) {
-        Some(key) => decode(bytes, key, params.box_size),
-        None if step.is_some() && bytes.starts_with(MAGIC) => Err(SimError::Invalid(format!(
-            "relaxed state: saved at step {}, before the end of the {} relaxation steps",
-            step.unwrap_or(0),
-            params.relax_steps
-        ))),
-        None => decode(bytes, 0, params.box_size),
-    }
+    decode_with(bytes, params.box_size, |step| {
+        key_at(params, seed, step).ok_or_else(|| {
+            SimError::Invalid(format!(
+                "relaxed state: saved at step {step}, before the end of the {} relaxation steps",
+                params.relax_steps
+            ))
+        })
+    })
 }
 
 /// The relaxed state of `params` and `seed` from `bytes` (see [`decode`]): refused if it was
@@ -158,6 +152,12 @@ pub fn encode(state: &State, key: u64) -> Vec<u8> {
 /// Reads bytes written by [`encode`]; refuses a damaged file, another format, another key (a
 /// state relaxed with other parameters or another seed) or another lattice side `l`.
 pub fn decode(bytes: &[u8], key: u64, l: usize) -> Result<State, SimError> {
+    decode_with(bytes, l, |_| Ok(key))
+}
+
+/// [`decode`] with the key the file must hold given by its step (`key_for`), which may refuse
+/// the step itself.
+fn decode_with(bytes: &[u8], l: usize, key_for: impl FnOnce(u64) -> Result<u64, SimError>) -> Result<State, SimError> {
     let bad = |why: String| SimError::Invalid(format!("relaxed state: {why}"));
     if bytes.len() < MAGIC.len() + 8 {
         return Err(bad(format!("{} bytes, shorter than its header", bytes.len())));
@@ -175,15 +175,16 @@ pub fn decode(bytes: &[u8], key: u64, l: usize) -> Result<State, SimError> {
         return Err(bad(format!("format version {version}, this core reads {VERSION}")));
     }
     let file_key = r.u64()?;
-    if file_key != key {
-        return Err(bad(format!(
-            "made with other parameters or another seed (key {file_key:016x}, these parameters give {key:016x})"
-        )));
-    }
     let step = r.u64()?;
     // Both phases at their longest: a larger step count is no state of a run (and would wrap).
     if step > 2 * crate::model::params::MAX_STEPS {
         return Err(bad(format!("step {step}: more than a run's 2·10⁹ steps")));
+    }
+    let key = key_for(step)?;
+    if file_key != key {
+        return Err(bad(format!(
+            "made with other parameters or another seed (key {file_key:016x}, these parameters give {key:016x})"
+        )));
     }
     let (file_l, n) = (r.u32()? as usize, r.u32()? as usize);
     if file_l != l {

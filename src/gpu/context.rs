@@ -29,7 +29,7 @@ pub struct GpuContext {
 }
 
 /// Keeps the first fault only: later ones follow from it.
-fn record(fault: &Mutex<Option<String>>, why: String) {
+pub(crate) fn record(fault: &Mutex<Option<String>>, why: String) {
     let mut f = fault.lock().unwrap_or_else(|e| e.into_inner());
     f.get_or_insert(why);
 }

@@ -3,7 +3,7 @@
 //! natively, a poll of the device) has mapped it. One readback can carry several buffers, since
 //! in a browser each costs milliseconds whatever its size.
 
-use crate::gpu::context::{GpuContext, GpuError};
+use crate::gpu::context::{record, GpuContext, GpuError};
 use std::future::Future;
 
 /// The contents of `buffers`, as 32-bit words, once every submitted dispatch has finished:
@@ -39,7 +39,7 @@ pub fn read_words(
     let fault = ctx.fault_handle();
     async move {
         let fail = |why: String| {
-            fault.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(why.clone());
+            record(&fault, why.clone());
             GpuError::Failed(why)
         };
         #[cfg(not(target_arch = "wasm32"))]
