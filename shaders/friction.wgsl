@@ -15,9 +15,14 @@
 // takes no further steps (α = 0), and once both have, the per-site kernels return at once.
 //
 // Sums (r·z, ‖r‖², p·Cp, ‖F‖²) are made in a fixed order: each workgroup of 256 sites adds its
-// sites in a halving tree into one partial sum (`partials`), and one workgroup then adds the
-// partial sums in the same way. No float atomics: the same state on the same adapter gives the
-// same bits.
+// sites in a halving tree into one partial sum (`partials`), and the kernel that needs the total
+// adds the partial sums in the same way, in every workgroup alike (`total_of`): the
+// same bits everywhere, and no one-workgroup kernel between the grid-wide ones. No float atomics:
+// the same state on the same adapter gives the same bits. The scalars are derived from the
+// partial sums where they are used, never written where a kernel that reads them runs: a part
+// of `partials` is written by one kernel and read only by the kernels after it, and `solve`
+// keeps only what the host reads and the previous r·z (written by `cg_update`, read by the next
+// `cg_product`).
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(11) var<storage, read> weight: array<f32>;
@@ -31,6 +36,7 @@
 @group(0) @binding(24) var<storage, read_write> partials: array<vec4<f32>>;
 @group(0) @binding(25) var<storage, read_write> solve: Solve;
 @group(0) @binding(26) var<storage, read_write> preconditioned: array<vec2<f32>>;
+@group(0) @binding(31) var<storage, read_write> direction_next: array<vec2<f32>>;
 
 // The CG scalars of both components (x, y), as `SolveScalars` in src/gpu/buffers.rs.
 struct Solve {
@@ -65,13 +71,16 @@ const RECURSIVE_RESIDUAL_MARGIN: f32 = 0.5;
 
 const GROUP: u32 = 256u;
 
-// `partials` holds three parts of one vec4 per workgroup g of the lattice (G workgroups): at
-// RR·G + g (‖r‖² of x and y, ‖F‖², 0), at PQ·G + g (p·Cp of x and y, 0, 0), at RZ·G + g (r·z of
-// x and y, 0, 0); each part is written by one kernel of an iteration and read by the next
-// one-workgroup kernel.
+// `partials` holds five parts of one vec4 per workgroup g of the lattice (G workgroups), at
+// part·G + g: RR (‖r‖² of x and y, from `cg_start` and `cg_update`), PQ (p·Cp of x and y, and
+// the stop flags `cg_product` found, from `cg_product`), RZ (r·z of x and y, from the
+// preconditioner), FF (‖F‖², from `cg_start`) and TRUE (‖F − C u‖² of x and y, from
+// `friction_pull`).
 const RR: u32 = 0u;
 const PQ: u32 = 1u;
 const RZ: u32 = 2u;
+const FF: u32 = 3u;
+const TRUE: u32 = 4u;
 
 fn groups() -> u32 {
     let l = params.box_size;
@@ -79,7 +88,6 @@ fn groups() -> u32 {
 }
 
 var<workgroup> tree: array<vec4<f32>, 256>;
-var<workgroup> both_done: u32;
 
 // Adds tree[0..256) into tree[0] by halving (a fixed order); every invocation of the
 // workgroup calls it.
@@ -103,12 +111,43 @@ fn store_partial(t: u32, part: u32, g: u32, value: vec4<f32>) {
     }
 }
 
-// Whether both components have met their target, uniformly across the workgroup.
-fn solve_finished(t: u32) -> bool {
-    if t == 0u {
-        both_done = solve.done.x & solve.done.y;
+// Adds a part's partial sums, one per workgroup of the lattice, in a fixed order (invocation t
+// adds entries t, t + 256, …; then the tree); every invocation calls it and gets the total.
+fn total_of(t: u32, part: u32) -> vec4<f32> {
+    let first = part * groups();
+    var s = vec4<f32>(0.0, 0.0, 0.0, 0.0);
+    for (var g = t; g < groups(); g += GROUP) {
+        s += partials[first + g];
     }
-    return workgroupUniformLoad(&both_done) != 0u;
+    workgroupBarrier();
+    tree[t] = s;
+    reduce_tree(t);
+    // Uniform by construction, and known so to WGSL (a kernel may return on it, then meet a
+    // barrier).
+    let total = workgroupUniformLoad(&tree[0]);
+    workgroupBarrier();
+    return total;
+}
+
+// Each component's target for ‖r‖², (tolerance·‖F‖)²/2, from the start's ‖F‖².
+fn target2_of(ff: f32) -> f32 {
+    let tol = params.friction_tolerance;
+    return tol * tol * ff * 0.5;
+}
+
+// Whether each component has met its target, from the latest ‖r‖² (`RR`), the same in every
+// workgroup. A residual that is not a finite number never meets it (by its bits: `is_finite2`),
+// so such a solve counts as unconverged and the step is put back. Once a component is done its
+// α is 0 and its r no longer changes, so the answer stays.
+fn components_done(t: u32) -> vec2<bool> {
+    let rr = total_of(t, RR).xy;
+    let target2 = target2_of(total_of(t, FF).x);
+    return is_finite2(rr) & vec2<bool>(is_finite(target2)) & (rr <= vec2<f32>(target2, target2));
+}
+
+// Whether both components have met their target: the kernels after that return at once.
+fn solve_finished(t: u32) -> bool {
+    return all(components_done(t));
 }
 
 // The 8 neighbours of lattice site x on the periodic L × L lattice.
@@ -179,16 +218,19 @@ fn friction_setup(@builtin(global_invocation_id) gid: vec3<u32>) {
     diagonal[x] = select(0.0, n * total, n > 0.0);
 }
 
-// r = F − C u from the warm start u, p = 0 (`cg_direction` then sets p = z); partial sums of
-// ‖r‖² and ‖F‖² (`Component::load` and the start of `Component::pcg`). The stop flags of the
-// previous solve are cleared, so that the preconditioner runs.
+// r = F − C u from the warm start u, p = 0 (the first `cg_product` then sets p = z); partial
+// sums of ‖r‖² and ‖F‖² (`Component::load` and the start of `Component::pcg`). The previous
+// r·z is cleared: the first direction is z alone.
 @compute @workgroup_size(256)
 fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
             @builtin(workgroup_id) wg: vec3<u32>) {
     let x = gid.x;
     let l = params.box_size;
     if x == 0u {
-        solve.done = vec2<u32>(0u, 0u);
+        solve.rz = vec2<f32>(0.0, 0.0);
+        solve.alpha = vec2<f32>(0.0, 0.0);
+        solve.beta = vec2<f32>(0.0, 0.0);
+        solve.iterations = vec2<u32>(0u, 0u);
     }
     var rr = vec2<f32>(0.0, 0.0);
     var ff = 0.0;
@@ -204,7 +246,8 @@ fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoca
     if x < l * l {
         direction[x] = vec2<f32>(0.0, 0.0);
     }
-    store_partial(t, RR, wg.x, vec4<f32>(rr, ff, 0.0));
+    store_partial(t, RR, wg.x, vec4<f32>(rr, 0.0, 0.0));
+    store_partial(t, FF, wg.x, vec4<f32>(ff, 0.0, 0.0, 0.0));
 }
 
 // z = M r by Jacobi, r / diag(C) in the solve and 0 outside, into `preconditioned`; partial
@@ -228,121 +271,94 @@ fn jacobi(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     store_partial(t, RZ, wg.x, vec4<f32>(rz, 0.0, 0.0));
 }
 
-// Adds the partial sums from `first` on, one per workgroup of the lattice, in a fixed order
-// (invocation t adds entries t, t + 256, …; then the tree); every invocation calls it.
-fn total_of_partials(t: u32, first: u32) -> vec4<f32> {
-    var s = vec4<f32>(0.0, 0.0, 0.0, 0.0);
-    for (var g = t; g < groups(); g += GROUP) {
-        s += partials[first + g];
-    }
-    tree[t] = s;
-    reduce_tree(t);
-    return tree[0];
-}
-
-// The start's scalars: r·z, ‖r‖², ‖F‖², each component's target, and which components start
-// converged (`Component::pcg`'s first test).
-@compute @workgroup_size(256)
-fn cg_begin(@builtin(local_invocation_index) t: u32) {
-    let a = total_of_partials(t, RR * groups());
-    let b = total_of_partials(t, RZ * groups());
-    if t == 0u {
-        let tol = params.friction_tolerance;
-        let target2 = tol * tol * a.z * 0.5;
-        solve.rz = b.xy;
-        solve.rr = a.xy;
-        solve.ff = a.z;
-        solve.target2 = target2;
-        solve.alpha = vec2<f32>(0.0, 0.0);
-        solve.beta = vec2<f32>(0.0, 0.0);
-        solve.iterations = vec2<u32>(0u, 0u);
-        // A residual that is not a finite number never meets its target (by its bits:
-        // `is_finite2`), so the solve counts as unconverged and the step is put back.
-        let met = is_finite2(a.xy) & vec2<bool>(is_finite(target2)) & (a.xy <= vec2<f32>(target2, target2));
-        solve.done = select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), met);
-    }
-}
-
-// q = C p and partial sums of p·q.
+// An iteration's start for each component still iterating: β = (r·z)_new / (r·z)_old (0 at the
+// first iteration, whose p is 0), the direction p′ = z + β p, q = C p′ and partial sums of p′·q.
+// p′ goes to `direction_next`, since the neighbours' p is read here; `cg_update` makes it p.
+// A component that is done keeps its p. Every workgroup writes the stop flags it found beside
+// its partial sums (1 done, 0 not), for `cg_update`, even when both are done and it returns.
 @compute @workgroup_size(256)
 fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
               @builtin(workgroup_id) wg: vec3<u32>) {
-    if solve_finished(t) {
+    let done = components_done(t);
+    if all(done) {
+        if t == 0u {
+            partials[PQ * groups() + wg.x] = vec4<f32>(0.0, 0.0, 1.0, 1.0);
+        }
         return;
     }
+    let rz = total_of(t, RZ).xy;
+    let old = solve.rz;
+    let beta = select(vec2<f32>(0.0, 0.0), rz / old, old != vec2<f32>(0.0, 0.0));
     let x = gid.x;
     let l = params.box_size;
     var pq = vec2<f32>(0.0, 0.0);
     if x < l * l {
-        let q = apply_c(x, P);
+        let d = diagonal[x];
+        var q = vec2<f32>(0.0, 0.0);
+        if d > 0.0 {
+            var s = vec2<f32>(0.0, 0.0);
+            for (var dy = -1; dy <= 1; dy++) {
+                for (var dx = -1; dx <= 1; dx++) {
+                    if dx != 0 || dy != 0 {
+                        let y = neighbour(x, dx, dy);
+                        s += weight[y] * next_direction(y, beta, done);
+                    }
+                }
+            }
+            q = d * next_direction(x, beta, done) - params.xi_cell * weight[x] * s;
+        }
+        let p = next_direction(x, beta, done);
+        direction_next[x] = p;
         product[x] = q;
-        pq = direction[x] * q;
+        pq = p * q;
     }
-    store_partial(t, PQ, wg.x, vec4<f32>(pq, 0.0, 0.0));
+    let flags = select(vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), done);
+    store_partial(t, PQ, wg.x, vec4<f32>(pq, flags));
 }
 
-// α = r·z / p·Cp for each component still iterating, 0 for one that has converged.
-@compute @workgroup_size(256)
-fn cg_alpha(@builtin(local_invocation_index) t: u32) {
-    let pq = total_of_partials(t, PQ * groups()).xy;
-    if t == 0u {
-        let running = solve.done == vec2<u32>(0u, 0u);
-        solve.alpha = select(vec2<f32>(0.0, 0.0), solve.rz / pq, running);
-    }
+// p′ = z + β p at site y for the components still iterating, p for those done.
+fn next_direction(y: u32, beta: vec2<f32>, done: vec2<bool>) -> vec2<f32> {
+    let p = direction[y];
+    return select(preconditioned[y] + beta * p, p, done);
 }
 
-// u += α p, r −= α q; partial sums of ‖r‖².
+// α = r·z / p′·Cp′ for each component still iterating (0 for one done), u += α p′, r −= α q,
+// p = p′; partial sums of ‖r‖². The stop flags are `cg_product`'s (the first workgroup's
+// entry: every entry holds the same). The first invocation keeps r·z for the next β and counts
+// the iteration.
 @compute @workgroup_size(256)
 fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
              @builtin(workgroup_id) wg: vec3<u32>) {
-    if solve_finished(t) {
+    if t == 0u {
+        tree[0] = partials[PQ * groups()];
+    }
+    let done = workgroupUniformLoad(&tree[0]).zw > vec2<f32>(0.5, 0.5);
+    workgroupBarrier();
+    if all(done) {
         return;
     }
+    let pq = total_of(t, PQ).xy;
+    let rz = total_of(t, RZ).xy;
+    let alpha = select(rz / pq, vec2<f32>(0.0, 0.0), done);
     let x = gid.x;
     let l = params.box_size;
+    if x == 0u {
+        let old = solve.rz;
+        solve.beta = select(select(vec2<f32>(0.0, 0.0), rz / old, old != vec2<f32>(0.0, 0.0)), vec2<f32>(0.0, 0.0), done);
+        solve.alpha = alpha;
+        solve.rz = select(rz, old, done);
+        solve.iterations += select(vec2<u32>(1u, 1u), vec2<u32>(0u, 0u), done);
+    }
     var rr = vec2<f32>(0.0, 0.0);
     if x < l * l {
-        let alpha = solve.alpha;
-        mean_velocity[x] += alpha * direction[x];
+        let p = direction_next[x];
+        direction[x] = p;
+        mean_velocity[x] += alpha * p;
         let r = residual[x] - alpha * product[x];
         residual[x] = r;
         rr = r * r;
     }
     store_partial(t, RR, wg.x, vec4<f32>(rr, 0.0, 0.0));
-}
-
-// One iteration's end for each component still iterating: count it; stop if ‖r‖² met the
-// target, else β = (r·z)_new / (r·z).
-@compute @workgroup_size(256)
-fn cg_beta(@builtin(local_invocation_index) t: u32) {
-    let rr = total_of_partials(t, RR * groups()).xy;
-    let rz = total_of_partials(t, RZ * groups()).xy;
-    if t == 0u {
-        let running = solve.done == vec2<u32>(0u, 0u);
-        solve.iterations += select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), running);
-        solve.rr = select(solve.rr, rr, running);
-        let met = running & is_finite2(rr) & vec2<bool>(is_finite(solve.target2))
-            & (rr <= vec2<f32>(solve.target2, solve.target2));
-        solve.done = select(solve.done, vec2<u32>(1u, 1u), met);
-        solve.beta = select(vec2<f32>(0.0, 0.0), rz / solve.rz, running);
-        solve.rz = select(solve.rz, rz, running);
-    }
-}
-
-// p = z + β p for each component still iterating (after `cg_begin`, β = 0 and p = 0: p = z).
-@compute @workgroup_size(256)
-fn cg_direction(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
-    if solve_finished(t) {
-        return;
-    }
-    let x = gid.x;
-    let l = params.box_size;
-    if x >= l * l {
-        return;
-    }
-    let running = solve.done == vec2<u32>(0u, 0u);
-    let p = preconditioned[x] + solve.beta * direction[x];
-    direction[x] = select(direction[x], p, running);
 }
 
 // The pull ξ_c S, S = Σ_{N8} n u, into `drag`.xy (`FrictionSolver::pull_from_solution`); where
@@ -352,17 +368,24 @@ fn cg_direction(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_in
 @compute @workgroup_size(256)
 fn friction_pull(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
                  @builtin(workgroup_id) wg: vec3<u32>) {
+    let done = components_done(t);
+    let last = total_of(t, RR).xy;
+    let ff = total_of(t, FF).x;
     let x = gid.x;
     let l = params.box_size;
     var rr = vec2<f32>(0.0, 0.0);
     if x < l * l {
         if x == 0u {
-            if (solve.done.x & solve.done.y) == 0u {
+            solve.done = select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), done);
+            solve.rr = last;
+            solve.ff = ff;
+            solve.target2 = target2_of(ff);
+            if !all(done) {
                 solve.unconverged += 1u;
             }
             solve.most_iterations = max(solve.most_iterations, max(solve.iterations.x, solve.iterations.y));
         }
-        if solve.ff == 0.0 {
+        if ff == 0.0 {
             mean_velocity[x] = vec2<f32>(0.0, 0.0);
             drag[x] = vec4<f32>(0.0, 0.0, drag[x].zw);
         } else {
@@ -374,7 +397,7 @@ fn friction_pull(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_i
             }
         }
     }
-    store_partial(t, PQ, wg.x, vec4<f32>(rr, 0.0, 0.0));
+    store_partial(t, TRUE, wg.x, vec4<f32>(rr, 0.0, 0.0));
 }
 
 // The true residual of each component against the CPU's tolerance, ‖F − C u‖_c² ≤
@@ -383,7 +406,7 @@ fn friction_pull(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_i
 // have refused.
 @compute @workgroup_size(256)
 fn friction_check(@builtin(local_invocation_index) t: u32) {
-    let rr = total_of_partials(t, PQ * groups()).xy;
+    let rr = total_of(t, TRUE).xy;
     if t == 0u && solve.ff != 0.0 {
         let target2 = solve.target2 / (RECURSIVE_RESIDUAL_MARGIN * RECURSIVE_RESIDUAL_MARGIN);
         let met = is_finite2(rr) & vec2<bool>(is_finite(target2)) & (rr <= vec2<f32>(target2, target2));

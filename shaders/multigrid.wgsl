@@ -2,7 +2,7 @@
 // CG (friction.wgsl). The same hierarchy: level 0 is C itself (its diagonal and n), each level
 // k + 1 aggregates 2 × 2 sites of level k (periodic; an odd side leaves a one-site-wide last
 // aggregate), its operator the Galerkin product Pᵀ A P with P piecewise constant, until the side
-// is at most 6, where the level is solved by Cholesky. The same cycle: one damped Jacobi sweep
+// is at most 6, where the level is solved exactly. The same cycle: one damped Jacobi sweep
 // (ω = 2/3) from zero, coarse corrections over-corrected by 1.5 (one on level 0, two below: a
 // W-cycle), one sweep after.
 //
@@ -12,15 +12,18 @@
 //   level's diagonal is built without cancellation from the row-sum identity C·1 = ξ_s n, which
 //   Galerkin coarsening keeps: diag = mass − Σ (bonds to the other aggregates), every term of
 //   one sign (bonds are ≤ 0). The mass of an aggregate is the sum of its sites' masses.
+// - The coarsest level is solved by its explicit inverse, computed in parallel (Gauss–Jordan)
+//   and applied by many invocations, where the CPU uses a Cholesky factor in f64: a triangular
+//   solve is a chain of n² dependent steps on one invocation, reached 16 times per W-cycle.
 // - Level 0 is worked by grid-wide kernels (`mg_restrict`, `mg_smooth`, which also finishes
 //   the prolongation), every coarser level by one workgroup (`mg_coarse_cycle`: 70² sites and
 //   fewer at the paper's size), so that a whole cycle is three dispatches. The hierarchy is
 //   built by two (`mg_coarsen_fine` for level 1, `mg_coarsen_rest` for the others and the
-//   Cholesky factor).
+//   coarsest level's inverse).
 //
 // Storage: `hierarchy` holds, for every level k ≥ 1, six values per site (the diagonal, the
 // bonds east, north-west, north and north-east, i.e. `FORWARD`, and the mass), then the coarsest
-// level's Cholesky factor (row-major, n × n, n its number of sites). `mg_work` holds for every
+// level's inverse (row-major, n × n, n its number of sites). `mg_work` holds for every
 // level k ≥ 1 its x, b and t (vec2: both velocity components), one after the other.
 
 // Compiled after friction.wgsl (src/gpu/kernels.rs), whose bindings (params, n, drag, the
@@ -72,7 +75,7 @@ fn coarsest() -> u32 {
     return k;
 }
 
-// Where the coarsest level's Cholesky factor starts in `hierarchy`: after the last level.
+// Where the coarsest level's inverse starts in `hierarchy`: after the last level.
 fn factor_offset(last: Level) -> u32 {
     return last.coef + PER_SITE * last.m * last.m;
 }
@@ -205,8 +208,8 @@ fn barrier() {
     workgroupBarrier();
 }
 
-// Levels 2 to the coarsest, each from the one above, then the coarsest's Cholesky factor
-// (`Coarsest::factor`; a site outside the solve gets an identity row). One workgroup.
+// Levels 2 to the coarsest, each from the one above, then the coarsest level's inverse
+// (`Coarsest::factor` on the CPU is a Cholesky factor; see `coarsest_inverse`). One workgroup.
 @compute @workgroup_size(256)
 fn mg_coarsen_rest(@builtin(local_invocation_index) t: u32) {
     let last = coarsest();
@@ -218,42 +221,65 @@ fn mg_coarsen_rest(@builtin(local_invocation_index) t: u32) {
         }
         barrier();
     }
-    if t != 0u || last == 0u {
+    if last == 0u {
         return;
     }
-    let lv = level(last);
+    coarsest_inverse(level(last), t);
+}
+
+// The coarsest level's operator A⁻¹, dense (n × n, row-major after the last level), by
+// Gauss–Jordan elimination without pivoting (A is symmetric positive definite) worked by the
+// whole workgroup: per pivot two barrier phases of at most ⌈n²/256⌉ entries per invocation, so
+// the longest chain of dependent steps is about 2n, where a Cholesky factor and its two
+// triangular solves on one invocation were n³/6 and n² per application. A site outside the
+// solve gets an identity row, as on the CPU.
+fn coarsest_inverse(lv: Level, t: u32) {
     let m = lv.m;
     let n = m * m;
     let a = factor_offset(lv);
-    for (var e = 0u; e < n * n; e++) {
+    // A, row by row: each invocation gathers its rows (a bond stored at the neighbour too), so
+    // no two invocations add into one entry.
+    for (var e = t; e < n * n; e += GROUP) {
         hierarchy[a + e] = 0.0;
     }
-    for (var x = 0u; x < n; x++) {
+    barrier();
+    for (var x = t; x < n; x += GROUP) {
         let d = level_diagonal(lv, x);
         hierarchy[a + x * n + x] += select(1.0, d, d > 0.0);
-        for (var q = 1u; q <= 4u; q++) {
-            let dir = forward_direction(q);
-            let y = step_to(x, dir.x, dir.y, m);
-            let b = hierarchy[lv.coef + PER_SITE * x + q];
-            hierarchy[a + x * n + y] += b;
-            hierarchy[a + y * n + x] += b;
+        for (var dy = -1; dy <= 1; dy++) {
+            for (var dx = -1; dx <= 1; dx++) {
+                if dx != 0 || dy != 0 {
+                    let y = step_to(x, dx, dy, m);
+                    hierarchy[a + x * n + y] += bond(lv, x, dx, dy);
+                }
+            }
         }
     }
-    for (var c = 0u; c < n; c++) {
-        var d = hierarchy[a + c * n + c];
-        for (var q = 0u; q < c; q++) {
-            let v = hierarchy[a + c * n + q];
-            d -= v * v;
-        }
-        d = sqrt(max(d, 1.1754944e-38));
-        hierarchy[a + c * n + c] = d;
-        for (var r = c + 1u; r < n; r++) {
-            var s = hierarchy[a + r * n + c];
-            for (var q = 0u; q < c; q++) {
-                s -= hierarchy[a + r * n + q] * hierarchy[a + c * n + q];
+    barrier();
+    // In place: for pivot k, a_ij −= a_ik a_kj / p off row and column k; then row k / p,
+    // column k −a_ik / p, the pivot 1/p. p is read before the barrier that lets it change.
+    for (var k = 0u; k < n; k++) {
+        let p = hierarchy[a + k * n + k];
+        for (var e = t; e < n * n; e += GROUP) {
+            let i = e / n;
+            let j = e % n;
+            if i != k && j != k {
+                hierarchy[a + e] -= hierarchy[a + i * n + k] * hierarchy[a + k * n + j] / p;
             }
-            hierarchy[a + r * n + c] = s / d;
         }
+        barrier();
+        for (var e = t; e < n * n; e += GROUP) {
+            let i = e / n;
+            let j = e % n;
+            if i == k && j == k {
+                hierarchy[a + e] = 1.0 / p;
+            } else if i == k {
+                hierarchy[a + e] /= p;
+            } else if j == k {
+                hierarchy[a + e] = -hierarchy[a + e] / p;
+            }
+        }
+        barrier();
     }
 }
 
@@ -323,26 +349,17 @@ fn smooth_level(lv: Level, t: u32) {
     barrier();
 }
 
-// x = A⁻¹ b on the coarsest level by the Cholesky factor, both components, on one invocation.
+// x = A⁻¹ b on the coarsest level, both components: invocation r forms row r of the stored
+// inverse times b (n ≤ 36 products), every row at once.
 fn coarsest_solve(lv: Level, t: u32) {
-    if t == 0u {
-        let n = lv.m * lv.m;
-        let a = factor_offset(lv);
-        for (var r = 0u; r < n; r++) {
-            var s = mg_work[lv.b + r];
-            for (var q = 0u; q < r; q++) {
-                s -= hierarchy[a + r * n + q] * mg_work[lv.x + q];
-            }
-            mg_work[lv.x + r] = s / hierarchy[a + r * n + r];
+    let n = lv.m * lv.m;
+    let a = factor_offset(lv);
+    for (var r = t; r < n; r += GROUP) {
+        var s = vec2<f32>(0.0, 0.0);
+        for (var q = 0u; q < n; q++) {
+            s += hierarchy[a + r * n + q] * mg_work[lv.b + q];
         }
-        for (var rr = n; rr > 0u; rr--) {
-            let r = rr - 1u;
-            var s = mg_work[lv.x + r];
-            for (var q = r + 1u; q < n; q++) {
-                s -= hierarchy[a + q * n + r] * mg_work[lv.x + q];
-            }
-            mg_work[lv.x + r] = s / hierarchy[a + r * n + r];
-        }
+        mg_work[lv.x + r] = s;
     }
     barrier();
 }

@@ -71,14 +71,15 @@ pub enum Slot {
     Residual = 21,
     Direction = 22,
     Product = 23,
-    /// Per workgroup of the lattice, partial sums of the CG's inner products (two vec4 each).
+    /// Per workgroup of the lattice, partial sums of the CG's inner products ([`PARTIAL_SUMS`]
+    /// vec4 each).
     Partials = 24,
     /// The CG's scalars, [`SolveScalars`].
     Solve = 25,
     /// z = M r, the preconditioned residual, (x, y) per site.
     Preconditioned = 26,
     /// The multigrid hierarchy below C: per level k ≥ 1 six values per site (diagonal, four
-    /// forward bonds, mass), then the coarsest level's Cholesky factor (`shaders/multigrid.wgsl`).
+    /// forward bonds, mass), then the coarsest level's inverse (`shaders/multigrid.wgsl`).
     Hierarchy = 27,
     /// Per level k ≥ 1 of the hierarchy, x, b and t of a cycle, (x, y) per site.
     MgWork = 28,
@@ -87,6 +88,8 @@ pub enum Slot {
     /// Per cell, the first [`PatchFault`] code other than `Moved` since the faults were last
     /// cleared (sticky), or `Moved`.
     PatchFault = 30,
+    /// The CG's next direction p′ = z + β p, (x, y) per site, while p is still read.
+    DirectionNext = 31,
 }
 
 /// Why a cell's patch did not move (`Slot::PatchFault`; `shaders/cell.wgsl`).
@@ -109,11 +112,15 @@ impl PatchFault {
     }
 }
 
+/// The parts of `Slot::Partials`, a vec4 per workgroup each: ‖r‖², p·Cp, r·z, ‖F‖² and the
+/// true residual (`shaders/friction.wgsl`).
+pub const PARTIAL_SUMS: usize = 5;
+
 /// `Slot::Fault` of a cell whose φ stayed in range.
 pub const NO_FAULT: u32 = u32::MAX;
 
 impl Slot {
-    pub const ALL: [Slot; 31] = [
+    pub const ALL: [Slot; 32] = [
         Slot::Params,
         Slot::Patches,
         Slot::Phi,
@@ -145,6 +152,7 @@ impl Slot {
         Slot::MgWork,
         Slot::NextPatches,
         Slot::PatchFault,
+        Slot::DirectionNext,
     ];
 
     pub fn binding(self) -> u32 {
@@ -441,8 +449,8 @@ impl DeviceState {
                     Slot::Fault => init(bytemuck::cast_slice(&vec![NO_FAULT; n]), STORAGE),
                     Slot::Diagonal => zeros(l2),
                     Slot::MeanVelocity => init(bytemuck::cast_slice(&warm_start), STORAGE),
-                    Slot::Residual | Slot::Direction | Slot::Product => zeros(2 * l2),
-                    Slot::Partials => zeros(3 * 4 * groups),
+                    Slot::Residual | Slot::Direction | Slot::DirectionNext | Slot::Product => zeros(2 * l2),
+                    Slot::Partials => zeros(PARTIAL_SUMS * 4 * groups),
                     Slot::Preconditioned => zeros(2 * l2),
                     Slot::Hierarchy => zeros(hierarchy.hierarchy_floats().max(1)),
                     Slot::MgWork => zeros(2 * hierarchy.work_sites().max(1)),
@@ -510,7 +518,7 @@ impl Hierarchy {
     }
 
     /// f32 values of `Slot::Hierarchy`: six per site of every level, then the coarsest level's
-    /// dense factor.
+    /// dense inverse.
     pub fn hierarchy_floats(&self) -> usize {
         let levels: usize = self.sides.iter().map(|m| 6 * m * m).sum();
         let n = self.sides.last().map_or(0, |m| m * m);
@@ -603,6 +611,7 @@ fn slot_label(slot: Slot) -> &'static str {
         Slot::MgWork => "mg_work",
         Slot::NextPatches => "next_patches",
         Slot::PatchFault => "patch_fault",
+        Slot::DirectionNext => "direction_next",
     }
 }
 

@@ -56,20 +56,12 @@ pub enum Kernel {
     /// The friction operator for the current n: its diagonal and the mobility
     /// (`shaders/friction.wgsl`, as `FrictionSolver::prepare`).
     FrictionSetup,
-    /// r = F − C u from the warm start, p = M r, and the partial sums of the start.
+    /// r = F − C u from the warm start, p = 0, and the partial sums of ‖r‖² and ‖F‖².
     CgStart,
-    /// The start's scalars and targets (one workgroup).
-    CgBegin,
-    /// q = C p and partial sums of p·q.
+    /// The stop test and β, p′ = z + β p, q = C p′ and partial sums of p′·q.
     CgProduct,
-    /// α per component (one workgroup).
-    CgAlpha,
-    /// u += α p, r −= α q, partial sums of r·z and ‖r‖².
+    /// α, u += α p′, r −= α q, p = p′, and partial sums of ‖r‖².
     CgUpdate,
-    /// The iteration's end: the stop test and β (one workgroup).
-    CgBeta,
-    /// p = M r + β p.
-    CgDirection,
     /// The pull ξ_c S from the solution (`FrictionSolver::pull_from_solution`), and partial
     /// sums of the true residual.
     FrictionPull,
@@ -79,7 +71,7 @@ pub enum Kernel {
     Jacobi,
     /// Multigrid level 1 from C (`shaders/multigrid.wgsl`, as `Multigrid::setup`).
     MgCoarsenFine,
-    /// The coarser levels and the coarsest level's Cholesky factor (one workgroup).
+    /// The coarser levels and the coarsest level's inverse (one workgroup).
     MgCoarsenRest,
     /// A cycle's level-0 sweep from zero and its restriction to level 1.
     MgRestrict,
@@ -146,7 +138,7 @@ enum Grid {
     /// One invocation per lattice site in row-major order, 256 per workgroup (the friction
     /// solve: one partial sum per workgroup).
     LatticeRows,
-    /// One workgroup: the friction solve's scalars, the coarse levels of the multigrid.
+    /// One workgroup: the true residual's check, the coarse levels of the multigrid.
     Single,
     /// One invocation per site of multigrid level 1, 256 per workgroup.
     LevelOne,
@@ -154,7 +146,7 @@ enum Grid {
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 28] = [
+    pub const ALL: [Kernel; 24] = [
         Kernel::LatticeSums,
         Kernel::CellArea,
         Kernel::ChemicalPotential,
@@ -166,12 +158,8 @@ impl Kernel {
         Kernel::Correct,
         Kernel::FrictionSetup,
         Kernel::CgStart,
-        Kernel::CgBegin,
         Kernel::CgProduct,
-        Kernel::CgAlpha,
         Kernel::CgUpdate,
-        Kernel::CgBeta,
-        Kernel::CgDirection,
         Kernel::FrictionPull,
         Kernel::FrictionCheck,
         Kernel::Jacobi,
@@ -210,13 +198,13 @@ impl Kernel {
 
     /// The friction solve of Eq. 2 with `iterations` CG iterations recorded (those after both
     /// components converged return at once): the operator and its preconditioner, the residual
-    /// of the warm start, the first direction, the iterations, then the pull.
+    /// of the warm start and its preconditioning, the iterations, then the pull and the check of
+    /// the true residual.
     pub fn friction_solve(pc: Preconditioner, iterations: usize) -> Vec<Kernel> {
         let mut out = vec![Kernel::FrictionSetup];
         out.extend_from_slice(pc.setup());
         out.push(Kernel::CgStart);
         out.extend_from_slice(pc.kernels());
-        out.extend_from_slice(&[Kernel::CgBegin, Kernel::CgDirection]);
         for _ in 0..iterations {
             out.extend_from_slice(&Kernel::cg_iteration(pc));
         }
@@ -224,11 +212,10 @@ impl Kernel {
         out
     }
 
-    /// One CG iteration: q = C p and α, u and r, z = M r, the stop test and β, p.
+    /// One CG iteration: the stop test, β, p and q = C p; α, u and r; z = M r.
     pub fn cg_iteration(pc: Preconditioner) -> Vec<Kernel> {
-        let mut out = vec![Kernel::CgProduct, Kernel::CgAlpha, Kernel::CgUpdate];
+        let mut out = vec![Kernel::CgProduct, Kernel::CgUpdate];
         out.extend_from_slice(pc.kernels());
-        out.extend_from_slice(&[Kernel::CgBeta, Kernel::CgDirection]);
         out
     }
 
@@ -294,12 +281,8 @@ impl Kernel {
             Kernel::Correct => (MONOLAYER_WGSL, "correct"),
             Kernel::FrictionSetup => (FRICTION_WGSL, "friction_setup"),
             Kernel::CgStart => (FRICTION_WGSL, "cg_start"),
-            Kernel::CgBegin => (FRICTION_WGSL, "cg_begin"),
             Kernel::CgProduct => (FRICTION_WGSL, "cg_product"),
-            Kernel::CgAlpha => (FRICTION_WGSL, "cg_alpha"),
             Kernel::CgUpdate => (FRICTION_WGSL, "cg_update"),
-            Kernel::CgBeta => (FRICTION_WGSL, "cg_beta"),
-            Kernel::CgDirection => (FRICTION_WGSL, "cg_direction"),
             Kernel::FrictionPull => (FRICTION_WGSL, "friction_pull"),
             Kernel::FrictionCheck => (FRICTION_WGSL, "friction_check"),
         }
@@ -340,19 +323,17 @@ impl Kernel {
             Kernel::Correct => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
             Kernel::FrictionSetup => &[Params, Weight, Drag, Diagonal],
             Kernel::CgStart => &[Params, Weight, Force, Diagonal, MeanVelocity, Residual, Direction, Partials, Solve],
-            Kernel::CgBegin => &[Params, Partials, Solve],
-            Kernel::CgProduct => &[Params, Weight, Diagonal, MeanVelocity, Direction, Product, Partials, Solve],
-            Kernel::CgAlpha => &[Params, Partials, Solve],
-            Kernel::CgUpdate => &[Params, MeanVelocity, Residual, Direction, Product, Partials, Solve],
-            Kernel::CgBeta => &[Params, Partials, Solve],
-            Kernel::CgDirection => &[Params, Direction, Solve, Preconditioned],
+            Kernel::CgProduct => {
+                &[Params, Weight, Diagonal, Direction, Product, Partials, Solve, Preconditioned, DirectionNext]
+            }
+            Kernel::CgUpdate => &[Params, MeanVelocity, Residual, Direction, Product, Partials, Solve, DirectionNext],
             Kernel::FrictionPull => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, Direction, Partials, Solve],
             Kernel::FrictionCheck => &[Params, Partials, Solve],
-            Kernel::Jacobi => &[Params, Diagonal, Residual, Partials, Solve, Preconditioned],
+            Kernel::Jacobi => &[Params, Diagonal, Residual, Partials, Preconditioned],
             Kernel::MgCoarsenFine | Kernel::MgCoarsenRest => &[Params, Weight, Drag, Diagonal, Hierarchy],
-            Kernel::MgRestrict => &[Params, Weight, Diagonal, Residual, Solve, MgWork],
-            Kernel::MgCoarseCycle => &[Params, Weight, Diagonal, Solve, Hierarchy, MgWork],
-            Kernel::MgSmooth => &[Params, Weight, Diagonal, Residual, Partials, Solve, Preconditioned, MgWork],
+            Kernel::MgRestrict => &[Params, Weight, Diagonal, Residual, Partials, MgWork],
+            Kernel::MgCoarseCycle => &[Params, Weight, Diagonal, Partials, Hierarchy, MgWork],
+            Kernel::MgSmooth => &[Params, Weight, Diagonal, Residual, Partials, Preconditioned, MgWork],
             Kernel::PatchBounds => &[Params, Patches, Phi, NextPatches, PatchFault],
             Kernel::Relayout => &[Params, Patches, Phi, Phi0, NextPatches],
             Kernel::CommitPatches => &[Patches, Phi, Phi0, NextPatches],
@@ -374,17 +355,11 @@ impl Kernel {
             | Kernel::CgStart
             | Kernel::CgProduct
             | Kernel::CgUpdate
-            | Kernel::CgDirection
             | Kernel::FrictionPull
             | Kernel::Jacobi
             | Kernel::MgSmooth => Grid::LatticeRows,
             Kernel::MgCoarsenFine | Kernel::MgRestrict => Grid::LevelOne,
-            Kernel::CgBegin
-            | Kernel::CgAlpha
-            | Kernel::CgBeta
-            | Kernel::FrictionCheck
-            | Kernel::MgCoarsenRest
-            | Kernel::MgCoarseCycle => Grid::Single,
+            Kernel::FrictionCheck | Kernel::MgCoarsenRest | Kernel::MgCoarseCycle => Grid::Single,
         }
     }
 
@@ -422,18 +397,14 @@ impl Kernel {
             Kernel::FrictionSetup => l2 + 4 * l2 + l2 + l2,
             // n, F, the diagonal and u read; r and p written.
             Kernel::CgStart => l2 + 2 * l2 + l2 + 2 * l2 + 4 * l2,
-            // p, n and the diagonal read; q written.
-            Kernel::CgProduct => 2 * l2 + 2 * l2 + 2 * l2,
-            // u, p, r, q and the diagonal read; u and r written.
-            Kernel::CgUpdate => 8 * l2 + l2 + 4 * l2,
-            // r, p and the diagonal read; p written.
-            Kernel::CgDirection => 4 * l2 + l2 + 2 * l2,
+            // z, p, n and the diagonal read; p′ and q written.
+            Kernel::CgProduct => 4 * l2 + 2 * l2 + 4 * l2,
+            // u, p′, r and q read; u, p and r written.
+            Kernel::CgUpdate => 8 * l2 + 6 * l2,
             // n, u, F and the diagonal read; the pull written.
             Kernel::FrictionPull => l2 + 2 * l2 + 2 * l2 + 2 * l2 + l2,
             // The partial sums, one workgroup.
-            Kernel::CgBegin | Kernel::CgAlpha | Kernel::CgBeta | Kernel::FrictionCheck => {
-                8 * l2.div_ceil(LATTICE_GROUP as u64)
-            }
+            Kernel::FrictionCheck => 4 * l2.div_ceil(LATTICE_GROUP as u64),
             // r and the diagonal read; z written.
             Kernel::Jacobi => 2 * l2 + l2 + 2 * l2,
             // n, ξ_s and the diagonal read; level 1 written.
