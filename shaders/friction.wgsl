@@ -62,6 +62,9 @@ struct Solve {
     // Solves that met their target on the recursive residual but missed the CPU's tolerance on
     // the true one, F − C u (sticky, as above; `friction_check`).
     inaccurate: u32,
+    // 1 once a workgroup found both components done in this solve (`solve_finished`): a hint
+    // that spares the later kernels' sums, never a different answer.
+    finished: atomic<u32>,
 };
 
 // The part of the CPU's tolerance the recursive residual is held to (`RECURSIVE_RESIDUAL_MARGIN`
@@ -71,16 +74,15 @@ const RECURSIVE_RESIDUAL_MARGIN: f32 = 0.5;
 
 const GROUP: u32 = 256u;
 
-// `partials` holds five parts of one vec4 per workgroup g of the lattice (G workgroups), at
-// part·G + g: RR (‖r‖² of x and y, from `cg_start` and `cg_update`), PQ (p·Cp of x and y, and
-// the stop flags `cg_product` found, from `cg_product`), RZ (r·z of x and y, from the
-// preconditioner), FF (‖F‖², from `cg_start`) and TRUE (‖F − C u‖² of x and y, from
-// `friction_pull`).
+// `partials` holds four parts of one vec4 per workgroup g of the lattice (G workgroups), at
+// part·G + g, each written by one kernel and read only by later ones: RR (‖r‖² of x and y and
+// ‖F‖², from `cg_start` and `cg_update`), PQ (p·Cp of x and y, 0 for a component done, and the
+// r·z `cg_product` used, from `cg_product`), RZ (r·z of x and y and the stop flags, from the
+// preconditioner) and TRUE (‖F − C u‖² of x and y, from `friction_pull`).
 const RR: u32 = 0u;
 const PQ: u32 = 1u;
 const RZ: u32 = 2u;
-const FF: u32 = 3u;
-const TRUE: u32 = 4u;
+const TRUE: u32 = 3u;
 
 fn groups() -> u32 {
     let l = params.box_size;
@@ -111,43 +113,81 @@ fn store_partial(t: u32, part: u32, g: u32, value: vec4<f32>) {
     }
 }
 
-// Adds a part's partial sums, one per workgroup of the lattice, in a fixed order (invocation t
-// adds entries t, t + 256, …; then the tree); every invocation calls it and gets the total.
+// Adds a part's partial sums, one per workgroup of the lattice, in a fixed order: invocation
+// t < TOTAL_LANES adds entries t, t + TOTAL_LANES, …, then a halving tree over the lanes (few
+// barrier phases: every kernel that needs a scalar takes one such total). Every invocation
+// calls it and gets the total.
+const TOTAL_LANES: u32 = 16u;
+
 fn total_of(t: u32, part: u32) -> vec4<f32> {
     let first = part * groups();
     var s = vec4<f32>(0.0, 0.0, 0.0, 0.0);
-    for (var g = t; g < groups(); g += GROUP) {
-        s += partials[first + g];
+    if t < TOTAL_LANES {
+        for (var g = t; g < groups(); g += TOTAL_LANES) {
+            s += partials[first + g];
+        }
     }
     workgroupBarrier();
     tree[t] = s;
-    reduce_tree(t);
+    for (var half = TOTAL_LANES / 2u; half > 0u; half = half / 2u) {
+        workgroupBarrier();
+        if t < half {
+            tree[t] = tree[t] + tree[t + half];
+        }
+    }
     // Uniform by construction, and known so to WGSL (a kernel may return on it, then meet a
-    // barrier).
+    // barrier); the barrier after it keeps the next sum from overwriting it too soon.
     let total = workgroupUniformLoad(&tree[0]);
     workgroupBarrier();
     return total;
 }
 
-// Each component's target for ‖r‖², (tolerance·‖F‖)²/2, from the start's ‖F‖².
+// Each component's target for ‖r‖², (tolerance·‖F‖)²/2, from ‖F‖².
 fn target2_of(ff: f32) -> f32 {
     let tol = params.friction_tolerance;
     return tol * tol * ff * 0.5;
 }
 
-// Whether each component has met its target, from the latest ‖r‖² (`RR`), the same in every
-// workgroup. A residual that is not a finite number never meets it (by its bits: `is_finite2`),
-// so such a solve counts as unconverged and the step is put back. Once a component is done its
-// α is 0 and its r no longer changes, so the answer stays.
-fn components_done(t: u32) -> vec2<bool> {
-    let rr = total_of(t, RR).xy;
-    let target2 = target2_of(total_of(t, FF).x);
-    return is_finite2(rr) & vec2<bool>(is_finite(target2)) & (rr <= vec2<f32>(target2, target2));
+// Whether each component has met its target, from the latest ‖r‖² and ‖F‖² (`RR`), the same in
+// every workgroup. A residual that is not a finite number never meets it (by its bits:
+// `is_finite2`), so such a solve counts as unconverged and the step is put back. Once a
+// component is done its α is 0 and its r no longer changes, so the answer stays.
+fn done_of(rr_ff: vec4<f32>) -> vec2<bool> {
+    let target2 = target2_of(rr_ff.z);
+    return is_finite2(rr_ff.xy) & vec2<bool>(is_finite(target2)) & (rr_ff.xy <= vec2<f32>(target2, target2));
 }
 
-// Whether both components have met their target: the kernels after that return at once.
+var<workgroup> finished_here: u32;
+
+// The hint that both components are done in this solve, uniformly across the workgroup.
+fn finished_hint(t: u32) -> bool {
+    if t == 0u {
+        finished_here = atomicLoad(&solve.finished);
+    }
+    return workgroupUniformLoad(&finished_here) != 0u;
+}
+
+// Records that both components are done: a workgroup of a later kernel then skips its sums.
+// Set only on a finding every workgroup would make, so a workgroup that reads it a moment too
+// early sums and finds the same.
+fn mark_finished(t: u32) {
+    if t == 0u {
+        atomicStore(&solve.finished, 1u);
+    }
+}
+
+// Whether both components have met their target: the kernels after that return at once. From
+// the hint where it is set, else from the sums of ‖r‖² (`RR`); a kernel that writes `RR` must not
+// ask (`cg_update` asks `PQ`).
 fn solve_finished(t: u32) -> bool {
-    return all(components_done(t));
+    if finished_hint(t) {
+        return true;
+    }
+    let done = all(done_of(total_of(t, RR)));
+    if done {
+        mark_finished(t);
+    }
+    return done;
 }
 
 // The 8 neighbours of lattice site x on the periodic L × L lattice.
@@ -231,23 +271,29 @@ fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoca
         solve.alpha = vec2<f32>(0.0, 0.0);
         solve.beta = vec2<f32>(0.0, 0.0);
         solve.iterations = vec2<u32>(0u, 0u);
+        atomicStore(&solve.finished, 0u);
     }
     var rr = vec2<f32>(0.0, 0.0);
     var ff = 0.0;
-    if x < l * l && diagonal[x] > 0.0 {
-        let f = force[x];
-        let r = f - apply_c(x, U);
-        residual[x] = r;
-        rr = r * r;
-        ff = dot(f, f);
-    } else if x < l * l {
-        residual[x] = vec2<f32>(0.0, 0.0);
-    }
     if x < l * l {
+        ff = force_squared(x);
+        if diagonal[x] > 0.0 {
+            let r = force[x] - apply_c(x, U);
+            residual[x] = r;
+            rr = r * r;
+        } else {
+            residual[x] = vec2<f32>(0.0, 0.0);
+        }
         direction[x] = vec2<f32>(0.0, 0.0);
     }
-    store_partial(t, RR, wg.x, vec4<f32>(rr, 0.0, 0.0));
-    store_partial(t, FF, wg.x, vec4<f32>(ff, 0.0, 0.0, 0.0));
+    store_partial(t, RR, wg.x, vec4<f32>(rr, ff, 0.0));
+}
+
+// ‖F(x)‖², over every site: F vanishes where n does (every weight is 0 there), so this is the
+// sum over the solve's sites, and `cg_update` can add it again without the diagonal.
+fn force_squared(x: u32) -> f32 {
+    let f = force[x];
+    return dot(f, f);
 }
 
 // z = M r by Jacobi, r / diag(C) in the solve and 0 outside, into `preconditioned`; partial
@@ -255,7 +301,12 @@ fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoca
 @compute @workgroup_size(256)
 fn jacobi(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
           @builtin(workgroup_id) wg: vec3<u32>) {
-    if solve_finished(t) {
+    if finished_hint(t) {
+        return;
+    }
+    let done = done_of(total_of(t, RR));
+    if all(done) {
+        mark_finished(t);
         return;
     }
     let x = gid.x;
@@ -268,25 +319,34 @@ fn jacobi(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
         preconditioned[x] = z;
         rz = r * z;
     }
-    store_partial(t, RZ, wg.x, vec4<f32>(rz, 0.0, 0.0));
+    store_partial(t, RZ, wg.x, vec4<f32>(rz, stop_flags(t, done)));
+}
+
+// The stop flags as the preconditioner writes them beside r·z: 1 done, 0 not, given by the
+// first invocation only (the tree adds what every invocation gives).
+fn stop_flags(t: u32, done: vec2<bool>) -> vec2<f32> {
+    return select(vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), done & vec2<bool>(t == 0u));
 }
 
 // An iteration's start for each component still iterating: β = (r·z)_new / (r·z)_old (0 at the
-// first iteration, whose p is 0), the direction p′ = z + β p, q = C p′ and partial sums of p′·q.
-// p′ goes to `direction_next`, since the neighbours' p is read here; `cg_update` makes it p.
-// A component that is done keeps its p. Every workgroup writes the stop flags it found beside
-// its partial sums (1 done, 0 not), for `cg_update`, even when both are done and it returns.
+// first iteration, whose p is 0), the direction p′ = z + β p, q = C p′ and partial sums of p′·q
+// (0 for a component done, which keeps its p). r·z and the stop flags are the preconditioner's
+// (`RZ`: every workgroup wrote the same flags, so a flag's sum is positive when it is set). p′
+// goes to `direction_next`, since the neighbours' p is read here; `cg_update` makes it p. The
+// r·z used goes beside the sums, for `cg_update`'s α.
 @compute @workgroup_size(256)
 fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
               @builtin(workgroup_id) wg: vec3<u32>) {
-    let done = components_done(t);
-    if all(done) {
-        if t == 0u {
-            partials[PQ * groups() + wg.x] = vec4<f32>(0.0, 0.0, 1.0, 1.0);
-        }
+    if finished_hint(t) {
         return;
     }
-    let rz = total_of(t, RZ).xy;
+    let rz_flags = total_of(t, RZ);
+    let done = rz_flags.zw > vec2<f32>(0.0, 0.0);
+    if all(done) {
+        mark_finished(t);
+        return;
+    }
+    let rz = rz_flags.xy;
     let old = solve.rz;
     let beta = select(vec2<f32>(0.0, 0.0), rz / old, old != vec2<f32>(0.0, 0.0));
     let x = gid.x;
@@ -310,10 +370,10 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
         let p = next_direction(x, beta, done);
         direction_next[x] = p;
         product[x] = q;
-        pq = p * q;
+        pq = select(p * q, vec2<f32>(0.0, 0.0), done);
     }
-    let flags = select(vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), done);
-    store_partial(t, PQ, wg.x, vec4<f32>(pq, flags));
+    // r·z once per workgroup (the tree adds what every invocation gives).
+    store_partial(t, PQ, wg.x, vec4<f32>(pq, select(vec2<f32>(0.0, 0.0), rz, t == 0u)));
 }
 
 // p′ = z + β p at site y for the components still iterating, p for those done.
@@ -322,34 +382,35 @@ fn next_direction(y: u32, beta: vec2<f32>, done: vec2<bool>) -> vec2<f32> {
     return select(preconditioned[y] + beta * p, p, done);
 }
 
-// α = r·z / p′·Cp′ for each component still iterating (0 for one done), u += α p′, r −= α q,
-// p = p′; partial sums of ‖r‖². The stop flags are `cg_product`'s (the first workgroup's
-// entry: every entry holds the same). The first invocation keeps r·z for the next β and counts
-// the iteration.
+// α = r·z / p′·Cp′ for each component still iterating (p′·Cp′ > 0 there; `cg_product` wrote 0
+// for a component done, whose α is then 0), u += α p′, r −= α q, p = p′; partial sums of ‖r‖²
+// and ‖F‖². r·z is the one `cg_product` used (beside its first sum: every workgroup wrote the
+// same). The first invocation keeps it for the next β and counts the iteration.
 @compute @workgroup_size(256)
 fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
              @builtin(workgroup_id) wg: vec3<u32>) {
-    if t == 0u {
-        tree[0] = partials[PQ * groups()];
-    }
-    let done = workgroupUniformLoad(&tree[0]).zw > vec2<f32>(0.5, 0.5);
-    workgroupBarrier();
-    if all(done) {
+    if finished_hint(t) {
         return;
     }
     let pq = total_of(t, PQ).xy;
-    let rz = total_of(t, RZ).xy;
-    let alpha = select(rz / pq, vec2<f32>(0.0, 0.0), done);
+    let running = pq != vec2<f32>(0.0, 0.0);
+    if !any(running) {
+        return;
+    }
+    let rz = partials[PQ * groups()].zw;
+    let alpha = select(vec2<f32>(0.0, 0.0), rz / pq, running);
     let x = gid.x;
     let l = params.box_size;
     if x == 0u {
         let old = solve.rz;
-        solve.beta = select(select(vec2<f32>(0.0, 0.0), rz / old, old != vec2<f32>(0.0, 0.0)), vec2<f32>(0.0, 0.0), done);
+        let beta = select(vec2<f32>(0.0, 0.0), rz / old, old != vec2<f32>(0.0, 0.0));
+        solve.beta = select(vec2<f32>(0.0, 0.0), beta, running);
         solve.alpha = alpha;
-        solve.rz = select(rz, old, done);
-        solve.iterations += select(vec2<u32>(1u, 1u), vec2<u32>(0u, 0u), done);
+        solve.rz = select(old, rz, running);
+        solve.iterations += select(vec2<u32>(0u, 0u), vec2<u32>(1u, 1u), running);
     }
     var rr = vec2<f32>(0.0, 0.0);
+    var ff = 0.0;
     if x < l * l {
         let p = direction_next[x];
         direction[x] = p;
@@ -357,8 +418,9 @@ fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
         let r = residual[x] - alpha * product[x];
         residual[x] = r;
         rr = r * r;
+        ff = force_squared(x);
     }
-    store_partial(t, RR, wg.x, vec4<f32>(rr, 0.0, 0.0));
+    store_partial(t, RR, wg.x, vec4<f32>(rr, ff, 0.0));
 }
 
 // The pull ξ_c S, S = Σ_{N8} n u, into `drag`.xy (`FrictionSolver::pull_from_solution`); where
@@ -368,9 +430,10 @@ fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
 @compute @workgroup_size(256)
 fn friction_pull(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
                  @builtin(workgroup_id) wg: vec3<u32>) {
-    let done = components_done(t);
-    let last = total_of(t, RR).xy;
-    let ff = total_of(t, FF).x;
+    let sums = total_of(t, RR);
+    let done = done_of(sums);
+    let last = sums.xy;
+    let ff = sums.z;
     let x = gid.x;
     let l = params.box_size;
     var rr = vec2<f32>(0.0, 0.0);

@@ -466,11 +466,16 @@ fn mg_coarse_cycle(@builtin(local_invocation_index) t: u32) {
 
 // Level 0's part after the coarse levels: the prolongation x₀′ = x₀ + P x₁ (over-corrected) and
 // the last sweep z = x₀′ + ω D⁻¹ (r − C x₀′), x₀′ formed wherever it is needed; z into
-// `preconditioned`, and the partial sums of r·z (third part of `partials`).
+// `preconditioned`, and the partial sums of r·z with the stop flags (`RZ` of `partials`).
 @compute @workgroup_size(256)
 fn mg_smooth(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
              @builtin(workgroup_id) wg: vec3<u32>) {
-    if solve_finished(t) {
+    if finished_hint(t) {
+        return;
+    }
+    let done = done_of(total_of(t, RR));
+    if all(done) {
+        mark_finished(t);
         return;
     }
     let m = params.box_size;
@@ -498,7 +503,7 @@ fn mg_smooth(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
         preconditioned[x] = z;
         rz = residual[x] * z;
     }
-    store_partial(t, RZ, wg.x, vec4<f32>(rz, 0.0, 0.0));
+    store_partial(t, RZ, wg.x, vec4<f32>(rz, stop_flags(t, done)));
 }
 
 // x₀′ at site y of level 0: ω D⁻¹ r + 1.5 x₁ of its aggregate (x₁ from `coarse` in `mg_work`,

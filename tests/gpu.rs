@@ -783,6 +783,19 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
     assert!(text.contains("a GPU run (GpuRun, checked every 50 steps)"), "{text}");
     let stages = text.lines().find(|l| l.starts_with("dispatches recorded per step by stage")).expect("the stages");
     assert!(stages.contains("gather.wgsl") && !stages.contains('?'), "a kernel without its shader file: {stages}");
+    assert!(text.contains("longest serial chain per step"), "{text}");
+    // The device's time per stage where it has timestamps (lavapipe has), else said so.
+    let timed = text.lines().find(|l| l.starts_with("device time")).expect("the device times");
+    if ctx.has_timestamps() {
+        let stages: Vec<&str> = timed.split(": ").nth(1).unwrap().split("; ").next().unwrap().split(", ").collect();
+        assert_eq!(stages.len(), 9, "one time per shader file: {timed}");
+        for stage in stages {
+            let ms: f64 = stage.rsplit(' ').next().unwrap().parse().unwrap_or_else(|_| panic!("{timed}"));
+            assert!(ms > 0.0 && ms.is_finite(), "{timed}");
+        }
+    } else {
+        assert!(timed.contains("timestamps unsupported"), "{timed}");
+    }
 }
 
 /// The median wall time of submitting `kernels` and waiting for them, after one warm-up.

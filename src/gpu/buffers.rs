@@ -112,9 +112,9 @@ impl PatchFault {
     }
 }
 
-/// The parts of `Slot::Partials`, a vec4 per workgroup each: ‖r‖², p·Cp, r·z, ‖F‖² and the
-/// true residual (`shaders/friction.wgsl`).
-pub const PARTIAL_SUMS: usize = 5;
+/// The parts of `Slot::Partials`, a vec4 per workgroup each: ‖r‖² with ‖F‖², p·Cp, r·z and
+/// the true residual (`shaders/friction.wgsl`).
+pub const PARTIAL_SUMS: usize = 4;
 
 /// `Slot::Fault` of a cell whose φ stayed in range.
 pub const NO_FAULT: u32 = u32::MAX;
@@ -558,8 +558,8 @@ pub struct SolveScalars {
     /// Solves that met their recursive target but missed the tolerance on the true residual
     /// since the host last reset the scalars (`friction_check`).
     pub inaccurate: u32,
-    /// WGSL pads the struct to its alignment of 8.
-    pub _pad: u32,
+    /// 1 once the last solve was found done (a hint the kernels read, `solve_finished`).
+    pub finished: u32,
 }
 
 impl SolveScalars {
@@ -619,7 +619,7 @@ fn slot_label(slot: Slot) -> &'static str {
 mod tests {
     use super::*;
 
-    /// The WGSL structs `Params` (24 four-byte fields), `Patch` (8) and `Solve` (17, padded to 18) have these
+    /// The WGSL structs `Params` (24 four-byte fields), `Patch` (8) and `Solve` (18) have these
     /// sizes; a field added on one side only changes them.
     #[test]
     fn structs_have_the_wgsl_sizes() {

@@ -57,7 +57,15 @@ impl GpuContext {
         };
         let adapter = instance.request_adapter(&options).await.map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
-        let descriptor = wgpu::DeviceDescriptor { label: Some("monolayer gpu"), ..Default::default() };
+        // Natively, timestamp queries where the adapter has them (`bench --gpu` times each
+        // dispatch with them); nothing else beyond WebGPU's defaults.
+        let required_features = if cfg!(target_arch = "wasm32") {
+            wgpu::Features::empty()
+        } else {
+            adapter.features() & wgpu::Features::TIMESTAMP_QUERY
+        };
+        let descriptor =
+            wgpu::DeviceDescriptor { label: Some("monolayer gpu"), required_features, ..Default::default() };
         let (device, queue) = adapter
             .request_device(&descriptor)
             .await
@@ -130,6 +138,12 @@ impl GpuContext {
 
     pub fn device_type(&self) -> wgpu::DeviceType {
         self.info.device_type
+    }
+
+    /// Whether the device writes timestamps around compute passes (natively, where the adapter
+    /// can).
+    pub fn has_timestamps(&self) -> bool {
+        self.device.features().contains(wgpu::Features::TIMESTAMP_QUERY)
     }
 
     /// Whether the adapter is a CPU device (lavapipe, SwiftShader): its times are CPU figures.

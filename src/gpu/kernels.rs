@@ -326,14 +326,16 @@ impl Kernel {
             Kernel::CgProduct => {
                 &[Params, Weight, Diagonal, Direction, Product, Partials, Solve, Preconditioned, DirectionNext]
             }
-            Kernel::CgUpdate => &[Params, MeanVelocity, Residual, Direction, Product, Partials, Solve, DirectionNext],
+            Kernel::CgUpdate => {
+                &[Params, Force, MeanVelocity, Residual, Direction, Product, Partials, Solve, DirectionNext]
+            }
             Kernel::FrictionPull => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, Direction, Partials, Solve],
             Kernel::FrictionCheck => &[Params, Partials, Solve],
-            Kernel::Jacobi => &[Params, Diagonal, Residual, Partials, Preconditioned],
+            Kernel::Jacobi => &[Params, Diagonal, Residual, Partials, Solve, Preconditioned],
             Kernel::MgCoarsenFine | Kernel::MgCoarsenRest => &[Params, Weight, Drag, Diagonal, Hierarchy],
-            Kernel::MgRestrict => &[Params, Weight, Diagonal, Residual, Partials, MgWork],
-            Kernel::MgCoarseCycle => &[Params, Weight, Diagonal, Partials, Hierarchy, MgWork],
-            Kernel::MgSmooth => &[Params, Weight, Diagonal, Residual, Partials, Preconditioned, MgWork],
+            Kernel::MgRestrict => &[Params, Weight, Diagonal, Residual, Partials, Solve, MgWork],
+            Kernel::MgCoarseCycle => &[Params, Weight, Diagonal, Partials, Solve, Hierarchy, MgWork],
+            Kernel::MgSmooth => &[Params, Weight, Diagonal, Residual, Partials, Solve, Preconditioned, MgWork],
             Kernel::PatchBounds => &[Params, Patches, Phi, NextPatches, PatchFault],
             Kernel::Relayout => &[Params, Patches, Phi, Phi0, NextPatches],
             Kernel::CommitPatches => &[Patches, Phi, Phi0, NextPatches],
@@ -399,8 +401,8 @@ impl Kernel {
             Kernel::CgStart => l2 + 2 * l2 + l2 + 2 * l2 + 4 * l2,
             // z, p, n and the diagonal read; p′ and q written.
             Kernel::CgProduct => 4 * l2 + 2 * l2 + 4 * l2,
-            // u, p′, r and q read; u, p and r written.
-            Kernel::CgUpdate => 8 * l2 + 6 * l2,
+            // u, p′, r, q and F read; u, p and r written.
+            Kernel::CgUpdate => 10 * l2 + 6 * l2,
             // n, u, F and the diagonal read; the pull written.
             Kernel::FrictionPull => l2 + 2 * l2 + 2 * l2 + 2 * l2 + l2,
             // The partial sums, one workgroup.
@@ -426,6 +428,58 @@ impl Kernel {
         4 * values
     }
 
+    /// The longest run of loop iterations one invocation takes in a dispatch, one after
+    /// another (dependent or merely in sequence), barrier phases included: the part of the
+    /// dispatch no number of invocations shortens. Read off each kernel's WGSL (loops over a
+    /// site's stencil count once); [`serial_chain`] adds them up along a step.
+    pub fn serial_steps(self, state: &DeviceState) -> u64 {
+        let layout = &state.layout;
+        let ceil = |a: usize, b: usize| a.div_ceil(b) as u64;
+        // A halving tree over a workgroup of 256 or 64 invocations; a total of the lattice's
+        // partial sums (`total_of` in friction.wgsl): its share of the entries, then the tree.
+        let (tree256, tree64) = (8, 6);
+        let groups = (layout.box_size * layout.box_size).div_ceil(LATTICE_GROUP);
+        let total = ceil(groups, TOTAL_LANES) + TOTAL_LANES.ilog2() as u64;
+        // The stop test: the total of ‖r‖² and ‖F‖² (or of r·z with the flags).
+        let done = total;
+        let per_cell = ceil(layout.max_padded, SITES_PER_GROUP) + tree64;
+        let hierarchy = Hierarchy::new(layout.box_size);
+        match self {
+            // Per chunk of 64 cells, one invocation compacts the chunk's flags, then every site
+            // adds the listed cells (at most the chunk).
+            Kernel::LatticeSums | Kernel::FrictionSums => {
+                2 * ceil(layout.n_cells(), GATHER_CHUNK) * GATHER_CHUNK as u64
+            }
+            Kernel::CellArea | Kernel::ShapeTensor | Kernel::PatchBounds => per_cell,
+            Kernel::ChemicalPotential
+            | Kernel::ForceDensity
+            | Kernel::VelocityAndRate
+            | Kernel::Predict
+            | Kernel::Correct
+            | Kernel::Relayout
+            | Kernel::CommitPatches
+            | Kernel::FrictionSetup
+            | Kernel::MgCoarsenFine => 1,
+            Kernel::CgStart => 2 * tree256 + 1,
+            Kernel::CgProduct | Kernel::CgUpdate | Kernel::FrictionPull => done + tree256 + 1,
+            Kernel::Jacobi | Kernel::MgSmooth => done + tree256 + 1,
+            Kernel::MgRestrict => done + 1,
+            Kernel::FrictionCheck => total,
+            Kernel::MgCoarsenRest => {
+                let levels: u64 = hierarchy.sides.iter().skip(1).map(|m| ceil(m * m, LATTICE_GROUP)).sum();
+                let n = hierarchy.sides.last().map_or(0, |m| m * m);
+                // The inverse: zeroing, the rows, then two phases per pivot.
+                let inverse = if n == 0 {
+                    0
+                } else {
+                    ceil(n * n, LATTICE_GROUP) + ceil(n, LATTICE_GROUP) + 2 * n as u64 * ceil(n * n, LATTICE_GROUP)
+                };
+                levels + inverse
+            }
+            Kernel::MgCoarseCycle => done + coarse_cycle_steps(&hierarchy.sides),
+        }
+    }
+
     /// Workgroups to dispatch over the state's layout.
     fn workgroups(self, state: &DeviceState) -> [u32; 3] {
         let layout = &state.layout;
@@ -445,6 +499,65 @@ impl Kernel {
             }
         }
     }
+}
+
+/// Invocations that add a part's partial sums before their tree (`TOTAL_LANES` in
+/// `shaders/friction.wgsl`).
+const TOTAL_LANES: usize = 16;
+
+/// Cells listed per pass over a lattice tile (`CHUNK` in `shaders/gather.wgsl`).
+const GATHER_CHUNK: usize = 64;
+
+/// The serial steps of `mg_coarse_cycle`'s walk (`shaders/multigrid.wgsl`) over levels of these
+/// sides (level 1 first): each loop over a level's sites is its share per invocation, each
+/// visit of the coarsest level n products into one sum.
+fn coarse_cycle_steps(sides: &[usize]) -> u64 {
+    use crate::model::multigrid::COARSE_CORRECTIONS;
+    let share = |k: usize| sides[k - 1].pow(2).div_ceil(LATTICE_GROUP) as u64;
+    let last = sides.len();
+    if last == 0 {
+        return 0;
+    }
+    // The same walk as the shader's: down smoothing from zero and restricting, the coarsest
+    // solved, up prolonging, down again while a level has corrections left, smoothing last.
+    let (mut steps, mut k, mut down) = (0u64, 1usize, true);
+    let mut corrections = vec![0usize; last + 1];
+    loop {
+        if down {
+            if k == last {
+                steps += sides[k - 1].pow(2) as u64;
+                if k == 1 {
+                    return steps;
+                }
+                down = false;
+                k -= 1;
+                continue;
+            }
+            corrections[k] = 0;
+            steps += share(k) + share(k) + share(k + 1);
+            k += 1;
+            continue;
+        }
+        steps += share(k);
+        corrections[k] += 1;
+        if corrections[k] < COARSE_CORRECTIONS {
+            steps += share(k) + share(k + 1);
+            k += 1;
+            down = true;
+            continue;
+        }
+        steps += 2 * share(k);
+        if k == 1 {
+            return steps;
+        }
+        k -= 1;
+    }
+}
+
+/// The serial steps of a list of dispatches ([`Kernel::serial_steps`]), which run one after
+/// another: the longest chain a step's dispatches make whatever the GPU's width.
+pub fn serial_chain(kernels: &[Kernel], state: &DeviceState) -> u64 {
+    kernels.iter().map(|k| k.serial_steps(state)).sum()
 }
 
 /// The kernels' pipelines, compiled once per device.
@@ -543,11 +656,60 @@ impl GpuMonolayer {
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("stages"), timestamp_writes: None });
         for &k in kernels {
-            let [x, y, z] = k.workgroups(&self.state);
-            pass.set_pipeline(self.pipelines.get(k));
-            pass.set_bind_group(0, &self.bind_groups[k as usize], &[]);
-            pass.dispatch_workgroups(x, y, z);
+            self.dispatch(&mut pass, k);
         }
+    }
+
+    fn dispatch(&self, pass: &mut wgpu::ComputePass, k: Kernel) {
+        let [x, y, z] = k.workgroups(&self.state);
+        pass.set_pipeline(self.pipelines.get(k));
+        pass.set_bind_group(0, &self.bind_groups[k as usize], &[]);
+        pass.dispatch_workgroups(x, y, z);
+    }
+
+    /// Runs the kernels, each in its own compute pass with a timestamp at its start and its end,
+    /// and returns each one's time on the device in ms; `None` where the device writes no
+    /// timestamps ([`GpuContext::has_timestamps`]). Blocking, native only: `bench --gpu`.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn time_kernels(&self, ctx: &GpuContext, kernels: &[Kernel]) -> Option<Vec<f64>> {
+        if !ctx.has_timestamps() {
+            return None;
+        }
+        let period_ns = f64::from(ctx.queue.get_timestamp_period());
+        let mut out = Vec::with_capacity(kernels.len());
+        for chunk in kernels.chunks(wgpu::QUERY_SET_MAX_QUERIES as usize / 2) {
+            let count = 2 * chunk.len() as u32;
+            let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("stage times"),
+                ty: wgpu::QueryType::Timestamp,
+                count,
+            });
+            let resolved = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("stage times"),
+                size: wgpu::QUERY_SIZE as u64 * count as u64,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let mut encoder =
+                ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("stage times") });
+            for (i, &k) in chunk.iter().enumerate() {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("stage"),
+                    timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                        query_set: &set,
+                        beginning_of_pass_write_index: Some(2 * i as u32),
+                        end_of_pass_write_index: Some(2 * i as u32 + 1),
+                    }),
+                });
+                self.dispatch(&mut pass, k);
+            }
+            encoder.resolve_query_set(&set, 0..count, &resolved, 0);
+            ctx.queue.submit([encoder.finish()]);
+            let words = read_now(ctx, &resolved);
+            let tick = |i: usize| u64::from(words[2 * i]) | (u64::from(words[2 * i + 1]) << 32);
+            out.extend((0..chunk.len()).map(|i| tick(2 * i + 1).saturating_sub(tick(2 * i)) as f64 * period_ns / 1e6));
+        }
+        Some(out)
     }
 
     /// Encodes and submits the kernels; returns without waiting for them.
@@ -686,6 +848,14 @@ mod tests {
         let at = FRICTION_WGSL.find("const RECURSIVE_RESIDUAL_MARGIN: f32 = ").expect("the margin in friction.wgsl");
         let value: String = FRICTION_WGSL[at + 39..].chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
         assert_eq!(value.parse::<f64>().unwrap(), crate::gpu::buffers::RECURSIVE_RESIDUAL_MARGIN, "WGSL margin");
+        // The lanes of a total are the ones the serial steps count with.
+        let at = FRICTION_WGSL.find("const TOTAL_LANES: u32 = ").expect("TOTAL_LANES in friction.wgsl");
+        let value: String = FRICTION_WGSL[at + 25..].chars().take_while(char::is_ascii_digit).collect();
+        assert_eq!(value.parse::<usize>().unwrap(), TOTAL_LANES, "WGSL TOTAL_LANES");
+        // The gather's chunk is the one the serial steps count with.
+        let at = GATHER_WGSL.find("const CHUNK: u32 = ").expect("CHUNK in gather.wgsl");
+        let value: String = GATHER_WGSL[at + 19..].chars().take_while(char::is_ascii_digit).collect();
+        assert_eq!(value.parse::<usize>().unwrap(), GATHER_CHUNK, "WGSL CHUNK");
         // The reductions' group in friction.wgsl and multigrid.wgsl is the host's.
         for text in [FRICTION_WGSL, MULTIGRID_WGSL] {
             if let Some(at) = text.find("const GROUP: u32 = ") {
@@ -693,6 +863,20 @@ mod tests {
                 assert_eq!(value.parse::<usize>().unwrap(), LATTICE_GROUP, "WGSL GROUP");
             }
         }
+    }
+
+    /// The walk visits the coarsest level 2^(levels − 1) times (two corrections below level 1),
+    /// as the W-cycle does: sides 70, 35, 18, 9, 5 (the paper's 140²) give 16 visits of 25
+    /// products, and each finer level's loops in proportion.
+    #[test]
+    fn the_coarse_cycles_serial_steps_follow_the_w_cycle() {
+        assert_eq!(coarse_cycle_steps(&[]), 0);
+        assert_eq!(coarse_cycle_steps(&[5]), 25);
+        // One level above the coarsest: down (3 loops), coarsest, up (prolong), down again
+        // (restrict: 2 loops), coarsest, up (prolong, then the final sweep's 2 loops).
+        assert_eq!(coarse_cycle_steps(&[9, 5]), (1 + 1 + 1) + 25 + 1 + (1 + 1) + 25 + 1 + 2);
+        let full = coarse_cycle_steps(&[70, 35, 18, 9, 5]);
+        assert!(full > 16 * 25, "{full}");
     }
 
     /// Every binding a kernel lists is declared in the WGSL it is compiled from with that number.

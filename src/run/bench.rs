@@ -360,14 +360,16 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
         if solve.converged() { "" } else { ", NOT CONVERGED" },
         bytes(&gpu, &working_kernels)
     );
-    let coarse_cycles = working_kernels.iter().filter(|&&k| k == Kernel::MgCoarseCycle).count();
     let working_bytes = bytes(&gpu, &working_kernels);
 
     // A run as the page's GPU engine takes it (gpu::stepper::GpuRun): submissions of 50 steps,
     // each checked by one readback, the recorded iterations following what the solves need.
     let mut run = crate::gpu::stepper::GpuRun::new(&ctx, &m).map_err(RunError::gpu)?;
     let recorded = run.gpu().solve_iterations;
-    run.advance(&ctx, run.check_every).map_err(RunError::gpu)?;
+    // Enough submissions for the recorded iterations to settle (the rule lowers them only after
+    // `LOWER_AFTER` in a row asked for fewer), then the timed ones.
+    let settle = u64::from(crate::gpu::iterations::LOWER_AFTER) + 1;
+    run.advance(&ctx, settle * run.check_every).map_err(RunError::gpu)?;
     let t = Instant::now();
     let steps = 2 * run.check_every;
     run.advance(&ctx, steps).map_err(RunError::gpu)?;
@@ -388,9 +390,46 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     }
     let stages: Vec<String> = per_stage.iter().map(|(f, n)| format!("{f} {n}")).collect();
     println!("dispatches recorded per step by stage (shaders/): {}", stages.join(", "));
+    // At the iterations the solve took: what the recorded count tends to when it fits them.
+    let needed = [Kernel::step(Some((gpu.preconditioner, taken))), Kernel::MOVE_PATCHES.to_vec()].concat();
+    let recorded_list = [Kernel::step(run.gpu().solve()), Kernel::MOVE_PATCHES.to_vec()].concat();
+    let coarse: u64 = recorded_list
+        .iter()
+        .filter(|&&k| matches!(k, Kernel::MgCoarseCycle | Kernel::MgCoarsenRest))
+        .map(|k| k.serial_steps(run.gpu().state()))
+        .sum();
+    println!(
+        "at the {taken} iterations the solve took: {} dispatches per step; longest serial chain per step (loop \
+         iterations one after another on one invocation, Kernel::serial_steps): {} as recorded, {coarse} of them in \
+         the coarse levels",
+        needed.len(),
+        crate::gpu::kernels::serial_chain(&recorded_list, run.gpu().state())
+    );
+    // Each dispatch timed on the device, in its own pass between two timestamps: one step from
+    // the uploaded state, the recorded list.
+    gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
+    match gpu.time_kernels(&ctx, &recorded_list) {
+        Some(ms) => {
+            let mut by_stage: Vec<(&str, f64)> = Vec::new();
+            for (k, t) in recorded_list.iter().zip(&ms) {
+                match by_stage.iter_mut().find(|(f, _)| *f == k.shader_file()) {
+                    Some((_, sum)) => *sum += t,
+                    None => by_stage.push((k.shader_file(), *t)),
+                }
+            }
+            let stages: Vec<String> = by_stage.iter().map(|(f, t)| format!("{f} {t:.3}")).collect();
+            println!(
+                "device time of one step by stage (timestamps around each dispatch), ms: {}; {:.3} in all",
+                stages.join(", "),
+                ms.iter().sum::<f64>()
+            );
+        }
+        None => println!("device time by stage: timestamps unsupported on this adapter"),
+    }
     // Every recorded dispatch is launched, the ones after convergence too; the bytes and the
-    // coarse cycles are those of the dispatches that work.
-    println!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, coarse_cycles)));
+    // serial steps are those of the dispatches that work.
+    let working_chain = crate::gpu::kernels::serial_chain(&working_kernels, gpu.state());
+    println!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, working_chain)));
     Ok(())
 }
 
@@ -400,8 +439,10 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
 pub struct LaptopProjection {
     pub dispatches: usize,
     pub megabytes: f64,
-    pub coarse_cycles: usize,
-    /// Fastest and slowest, in ms per step.
+    /// The longest chain of serial steps along the step (`gpu::kernels::serial_chain`).
+    pub serial_steps: u64,
+    /// Fastest and slowest, in ms per step: the device's time or the host's encoding, whichever
+    /// is longer (the host encodes the next submission while the device runs this one).
     pub ms: (f64, f64),
 }
 
@@ -409,21 +450,23 @@ pub struct LaptopProjection {
 pub const DISPATCH_US: (f64, f64) = (2.0, 10.0);
 /// Memory bandwidth, GB/s: a discrete laptop GPU, an integrated one.
 pub const BANDWIDTH_GB_S: (f64, f64) = (200.0, 60.0);
-/// One barrier phase of the one-workgroup coarse cycle, µs, and the phases of one cycle (the
-/// W-cycle's walk over the coarse levels, `shaders/multigrid.wgsl`).
-pub const BARRIER_US: f64 = 1.0;
-pub const PHASES_PER_COARSE_CYCLE: usize = 150;
+/// One serial step of an invocation (a loop iteration with its loads from cache, or a barrier
+/// phase), µs.
+pub const SERIAL_STEP_US: (f64, f64) = (0.05, 0.5);
+/// The host's cost of encoding one dispatch (pipeline, bind group, dispatch), µs.
+pub const ENCODE_US: (f64, f64) = (0.5, 2.0);
 
 impl LaptopProjection {
-    pub fn of(dispatches: usize, megabytes: f64, coarse_cycles: usize) -> Self {
-        let cycles_ms = (coarse_cycles * PHASES_PER_COARSE_CYCLE) as f64 * BARRIER_US / 1e3;
-        let at = |dispatch_us: f64, gb_s: f64| dispatches as f64 * dispatch_us / 1e3 + megabytes / gb_s + cycles_ms;
-        LaptopProjection {
-            dispatches,
-            megabytes,
-            coarse_cycles,
-            ms: (at(DISPATCH_US.0, BANDWIDTH_GB_S.0), at(DISPATCH_US.1, BANDWIDTH_GB_S.1)),
-        }
+    pub fn of(dispatches: usize, megabytes: f64, serial_steps: u64) -> Self {
+        let at = |i: usize| {
+            let [launch, gb_s, serial, encode] = [
+                [DISPATCH_US.0, BANDWIDTH_GB_S.0, SERIAL_STEP_US.0, ENCODE_US.0],
+                [DISPATCH_US.1, BANDWIDTH_GB_S.1, SERIAL_STEP_US.1, ENCODE_US.1],
+            ][i];
+            let device = dispatches as f64 * launch / 1e3 + megabytes / gb_s + serial_steps as f64 * serial / 1e3;
+            device.max(dispatches as f64 * encode / 1e3)
+        };
+        LaptopProjection { dispatches, megabytes, serial_steps, ms: (at(0), at(1)) }
     }
 }
 
@@ -431,14 +474,19 @@ impl LaptopProjection {
 pub fn projection_line(p: &LaptopProjection) -> String {
     format!(
         "PROJECTION for a laptop GPU, not a measurement: {} dispatches × {}–{} µs, {:.1} MB at {}–{} GB/s, \
-         {} coarse cycles × {PHASES_PER_COARSE_CYCLE} barrier phases × {BARRIER_US} µs: {:.1}–{:.1} ms per step ({:.0}–{:.0} steps/s)",
+         {} serial steps × {}–{} µs (host encoding {}–{} µs per dispatch, overlapped): {:.1}–{:.1} ms per step \
+         ({:.0}–{:.0} steps/s)",
         p.dispatches,
         DISPATCH_US.0,
         DISPATCH_US.1,
         p.megabytes,
         BANDWIDTH_GB_S.0,
         BANDWIDTH_GB_S.1,
-        p.coarse_cycles,
+        p.serial_steps,
+        SERIAL_STEP_US.0,
+        SERIAL_STEP_US.1,
+        ENCODE_US.0,
+        ENCODE_US.1,
         p.ms.0,
         p.ms.1,
         1e3 / p.ms.1,
@@ -458,14 +506,17 @@ mod tests {
     }
 
     #[test]
-    fn the_laptop_projection_adds_dispatches_bytes_and_coarse_cycles() {
+    fn the_laptop_projection_adds_dispatches_bytes_and_serial_steps() {
         // 100 dispatches at 2–10 µs = 0.2–1.0 ms; 60 MB at 200–60 GB/s = 0.3–1.0 ms;
-        // 10 cycles × 150 phases × 1 µs = 1.5 ms.
-        let p = LaptopProjection::of(100, 60.0, 10);
-        assert!((p.ms.0 - 2.0).abs() < 1e-12 && (p.ms.1 - 3.5).abs() < 1e-12, "{p:?}");
+        // 10,000 serial steps at 0.05–0.5 µs = 0.5–5.0 ms; encoding 0.05–0.2 ms, overlapped.
+        let p = LaptopProjection::of(100, 60.0, 10_000);
+        assert!((p.ms.0 - 1.0).abs() < 1e-12 && (p.ms.1 - 7.0).abs() < 1e-12, "{p:?}");
         let line = projection_line(&p);
         assert!(line.starts_with("PROJECTION for a laptop GPU, not a measurement"), "{line}");
-        assert!(line.contains("2.0–3.5 ms per step (286–500 steps/s)"), "{line}");
+        assert!(line.contains("1.0–7.0 ms per step (143–1000 steps/s)"), "{line}");
+        // Where encoding takes longer than the device, it sets the pace.
+        let host_bound = LaptopProjection::of(10_000, 0.0, 0);
+        assert!((host_bound.ms.1 - 100.0).abs() < 1e-9, "{host_bound:?}");
     }
 
     #[test]
