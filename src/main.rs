@@ -625,7 +625,7 @@ fn figures(a: FiguresArgs) -> Result<(), RunError> {
     if a.throttle == 0 {
         return Err(RunError::invalid("--throttle", 0, "≥ 1"));
     }
-    monolayer::run::figures::command::figures(&monolayer::run::figures::command::FiguresOptions {
+    monolayer::run::figures::figures(&monolayer::run::figures::FiguresOptions {
         out: a.out,
         scale: a.scale,
         only: a.only,

@@ -68,6 +68,11 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
     })
 }
 
+/// Writes `text` to `path` atomically ([`write_atomic`]): the tables, reports and scripts.
+pub fn write_text(path: &Path, text: &str) -> IoResult<()> {
+    write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| io(path, e)))
+}
+
 /// The file a rename into `path` replaces: `path` itself, or the regular file a symbolic link
 /// there points to (so that the link is written through, not replaced). A rename replaces
 /// whatever is at its target, so anything else (a device such as `/dev/null`, a FIFO, a
