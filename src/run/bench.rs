@@ -11,11 +11,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::analysis::Analysis;
-use crate::formats::snapshot;
-use crate::model::monolayer::Monolayer;
-use crate::model::params::Params;
+use crate::formats::{snapshot, RunRecord};
+use crate::model::{Monolayer, Params};
 use crate::run::error::RunError;
-use crate::run::files::{frame_path, write_frame, RunRecord};
+use crate::run::files::{frame_path, write_frame};
 use crate::run::offline::analyze_run;
 use crate::run::plots::Background;
 
@@ -31,7 +30,7 @@ pub struct BenchOptions {
     pub threads: Vec<usize>,
     pub blocks: u64,
     pub seed: u64,
-    /// A relaxed-state file to start from instead of relaxing (see [`relaxed_start`]).
+    /// A relaxed-state file to start from instead of relaxing (see `relaxed_start`).
     pub from_relaxed: Option<PathBuf>,
 }
 
@@ -365,7 +364,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
 
     // A run as the page's GPU engine takes it (gpu::stepper::GpuRun): submissions of 50 steps,
     // each checked by one readback, the recorded iterations following what the solves need.
-    let mut run = crate::gpu::stepper::GpuRun::new(&ctx, &m).map_err(RunError::gpu)?;
+    let mut run = crate::gpu::GpuRun::new(&ctx, &m).map_err(RunError::gpu)?;
     let recorded = run.gpu().solve_iterations;
     run.advance(&ctx, run.check_every).map_err(RunError::gpu)?;
     let t = Instant::now();
@@ -396,6 +395,8 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
 
 /// A laptop GPU's time per full-size step, projected from the counts of a step (what works
 /// in it), with the assumed costs below. Not a measurement: no GPU was at hand (docs/gpu.md).
+/// Only `bench --gpu` prints it (and the tests check it).
+#[cfg(any(feature = "gpu", test))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LaptopProjection {
     pub dispatches: usize,
@@ -406,14 +407,19 @@ pub struct LaptopProjection {
 }
 
 /// Launch and dependency cost of one dispatch within a compute pass on a laptop GPU, µs.
+#[cfg(any(feature = "gpu", test))]
 pub const DISPATCH_US: (f64, f64) = (2.0, 10.0);
 /// Memory bandwidth, GB/s: a discrete laptop GPU, an integrated one.
+#[cfg(any(feature = "gpu", test))]
 pub const BANDWIDTH_GB_S: (f64, f64) = (200.0, 60.0);
 /// One barrier phase of the one-workgroup coarse cycle, µs, and the phases of one cycle (the
 /// W-cycle's walk over the coarse levels, `shaders/multigrid.wgsl`).
+#[cfg(any(feature = "gpu", test))]
 pub const BARRIER_US: f64 = 1.0;
+#[cfg(any(feature = "gpu", test))]
 pub const PHASES_PER_COARSE_CYCLE: usize = 150;
 
+#[cfg(any(feature = "gpu", test))]
 impl LaptopProjection {
     pub fn of(dispatches: usize, megabytes: f64, coarse_cycles: usize) -> Self {
         let cycles_ms = (coarse_cycles * PHASES_PER_COARSE_CYCLE) as f64 * BARRIER_US / 1e3;
@@ -428,6 +434,7 @@ impl LaptopProjection {
 }
 
 /// The line `bench --gpu` prints, labelled as a projection.
+#[cfg(any(feature = "gpu", test))]
 pub fn projection_line(p: &LaptopProjection) -> String {
     format!(
         "PROJECTION for a laptop GPU, not a measurement: {} dispatches × {}–{} µs, {:.1} MB at {}–{} GB/s, \

@@ -4,8 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::model::error::SimError;
-use crate::model::params::ParamError;
+use crate::model::{ParamError, SimError};
 
 /// What went wrong in a command of this layer.
 #[derive(Debug, thiserror::Error)]
@@ -34,7 +33,7 @@ pub enum RunError {
     /// An option or a value outside what it takes: `NAME VALUE: must be ALLOWED`.
     #[error("{name} {value}: must be {allowed}")]
     Invalid { name: String, value: String, allowed: String },
-    /// Parameters [`Params::validate`](crate::model::params::Params::validate) refuses.
+    /// Parameters [`Params::validate`](crate::model::Params::validate) refuses.
     #[error(transparent)]
     Params(#[from] ParamError),
     /// The simulation failed.

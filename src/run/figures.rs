@@ -1,24 +1,25 @@
 //! `monolayer figures`: the paper's figures from one plan of runs (docs/cli.md, "figures"), in
 //! five stages, a file each, each taking the previous stage's output and returning its own:
 //!
-//! 1. [`plan`]: the runs every figure needs, their union, each figure's points ([`Plan`]);
-//! 2. [`runs`]: the estimate, then the runs through the sweep machinery (or, with `--slurm`, as a
-//!    job array: [`slurm`]); hands on the finished runs with their records ([`runs::Runs`]);
-//! 3. [`measures`]: every run measured once ([`measures::Measures`]);
-//! 4. [`draw`]: `plan.csv` and each figure as PNG and SVG beside a CSV of exactly what is drawn
-//!    ([`draw::Drawn`]; the plots themselves in [`plot`]);
-//! 5. [`report`]: `OUT/figures.md`, each figure beside what the paper says.
+//! 1. `plan`: the runs every figure needs, their union, each figure's points ([`Plan`]);
+//! 2. `runs`: the estimate ([`Speed`]), then the runs through the sweep machinery (or, with
+//!    `--slurm`, as a job array: `slurm`); hands on the finished runs with their records (`Runs`);
+//! 3. `measures`: every run measured once (`Measures`);
+//! 4. `draw`: `plan.csv` and each figure as PNG and SVG beside a CSV of exactly what is drawn
+//!    (`Drawn`; the plots themselves in `plot`);
+//! 5. `report`: `OUT/figures.md`, each figure beside what the paper says.
 //!
 //! This file is the command that runs them in order: `--stage runs` stops after the runs,
-//! `--stage figures` starts from runs that must all be there.
+//! `--stage figures` starts from runs that must all be there. The stages' modules are private;
+//! the plan's types, the estimate and the command are re-exported here.
 
-pub mod draw;
-pub mod measures;
-pub mod plan;
-pub mod plot;
-pub mod report;
-pub mod runs;
-pub mod slurm;
+mod draw;
+mod measures;
+mod plan;
+mod plot;
+mod report;
+mod runs;
+mod slurm;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -122,7 +123,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         };
         return slurm::run_on_slurm(&plan, &request, &speed);
     }
-    let core_seconds = speed.core_seconds_left(&share);
+    let core_seconds = share.core_seconds(&speed);
     let workers = o.jobs.min(share.todo.len().max(1));
     if !share.todo.is_empty() {
         eprintln!(

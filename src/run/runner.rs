@@ -6,13 +6,12 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::model::monolayer::Monolayer;
-use crate::model::params::Params;
-use crate::model::precision::STORE_NAME;
+use crate::formats::{Engine, RunRecord, RunStatus};
+use crate::model::{Monolayer, Params, STORE_NAME};
 use crate::run::error::RunError;
 use crate::run::files::{
     check_checkpoint_params, checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint,
-    write_frame, Engine, RunLock, RunRecord, RunStatus, LAST_GOOD_STATE,
+    write_frame, RunLock, LAST_GOOD_STATE,
 };
 use crate::run::offline::LiveRun;
 
@@ -424,7 +423,7 @@ impl RunDir {
         live: Option<&mut LiveRun>,
         watch: &mut dyn FnMut(&Monolayer, &Event),
     ) -> Result<(), Stop> {
-        use crate::gpu::stepper::GpuRun;
+        use crate::gpu::GpuRun;
         let p = self.monolayer.params().clone();
         let total = p.total_steps();
         let fi = self.record.frame_interval;

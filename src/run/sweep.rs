@@ -25,14 +25,13 @@ use std::sync::Mutex;
 
 use serde::Deserialize;
 
-use crate::analysis::holes::{counted_holes, HoleCounting};
-use crate::analysis::regime::{classify, fitted_lifetime, Regime};
-use crate::analysis::FrameSummary;
-use crate::model::params::Params;
+use crate::analysis::{classify, counted_holes, fitted_lifetime, FrameSummary, HoleCounting, Regime};
+use crate::formats::{RunRecord, RunStatus};
+use crate::model::Params;
 use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
 use crate::run::error::RunError;
 use crate::run::files::{check_frame, read_frame, RunFrames};
-use crate::run::files::{checkpoint_path, write_atomic, RunLock, RunRecord, RunStatus};
+use crate::run::files::{checkpoint_path, write_atomic, RunLock};
 use crate::run::offline::RunAnalysis;
 use crate::run::runner::{Event, RunDir};
 
@@ -507,7 +506,7 @@ fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() +
         Start::Fresh => {
             job.params.validate().map_err(RunError::from)?;
             crate::run::runner::check_memory(&job.params)?;
-            let m = crate::model::monolayer::Monolayer::new(job.params.clone(), job.seed).map_err(RunError::from)?;
+            let m = crate::model::Monolayer::new(job.params.clone(), job.seed).map_err(RunError::from)?;
             RunDir::create_locked(lock, dir, m, frame_interval)?
         }
     };

@@ -12,9 +12,7 @@ use std::path::{Path, PathBuf};
 use super::measures::{Measures, RunData};
 use super::plan::{Figure, Friction, Plan, Point};
 use super::plot::{self, Marker, Panel, Series};
-use crate::analysis::correlations::correlation_length;
-use crate::analysis::precursors::{Precursor, DEPTH};
-use crate::analysis::regime::{classify, fitted_lifetime, Regime};
+use crate::analysis::{classify, correlation_length, fitted_lifetime, Precursor, Regime, DEPTH};
 use crate::run::error::RunError;
 use crate::run::files::write_text;
 
@@ -304,7 +302,7 @@ fn precursor_line(sel: &[&RunData], desc: &str, column: Column, sign: f64) -> St
 /// from holes (45°: random axes), with its table.
 fn alignment_panel(m: &Measures, base: &Path, made: &mut Made) -> Result<Panel, RunError> {
     let plan = m.plan;
-    use crate::analysis::alignment::{AWAY_RADII, BORDER_RADII};
+    use crate::analysis::{AWAY_RADII, BORDER_RADII};
     let mut text = String::from("chi,where,cell_frames,mean_angle_degrees,sem_degrees\n");
     let mut panel = Panel::new(
         &format!("Cells at a hole's edge (0°: tangential, 45°: random; ζ = {})", plan.base.zeta),
@@ -366,9 +364,7 @@ pub fn fmt(x: f64) -> String {
 /// Fig. 2: P(hole | ε̇) per (χ, ζ), pooled over runs, with exponential fits; beside it the
 /// paper's inset: the fitted coefficient against χ^0.1/ζ.
 fn fig2(m: &Measures, base: &Path, made: &mut Made) -> Result<(), RunError> {
-    use crate::analysis::nucleation::{
-        best_collapse_exponent, binomial_fit, collapse_scatter, least_squares_fit, STRAIN_RATE_BIN,
-    };
+    use crate::analysis::{best_collapse_exponent, binomial_fit, collapse_scatter, least_squares_fit, STRAIN_RATE_BIN};
     let mut text =
         String::from("chi,zeta,strain_rate_low,strain_rate_high,sites,sites_opening_into_a_new_hole,probability\n");
     let mut fits = String::from(
@@ -420,7 +416,7 @@ fn fig2(m: &Measures, base: &Path, made: &mut Made) -> Result<(), RunError> {
         for (list, f) in coefficients.iter_mut().zip([ml, ls]) {
             list.extend(f.map(|f| (chi, zeta, f.b)));
         }
-        let cols = |f: Option<crate::analysis::nucleation::ExponentialFit>| {
+        let cols = |f: Option<crate::analysis::ExponentialFit>| {
             f.map(|f| format!("{:.6e},{:.6e},{:.6e}", f.ln_a.exp(), f.b, f.se_b)).unwrap_or_else(|| ",,".into())
         };
         let with_holes = sel.iter().filter(|r| r.probability.values().any(|b| b.1 > 0)).count();
@@ -434,7 +430,7 @@ fn fig2(m: &Measures, base: &Path, made: &mut Made) -> Result<(), RunError> {
             jk_ml.map(|v| format!("{v:.6e}")).unwrap_or_default(),
             jk_ls.map(|v| format!("{v:.6e}")).unwrap_or_default()
         );
-        let shown = |f: Option<crate::analysis::nucleation::ExponentialFit>| {
+        let shown = |f: Option<crate::analysis::ExponentialFit>| {
             f.map(|f| format!("P = {} · exp(({} ± {}) ε̇)", fmt(f.ln_a.exp()), fmt(f.b), fmt(f.se_b)))
                 .unwrap_or_else(|| "too few bins with holes".into())
         };
@@ -497,14 +493,14 @@ fn pooled_probability<'a>(runs: impl Iterator<Item = &'a RunData>) -> BTreeMap<i
 }
 
 /// A fit of P(hole | ε̇) to (ε̇, sites, hole sites) bins.
-type CoefficientFit = fn(&[(f64, u64, u64)]) -> Option<crate::analysis::nucleation::ExponentialFit>;
+type CoefficientFit = fn(&[(f64, u64, u64)]) -> Option<crate::analysis::ExponentialFit>;
 
 /// The jackknife standard error over runs of a fit's coefficient b: each run left out in turn,
 /// the others' bins pooled and fitted; √((n − 1)/n Σ (b₋ᵢ − b̄)²) over the n runs with hole sites
 /// (a run without holes moves no fit's numerator but still counts its sites: it is left out in
 /// turn too). None unless at least two runs have hole sites and every leave-one-out fit exists.
 pub fn jackknife_coefficient_se(runs: &[&RunData], fit: CoefficientFit) -> Option<f64> {
-    use crate::analysis::nucleation::STRAIN_RATE_BIN;
+    use crate::analysis::STRAIN_RATE_BIN;
     if runs.iter().filter(|r| r.probability.values().any(|b| b.1 > 0)).count() < 2 {
         return None;
     }
@@ -810,7 +806,7 @@ fn fig_s1(m: &Measures, base: &Path, made: &mut Made) -> Result<(), RunError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::run::files::RunStatus;
+    use crate::formats::RunStatus;
 
     #[test]
     fn survival_counts_censored_holes_at_risk() {
@@ -852,7 +848,7 @@ mod tests {
         let run_with = |b: f64| {
             let mut r = run_with_spiral_cores(&[], &[]);
             for k in 0..10i64 {
-                let x = k as f64 * crate::analysis::nucleation::STRAIN_RATE_BIN;
+                let x = k as f64 * crate::analysis::STRAIN_RATE_BIN;
                 let n = 1_000_000u64;
                 r.probability.insert(k, (n, (0.001 * (b * x).exp() * n as f64).round() as u64));
             }
@@ -860,7 +856,7 @@ mod tests {
         };
         let (a, b, c) = (run_with(1000.0), run_with(2000.0), run_with(3000.0));
         let runs = [&a, &b, &c];
-        let jk = jackknife_coefficient_se(&runs, crate::analysis::nucleation::binomial_fit).unwrap();
+        let jk = jackknife_coefficient_se(&runs, crate::analysis::binomial_fit).unwrap();
         // Leave-one-out coefficients near 2,500, 2,000, 1,500: √(2/3 · 500,000) ≈ 577.
         assert!(jk > 400.0 && jk < 750.0, "{jk}");
         let mut pooled = BTreeMap::new();
@@ -871,14 +867,12 @@ mod tests {
                 e.1 += h;
             }
         }
-        let counts: Vec<(f64, u64, u64)> = pooled
-            .iter()
-            .map(|(&k, &(n, h))| (k as f64 * crate::analysis::nucleation::STRAIN_RATE_BIN, n, h))
-            .collect();
-        let own = crate::analysis::nucleation::binomial_fit(&counts).unwrap().se_b;
+        let counts: Vec<(f64, u64, u64)> =
+            pooled.iter().map(|(&k, &(n, h))| (k as f64 * crate::analysis::STRAIN_RATE_BIN, n, h)).collect();
+        let own = crate::analysis::binomial_fit(&counts).unwrap().se_b;
         assert!(jk > 5.0 * own, "{jk} against the fit's own {own}");
         let empty = run_with_spiral_cores(&[], &[]);
-        assert_eq!(jackknife_coefficient_se(&[&a, &empty], crate::analysis::nucleation::binomial_fit), None);
+        assert_eq!(jackknife_coefficient_se(&[&a, &empty], crate::analysis::binomial_fit), None);
     }
 
     #[test]

@@ -9,10 +9,10 @@ use rayon::prelude::*;
 
 use super::plan::{Figure, Plan, Point};
 use super::runs::Runs;
-use crate::analysis::holes::{counted_holes, CountedHole, HoleCounting};
-use crate::analysis::precursors::Precursor;
+use crate::analysis::{counted_holes, CountedHole, HoleCounting, Precursor};
+use crate::formats::{RunRecord, RunStatus};
 use crate::run::error::RunError;
-use crate::run::files::{read_frame, RunFrames, RunRecord, RunStatus};
+use crate::run::files::{read_frame, RunFrames};
 use crate::run::offline::RunAnalysis;
 
 /// What the figures need of one run.

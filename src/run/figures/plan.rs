@@ -8,7 +8,7 @@
 
 use std::collections::BTreeSet;
 
-use crate::model::params::Params;
+use crate::model::Params;
 use crate::run::config::load_params;
 use crate::run::error::RunError;
 use crate::run::sweep::Job;

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::analysis::regime::Regime;
+use crate::analysis::Regime;
 use crate::run::error::RunError;
 use crate::run::plots::{self, both_of, plot_err, regime_marker, Draw, FONT};
 

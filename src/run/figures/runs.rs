@@ -11,10 +11,9 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::plan::Plan;
-use crate::model::monolayer::Monolayer;
-use crate::model::params::Params;
+use crate::formats::RunRecord;
+use crate::model::{Monolayer, Params};
 use crate::run::error::RunError;
-use crate::run::files::RunRecord;
 use crate::run::sweep::{run_sweep, steps_to_run, Job, Shard};
 
 /// This process's share of the plan (all of it, or a Slurm array task's `--shard K/N`), with the
@@ -47,6 +46,11 @@ impl<'p> Share<'p> {
     /// The steps the share has left.
     pub fn steps(&self) -> u64 {
         self.todo.iter().map(|&(_, left)| left).sum()
+    }
+
+    /// Estimated core-seconds of the steps the share has left, at `speed`.
+    pub fn core_seconds(&self, speed: &Speed) -> f64 {
+        self.todo.iter().map(|&(job, left)| speed.core_seconds(job, left)).sum()
     }
 }
 
@@ -144,11 +148,6 @@ impl Speed {
             .map(|s| s.1)
             .unwrap_or((0.0, 0.0));
         1e-3 * (relax_left as f64 * r + (left - relax_left) as f64 * a)
-    }
-
-    /// Estimated core-seconds of the steps the share has left.
-    pub fn core_seconds_left(&self, share: &Share) -> f64 {
-        share.todo.iter().map(|&(job, left)| self.core_seconds(job, left)).sum()
     }
 }
 
