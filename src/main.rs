@@ -211,7 +211,7 @@ impl ParamArgs {
         for s in &self.set {
             let (k, _) = parse_assignment("--set", s)?;
             if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
-                return Err(RunError::Message(format!(
+                return Err(RunError::Options(format!(
                     "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
                     if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
                 )));
@@ -375,9 +375,7 @@ fn main() -> ExitCode {
             .transpose()
             .and_then(|threads| with_threads(threads, || run(&a))),
         Command::Bench(a) => bench(&a),
-        Command::Params => {
-            toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| RunError::Message(e.to_string()))
-        }
+        Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(RunError::from),
         Command::Fingerprint(a) => fingerprint(&a),
         Command::RelaxedState(a) => relaxed_state(&a),
         Command::Sweep(a) => sweep(&a),
@@ -418,7 +416,7 @@ fn with_threads(threads: Option<usize>, f: impl FnOnce() -> Result<(), RunError>
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build()
-            .map_err(|e| RunError::Message(format!("--threads {n}: {e}")))?
+            .map_err(|e| RunError::from(e).context(format!("--threads {n}")))?
             .install(f),
     }
 }
@@ -604,12 +602,7 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         });
     }
     if !stopped.is_empty() {
-        return Err(RunError::Message(format!(
-            "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \
-             same command again: they continue from their checkpoints",
-            stopped.len(),
-            stopped.join("\n")
-        )));
+        return Err(RunError::Stopped(stopped));
     }
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
@@ -663,7 +656,7 @@ fn slurm_shard() -> Result<Option<Shard>, RunError> {
     let contiguous = max.is_none_or(|max| max.checked_sub(min).map(|d| d + 1) == Some(count));
     match id.checked_sub(min) {
         Some(index) if index < count && count > 0 && contiguous => Ok(Some(Shard { index, count })),
-        _ => Err(RunError::Message(format!(
+        _ => Err(RunError::Options(format!(
             "this Slurm array task (SLURM_ARRAY_TASK_ID = {id}, MIN = {min}, MAX = {}, COUNT = {count}) is not one of \
              a contiguous array such as --array=0-{}: give each task its share with --shard K/N",
             max.map(|m| m.to_string()).unwrap_or_else(|| "unset".into()),

@@ -35,7 +35,10 @@ pub struct BenchOptions {
 }
 
 fn pool(n: usize) -> Result<rayon::ThreadPool, RunError> {
-    rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| RunError::Message(format!("--threads {n}: {e}")))
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()
+        .map_err(|e| RunError::from(e).context(format!("--threads {n}")))
 }
 
 /// The median of a few timings (the mean of the middle two for an even count).
@@ -61,10 +64,10 @@ fn best(v: &[f64]) -> f64 {
 /// thread counts include 1 and 2) the ceiling of two independent one-thread simulations.
 pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
     if o.threads.is_empty() || o.threads.contains(&0) {
-        return Err(RunError::Message(format!("--threads {:?}: every count must be ≥ 1", o.threads)));
+        return Err(RunError::Options(format!("--threads {:?}: every count must be ≥ 1", o.threads)));
     }
     if o.blocks == 0 || o.blocks > o.steps {
-        return Err(RunError::Message(format!("--blocks {}: must be in [1, --steps = {}]", o.blocks, o.steps)));
+        return Err(RunError::invalid("--blocks", o.blocks, format!("in [1, --steps = {}]", o.steps)));
     }
     if o.chis.is_empty() {
         return Err("--chi: give at least one value".into());
@@ -205,10 +208,10 @@ pub fn relaxed_start(file: &Path, params: &Params, seed: u64) -> Result<Monolaye
     // A relaxed state holds less than the simulation it starts: a larger file is not one.
     let max = crate::run::runner::memory_estimate(params);
     let bytes = crate::run::files::read_input(file, "a relaxed state (--from-relaxed)", max)
-        .map_err(|e| RunError::Message(format!("--from-relaxed {e}")))?;
+        .map_err(|e| RunError::FromRelaxed(e.to_string()))?;
     let state = snapshot::decode_relaxed(&bytes, params, seed).map_err(|e| {
-        RunError::Message(format!(
-            "--from-relaxed {}: {e} (give the relaxation's parameters: --relax-steps, --seed, --set box_size=…, n_cells=…, gamma=…)",
+        RunError::FromRelaxed(format!(
+            "{}: {e} (give the relaxation's parameters: --relax-steps, --seed, --set box_size=…, n_cells=…, gamma=…)",
             file.display()
         ))
     })?;

@@ -48,7 +48,7 @@ impl std::str::FromStr for Stage {
             "all" => Ok(Stage::All),
             "runs" => Ok(Stage::Runs),
             "figures" => Ok(Stage::Figures),
-            _ => Err(RunError::Message(format!("--stage {s}: the stage is one of all, runs, figures"))),
+            _ => Err(RunError::Parse(format!("--stage {s}: the stage is one of all, runs, figures"))),
         }
     }
 }
@@ -139,7 +139,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
     }
     // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
     if matches!(o.scale, Scale::Paper | Scale::Evidence) && !o.yes && o.shard.is_none() && !share.todo.is_empty() {
-        return Err(RunError::Message(format!(
+        return Err(RunError::Options(format!(
             "--scale {} runs {} simulations here, about {} on {} core(s): refused without --yes; \
              on a cluster, --slurm submits them as a job array (--slurm --dry-run prints the scripts)",
             o.scale.name(),
@@ -152,9 +152,10 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         runs::execute(&plan, &share, &o.out, o.jobs, o.quiet)?;
     }
     if let Some((name, _)) = crate::run::runner::stop_signal() {
-        return Err(RunError::Message(format!(
-            "stopped by {name}: the same command again continues the runs from their checkpoints"
-        )));
+        return Err(RunError::Interrupted {
+            signal: name,
+            detail: ": the same command again continues the runs from their checkpoints".into(),
+        });
     }
     if o.stage == Stage::All {
         draw_figures(&plan, &o.out, o.jobs)?;

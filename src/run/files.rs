@@ -609,13 +609,13 @@ impl RunFrames {
             let own = frame_path(dir, step);
             let foreign: Vec<String> =
                 frames.iter().filter(|f| f.0 == step && f.1 != own).map(|f| f.1.display().to_string()).collect();
-            return Err(RunError::Message(format!(
-                "{} and {} both hold step {step}: remove what this run did not write ({}; its own is {})",
-                w[0].1.display(),
-                w[1].1.display(),
-                foreign.join(", "),
-                own.display()
-            )));
+            return Err(RunError::DuplicateFrames {
+                first: w[0].1.clone(),
+                second: w[1].1.clone(),
+                step,
+                foreign,
+                own,
+            });
         }
         // A gap would be measured as one frame interval: holes would seem to open and close
         // faster, and a lifetime would end early. The frames need not start at the end of the

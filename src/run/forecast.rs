@@ -65,11 +65,10 @@ fn measure_run(dir: &Path, partial: bool) -> Result<RunData, RunError> {
     let run = RunFrames::open(dir)?;
     let record = &run.record;
     if !partial && record.status != RunStatus::Finished {
-        return Err(RunError::Message(format!(
-            "{}: the run has not finished ({}); --partial scores the frames written so far",
-            dir.display(),
-            record.status
-        )));
+        return Err(RunError::file(
+            dir,
+            format!("the run has not finished ({}); --partial scores the frames written so far", record.status),
+        ));
     }
     let params = &record.params;
     let mut a = Analysis::new(params);
@@ -492,10 +491,7 @@ pub fn forecast(
     }
     let seeds: BTreeSet<u64> = runs.iter().map(|r| r.seed).collect();
     if seeds.len() < 2 {
-        return Err(RunError::Message(format!(
-            "the runs have {} seed(s): leaving one seed out needs runs of at least two seeds",
-            seeds.len()
-        )));
+        return Err(RunError::TooFewSeeds(seeds.len()));
     }
     let (scores, pooled) = cross_validate(&runs);
     let all: Vec<&RunData> = runs.iter().collect();

@@ -358,11 +358,7 @@ fn measure_frames(
         let frame = read_frame(path, params.box_size)?;
         check_frame(&frame, params)?;
         if frame.data.step != *step {
-            return Err(RunError::Message(format!(
-                "{}: holds step {}, its name says {step}",
-                path.display(),
-                frame.data.step
-            )));
+            return Err(RunError::file(path, format!("holds step {}, its name says {step}", frame.data.step)));
         }
         ra.push_frame(&frame);
         if Some(*step) == keep {
@@ -418,7 +414,7 @@ impl LiveRun {
                 let path = out.join(format!("{}.{ext}", snapshot_name(old)));
                 match fs::remove_file(&path) {
                     Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                        return Err(RunError::Message(format!("{}: {e}", path.display())));
+                        return Err(RunError::io(&path, e));
                     }
                     _ => {}
                 }

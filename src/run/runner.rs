@@ -55,7 +55,7 @@ pub fn stop_gracefully_on_signals() -> Result<(), RunError> {
 }
 
 fn signal_handler(e: std::io::Error) -> RunError {
-    RunError::Message(format!("signal handler: {e}"))
+    RunError::SignalHandler(e)
 }
 
 /// The signal that asked this process to stop, if one did: (name, number).
@@ -201,13 +201,14 @@ pub fn check_memory_of(params: &Params, copies: u64) -> Result<(), RunError> {
     let need = memory_estimate(params).saturating_mul(copies.max(1));
     let held = if copies > 1 { format!(" for the {copies} simulations held at once") } else { String::new() };
     match memory_limit()? {
-        Some((limit, what)) if need > limit => Err(RunError::Message(format!(
-            "box_size = {}, n_cells = {} need about {} MB{held}, more than {what} ({} MB): lower box_size or n_cells",
-            params.box_size,
-            params.n_cells,
-            need >> 20,
-            limit >> 20
-        ))),
+        Some((limit, what)) if need > limit => Err(RunError::Memory {
+            box_size: params.box_size,
+            n_cells: params.n_cells,
+            need_mb: need >> 20,
+            held,
+            limit: what,
+            limit_mb: limit >> 20,
+        }),
         _ => Ok(()),
     }
 }
@@ -220,7 +221,7 @@ pub fn check_frame_interval(flag: &str, frame_interval: u64, params: &Params) ->
         return Err(RunError::invalid(flag, 0, "≥ 1"));
     }
     if params.active_steps > 0 && frame_interval > params.active_steps {
-        return Err(RunError::Message(format!(
+        return Err(RunError::Options(format!(
             "{flag} {frame_interval}: larger than active_steps = {}, so the run would write no frame of its \
              active phase: give a frame interval in [1, {0}]",
             params.active_steps
@@ -520,15 +521,14 @@ fn write_scheduled(
 }
 
 fn already_a_run(dir: &Path) -> RunError {
-    RunError::Message(if checkpoint_path(dir).exists() {
-        format!("{} already holds a run: continue it with --resume {0}, or choose another --out", dir.display())
+    let why = if checkpoint_path(dir).exists() {
+        format!("already holds a run: continue it with --resume {}, or choose another --out", dir.display())
     } else {
-        format!(
-            "{} already holds a run that stopped before its first checkpoint: delete it to start again, or choose \
-             another --out",
-            dir.display()
-        )
-    })
+        "already holds a run that stopped before its first checkpoint: delete it to start again, or choose another \
+         --out"
+            .to_string()
+    };
+    RunError::OtherRun { dir: dir.to_path_buf(), why }
 }
 
 /// `--engine gpu` in a build without feature `gpu`.

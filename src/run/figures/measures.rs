@@ -65,10 +65,7 @@ impl<'p> Measures<'p> {
 
 /// Measures every run, `workers` at a time.
 pub fn measure<'p>(runs: Runs<'p>, workers: usize) -> Result<Measures<'p>, RunError> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(workers.max(1))
-        .build()
-        .map_err(|e| RunError::Message(e.to_string()))?;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(workers.max(1)).build()?;
     let data = pool.install(|| {
         runs.dirs.par_iter().zip(&runs.records).map(|(dir, record)| measure_run(dir, record)).collect::<Result<_, _>>()
     })?;

@@ -91,8 +91,7 @@ impl Speed {
     /// bound; it is what the machine does now, not what a README says.
     pub fn measure(jobs: &[&Job], warm_up: u64, steps: u64) -> Result<Speed, RunError> {
         let mut sizes: Vec<((usize, usize), (f64, f64))> = Vec::new();
-        let pool =
-            rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| RunError::Message(e.to_string()))?;
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
         for job in jobs {
             let key = (job.params.box_size, job.params.n_cells);
             if sizes.iter().any(|s| s.0 == key) {
@@ -233,10 +232,13 @@ pub fn finished<'p>(plan: &'p Plan, out: &Path) -> Result<Runs<'p>, RunError> {
         match RunRecord::load(&dir) {
             Ok(r) if r.status.is_complete() => {
                 if r.params != job.params || r.seed != job.seed {
-                    return Err(RunError::Message(format!(
-                        "{} was run with other parameters or seed than this plan gives it (another scale or --set?): use another --out",
-                        dir.display()
-                    )));
+                    return Err(RunError::OtherRun {
+                        dir,
+                        why:
+                            "was run with other parameters or seed than this plan gives it (another scale or --set?): \
+                              use another --out"
+                                .into(),
+                    });
                 }
                 records.push(r);
             }
@@ -246,15 +248,7 @@ pub fn finished<'p>(plan: &'p Plan, out: &Path) -> Result<Runs<'p>, RunError> {
         dirs.push(dir);
     }
     if !missing.is_empty() {
-        let shown: Vec<&str> = missing.iter().take(5).map(String::as_str).collect();
-        return Err(RunError::Message(format!(
-            "{} of the plan's {} runs in {} are not finished: {}{}; run them first (`monolayer figures --stage runs` with the same --scale, --only and --set, or the Slurm array)",
-            missing.len(),
-            plan.jobs.len(),
-            runs_dir.display(),
-            shown.join(", "),
-            if missing.len() > shown.len() { ", …" } else { "" }
-        )));
+        return Err(RunError::Unfinished { missing, total: plan.jobs.len(), dir: runs_dir });
     }
     Ok(Runs { plan, dirs, records })
 }

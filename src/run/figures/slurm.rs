@@ -39,7 +39,7 @@ pub fn run_on_slurm(plan: &Plan, r: &SlurmRequest, speed: &Speed) -> Result<(), 
         [("--out", out.display().to_string()), ("--partition", r.partition.unwrap_or_default().to_string())]
     {
         if let Some(c) = text.chars().find(|c| c.is_whitespace() || c.is_control() || "%\"'\\$`".contains(*c)) {
-            return Err(RunError::Message(format!(
+            return Err(RunError::Options(format!(
                 "{what} {text:?}: holds {c:?}, which an #SBATCH line cannot hold (spaces, %, quotes, $, `, \\ and \
                  control characters): choose one without"
             )));
@@ -232,10 +232,12 @@ pub fn submit(out: &Path) -> Result<(String, String), RunError> {
     let dir = out.join("slurm");
     let sbatch = |args: &[&str]| -> Result<String, RunError> {
         let o = Command::new("sbatch").args(args).current_dir(&dir).output().map_err(|e| {
-            format!("sbatch: {e} (is this a Slurm login node? --dry-run prints the scripts without submitting)")
+            RunError::Slurm(format!(
+                "sbatch: {e} (is this a Slurm login node? --dry-run prints the scripts without submitting)"
+            ))
         })?;
         if !o.status.success() {
-            return Err(RunError::Message(format!(
+            return Err(RunError::Slurm(format!(
                 "sbatch {}: {}",
                 args.join(" "),
                 String::from_utf8_lossy(&o.stderr).trim()
