@@ -21,6 +21,12 @@
 //!   (imports only `model`);
 //! - `run` (native, feature `cli`): files, runs, sweeps, the offline analysis, plots;
 //! - [`web`]: the browser demo's view (native and wasm32), its binding and wgpu renderer (wasm32).
+//!
+//! The public API is curated, layer by layer: each layer's modules are private and its
+//! `mod.rs` re-exports what the other layers, the `monolayer` binary, the tests and the page
+//! use (`monolayer::model::FrictionSolver`, `monolayer::analysis::HoleTracker`,
+//! `monolayer::run::RunDir`), so a file can move inside its layer without breaking a caller.
+//! The core's few types are re-exported here too.
 
 pub mod analysis;
 pub mod formats;
@@ -39,6 +45,4 @@ pub mod run;
 // wgpu drawing.
 pub mod web;
 
-pub use model::error::SimError;
-pub use model::monolayer::{Monolayer, Phase, State};
-pub use model::params::Params;
+pub use model::{Monolayer, Params, Phase, SimError, State};

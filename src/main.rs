@@ -8,15 +8,14 @@ use std::time::Instant;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use monolayer::formats::snapshot;
-use monolayer::run::bench::BenchOptions;
-use monolayer::run::config::{load_params, parse_assignment};
-use monolayer::run::error::RunError;
-use monolayer::run::files::{self, Engine, RunStatus};
-use monolayer::run::offline::analyze_run;
-use monolayer::run::plots::Background;
-use monolayer::run::runner::{Event, RunDir};
-use monolayer::run::sweep::{jobs_of_runs, measure_existing, run_sweep, steps_to_run, write_tables, Shard, SweepSpec};
+use monolayer::formats::{snapshot, Engine, RunStatus};
+use monolayer::model::MAX_STEPS;
+use monolayer::run::figures::{FiguresOptions, Scale, Stage};
+use monolayer::run::{
+    analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, jobs_of_runs, load_params,
+    measure_existing, parse_assignment, replaceable, run_sweep, steps_to_run, stop_gracefully_on_signals, stop_signal,
+    write_atomic, write_tables, Background, BenchOptions, Event, RunDir, RunError, Shard, SweepSpec,
+};
 use monolayer::{Monolayer, Params, Phase};
 
 #[derive(Parser)]
@@ -86,7 +85,7 @@ struct FiguresArgs {
     /// Figs. 2 and 3c, 3 elsewhere, the χ = 0.01 points at ζ = 0.4 and 0.5 included; 75 runs,
     /// some 20 core-hours) or paper (the paper's counts: a cluster).
     #[arg(long, default_value = "smoke")]
-    scale: monolayer::run::figures::Scale,
+    scale: Scale,
     /// Only these figures and their runs: --only 1c,3d,S1 (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3,
     /// mechanism).
     #[arg(long, value_name = "LIST")]
@@ -104,7 +103,7 @@ struct FiguresArgs {
     /// all (runs, then figures), runs (only the runs: a Slurm array task), or figures (only the
     /// figures, from finished runs: the aggregation job).
     #[arg(long, default_value = "all")]
-    stage: monolayer::run::figures::Stage,
+    stage: Stage,
     /// Run only every N-th run of the plan starting at K (K/N), as a Slurm array task does.
     #[arg(long, value_name = "K/N")]
     shard: Option<Shard>,
@@ -171,7 +170,7 @@ struct RelaxedStateArgs {
     /// Active steps to run past the relaxation before saving (0: the end of the relaxation,
     /// which serves every activity and friction; later states continue only under exactly
     /// these parameters).
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=monolayer::model::params::MAX_STEPS))]
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=MAX_STEPS))]
     advance: u64,
     /// The snapshot file to write (atomically).
     #[arg(long)]
@@ -212,7 +211,7 @@ impl ParamArgs {
         for s in &self.set {
             let (k, _) = parse_assignment("--set", s)?;
             if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
-                return Err(RunError::Message(format!(
+                return Err(RunError::Options(format!(
                     "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
                     if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
                 )));
@@ -364,7 +363,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     // The commands that run simulations stop gracefully on SIGTERM and SIGINT.
     if matches!(cli.command, Command::Run(_) | Command::Sweep(_) | Command::Figures(_)) {
-        if let Err(e) = monolayer::run::runner::stop_gracefully_on_signals() {
+        if let Err(e) = stop_gracefully_on_signals() {
             eprintln!("error: {e}");
             return ExitCode::from(2);
         }
@@ -376,9 +375,7 @@ fn main() -> ExitCode {
             .transpose()
             .and_then(|threads| with_threads(threads, || run(&a))),
         Command::Bench(a) => bench(&a),
-        Command::Params => {
-            toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(|e| RunError::Message(e.to_string()))
-        }
+        Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(RunError::from),
         Command::Fingerprint(a) => fingerprint(&a),
         Command::RelaxedState(a) => relaxed_state(&a),
         Command::Sweep(a) => sweep(&a),
@@ -391,7 +388,7 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {e}");
             // 128 + the signal, as a shell reports a process the signal ended.
-            match monolayer::run::runner::stop_signal() {
+            match stop_signal() {
                 Some((_, sig)) => ExitCode::from(128 + sig as u8),
                 None => ExitCode::from(2),
             }
@@ -419,7 +416,7 @@ fn with_threads(threads: Option<usize>, f: impl FnOnce() -> Result<(), RunError>
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build()
-            .map_err(|e| RunError::Message(format!("--threads {n}: {e}")))?
+            .map_err(|e| RunError::from(e).context(format!("--threads {n}")))?
             .install(f),
     }
 }
@@ -434,7 +431,7 @@ fn run(a: &RunArgs) -> Result<(), RunError> {
         None => {
             let params = a.params.params()?;
             if let Some(fi) = a.frame_interval {
-                monolayer::run::runner::check_frame_interval("--frame-interval", fi, &params)?;
+                check_frame_interval("--frame-interval", fi, &params)?;
             }
             RunDir::create(&a.out, params, a.seed, a.frame_interval.unwrap_or(1000))?
         }
@@ -536,7 +533,7 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     let jobs = spec.jobs()?;
     if let Some(fi) = a.frame_interval {
         for job in &jobs {
-            monolayer::run::runner::check_frame_interval("--frame-interval", fi, &job.params)
+            check_frame_interval("--frame-interval", fi, &job.params)
                 .map_err(|e| e.context(format!("run {}", job.name)))?;
         }
     }
@@ -594,7 +591,7 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
             _ => None,
         })
         .collect();
-    if let Some((name, _)) = monolayer::run::runner::stop_signal() {
+    if let Some((name, _)) = stop_signal() {
         return Err(RunError::Interrupted {
             signal: name,
             detail: format!(
@@ -605,12 +602,7 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         });
     }
     if !stopped.is_empty() {
-        return Err(RunError::Message(format!(
-            "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \
-             same command again: they continue from their checkpoints",
-            stopped.len(),
-            stopped.join("\n")
-        )));
+        return Err(RunError::Stopped(stopped));
     }
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
@@ -625,7 +617,7 @@ fn figures(a: FiguresArgs) -> Result<(), RunError> {
     if a.throttle == 0 {
         return Err(RunError::invalid("--throttle", 0, "≥ 1"));
     }
-    monolayer::run::figures::command::figures(&monolayer::run::figures::command::FiguresOptions {
+    monolayer::run::figures::figures(&FiguresOptions {
         out: a.out,
         scale: a.scale,
         only: a.only,
@@ -664,7 +656,7 @@ fn slurm_shard() -> Result<Option<Shard>, RunError> {
     let contiguous = max.is_none_or(|max| max.checked_sub(min).map(|d| d + 1) == Some(count));
     match id.checked_sub(min) {
         Some(index) if index < count && count > 0 && contiguous => Ok(Some(Shard { index, count })),
-        _ => Err(RunError::Message(format!(
+        _ => Err(RunError::Options(format!(
             "this Slurm array task (SLURM_ARRAY_TASK_ID = {id}, MIN = {min}, MAX = {}, COUNT = {count}) is not one of \
              a contiguous array such as --array=0-{}: give each task its share with --shard K/N",
             max.map(|m| m.to_string()).unwrap_or_else(|| "unset".into()),
@@ -674,16 +666,16 @@ fn slurm_shard() -> Result<Option<Shard>, RunError> {
 }
 
 fn fingerprint(a: &FingerprintArgs) -> Result<(), RunError> {
-    if a.total_steps > monolayer::model::params::MAX_STEPS {
+    if a.total_steps > MAX_STEPS {
         return Err(RunError::invalid(
             "--total-steps",
             a.total_steps,
-            format!("in [0, {}] (relaxation included)", monolayer::model::params::MAX_STEPS),
+            format!("in [0, {}] (relaxation included)", MAX_STEPS),
         ));
     }
     let params = a.params.params()?;
     params.validate()?;
-    monolayer::run::runner::check_memory(&params)?;
+    check_memory(&params)?;
     let mut m = Monolayer::new(params, a.seed)?;
     m.advance(a.total_steps)?;
     println!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint());
@@ -692,9 +684,9 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), RunError> {
 
 fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), RunError> {
     // Before the relaxation, which may take long: the write would refuse it at the end.
-    files::replaceable(&a.out)?;
+    replaceable(&a.out)?;
     let params = a.params.params()?;
-    monolayer::run::runner::check_memory(&params)?;
+    check_memory(&params)?;
     let steps = params.relax_steps + a.advance;
     let key = snapshot::key_at(&params, a.seed, steps).expect("at or past the end of the relaxation");
     let mut m = Monolayer::new(params, a.seed)?;
@@ -710,7 +702,7 @@ fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), RunError> {
     }
     bar.finish_and_clear();
     let bytes = snapshot::encode(&m.state(), key);
-    files::write_atomic(&a.out, |w| w.write_all(&bytes).map_err(|e| RunError::io(&a.out, e)))?;
+    write_atomic(&a.out, |w| w.write_all(&bytes).map_err(|e| RunError::io(&a.out, e)))?;
     eprintln!(
         "{}: step {steps}, {} cells, {} bytes, key {key:016x}, fingerprint {:016x}",
         a.out.display(),
@@ -735,7 +727,7 @@ fn bench(a: &BenchArgs) -> Result<(), RunError> {
     // The relaxed state, a copy per thread count timed, and two more for the ceiling.
     let ceiling = a.threads.contains(&1) && a.threads.contains(&2);
     let copies = if a.gpu { 1 } else { 1 + a.threads.len() as u64 + if ceiling { 2 } else { 0 } };
-    monolayer::run::runner::check_memory_of(&params, copies)?;
+    check_memory_of(&params, copies)?;
     if a.gpu {
         return bench_gpu(&params, a);
     }
@@ -749,12 +741,12 @@ fn bench(a: &BenchArgs) -> Result<(), RunError> {
         seed: a.seed,
         from_relaxed: a.from_relaxed.clone(),
     };
-    monolayer::run::bench::bench(&options)
+    monolayer::run::bench(&options)
 }
 
 #[cfg(feature = "gpu")]
 fn bench_gpu(params: &Params, a: &BenchArgs) -> Result<(), RunError> {
-    monolayer::run::bench::bench_gpu(params, a.relax_steps, a.seed, a.steps as usize)
+    monolayer::run::bench_gpu(params, a.relax_steps, a.seed, a.steps as usize)
 }
 
 #[cfg(not(feature = "gpu"))]
@@ -767,7 +759,7 @@ fn bench_gpu(_: &Params, _: &BenchArgs) -> Result<(), RunError> {
 /// `forecast DIR… --out OUT`.
 fn forecast(a: &ForecastArgs) -> Result<(), RunError> {
     let quiet = a.quiet;
-    let written = monolayer::run::forecast::forecast(&a.dirs, &a.out, a.partial, |line| {
+    let written = monolayer::run::forecast(&a.dirs, &a.out, a.partial, |line| {
         if !quiet {
             eprintln!("{line}");
         }
@@ -781,7 +773,7 @@ fn forecast(a: &ForecastArgs) -> Result<(), RunError> {
 /// `analyze DIR`, or with --bench the timings of the measurements at full size.
 fn analyze(a: &AnalyzeArgs) -> Result<(), RunError> {
     if a.bench {
-        return monolayer::run::bench::bench_analysis(a.bench_frames);
+        return bench_analysis(a.bench_frames);
     }
     let dir = a.dir.as_deref().expect("clap requires DIR without --bench");
     let written = analyze_run(dir, a.out.as_deref(), a.snapshot, a.field)?;

@@ -5,20 +5,12 @@ mod common;
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
-use monolayer::analysis::alignment::{boundary_sites, tangential_angles, AWAY_RADII, BORDER_RADII};
-use monolayer::analysis::correlations::{correlation_length, Correlator};
-use monolayer::analysis::defects::Defect;
-use monolayer::analysis::defects::DefectFinder;
-use monolayer::analysis::fields::{divergence, window_mean};
-use monolayer::analysis::holes::{periodic_distance, HoleTracker, VoidRegions};
-use monolayer::analysis::nucleation::{HoleProbability, STRAIN_RATE_BIN};
-use monolayer::analysis::precursors::{Precursor, Precursors, CHANCE_SITES};
-use monolayer::analysis::spirals::PlusOne;
-use monolayer::analysis::spirals::SpiralFinder;
-use monolayer::analysis::Analysis;
-use monolayer::model::forces::force_density;
-use monolayer::model::lattice::Patch;
-use monolayer::model::params::PassiveForce;
+use monolayer::analysis::{
+    boundary_sites, correlation_length, divergence, periodic_distance, tangential_angles, window_mean, Analysis,
+    Correlator, Defect, DefectFinder, HoleProbability, HoleTracker, PlusOne, Precursor, Precursors, SpiralFinder,
+    VoidRegions, AWAY_RADII, BORDER_RADII, CHANCE_SITES, STRAIN_RATE_BIN,
+};
+use monolayer::model::{force_density, PassiveForce, Patch};
 use monolayer::Params;
 use num_complex::Complex64 as C64;
 

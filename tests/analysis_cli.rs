@@ -38,7 +38,7 @@ fn analyze_writes_tables_and_plots_like_run_analyze() {
         let step: u64 = cols.next().unwrap().parse().unwrap();
         let packing: f64 = cols.nth(1).unwrap().parse().unwrap();
         let l = 60;
-        let frame = monolayer::run::files::read_frame(&monolayer::run::files::frame_path(&run, step), l).unwrap();
+        let frame = monolayer::run::read_frame(&monolayer::run::frame_path(&run, step), l).unwrap();
         let mut sum = vec![0.0; l * l];
         for (p, phi) in &frame.data.cells {
             for b in 0..p.h {

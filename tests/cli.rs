@@ -130,8 +130,8 @@ fn a_lost_cell_stops_with_the_state_from_before_its_step() {
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{e}");
     assert!(e.contains("step 1000: cell 0 spans the box") && e.contains("the state before this step is kept"), "{e}");
-    let saved = monolayer::run::files::read_checkpoint(&out.join("last_good_state.npz"), 40).unwrap();
-    let relaxed = monolayer::run::files::read_checkpoint(&out.join("checkpoint.npz"), 40).unwrap();
+    let saved = monolayer::run::read_checkpoint(&out.join("last_good_state.npz"), 40).unwrap();
+    let relaxed = monolayer::run::read_checkpoint(&out.join("checkpoint.npz"), 40).unwrap();
     assert_eq!((saved.step, relaxed.step), (1000, 1000));
     assert!(saved.cells == relaxed.cells, "the last good state is not the state before the failed step");
 }

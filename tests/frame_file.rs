@@ -8,10 +8,9 @@ mod common;
 use std::fs;
 
 use common::{arg, monolayer, quick_run, stderr};
-use monolayer::formats::frame_file::{decode_frame, encode_frame};
-use monolayer::formats::frame_file_name;
-use monolayer::run::files::{read_frame, write_frame, RunFrames, RunRecord};
-use monolayer::web::readouts::run_record_json;
+use monolayer::formats::{decode_frame, encode_frame, frame_file_name, RunRecord};
+use monolayer::run::{read_frame, write_frame, RunFrames};
+use monolayer::web::run_record_json;
 use monolayer::{Monolayer, Params};
 
 #[test]
@@ -65,8 +64,7 @@ fn the_pages_frame_is_the_native_frame_and_its_download_is_a_run_analyze_reads()
 /// as it opens a small one: the same code as in the browser, here natively.
 #[test]
 fn a_full_size_frame_opens_in_the_pages_playback() {
-    use monolayer::web::playback::Playback;
-    use monolayer::web::view::FieldKind;
+    use monolayer::web::{FieldKind, Playback};
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let o = monolayer(&[

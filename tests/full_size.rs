@@ -3,9 +3,8 @@
 mod common;
 
 use common::{phi_bits, relaxed_full_size};
-use monolayer::analysis::correlations::{correlation_length, Correlator};
-use monolayer::analysis::holes::{nucleation_area, VoidRegions};
-use monolayer::run::files::{read_checkpoint, write_checkpoint};
+use monolayer::analysis::{correlation_length, nucleation_area, Correlator, VoidRegions};
+use monolayer::run::{read_checkpoint, write_checkpoint};
 use monolayer::{Monolayer, Params};
 
 /// After the protocol's 10,000 relaxation steps the tissue is confluent: more than 95 % of the

@@ -26,14 +26,14 @@ mod common;
 use std::sync::OnceLock;
 use std::time::Instant;
 
-use monolayer::gpu::buffers::{patch_storage, Layout, PatchFault};
-use monolayer::gpu::stepper::{GpuRun, GpuRunError};
-use monolayer::gpu::{GpuContext, GpuMonolayer, Kernel, Preconditioner, Slot, NO_FAULT};
-use monolayer::model::free_energy::FreeEnergy;
-use monolayer::model::friction::{FrictionProblem, FrictionSolver};
-use monolayer::model::lattice::Patch;
-use monolayer::model::motion::friction_weight;
-use monolayer::model::params::{Advection, FrictionWeights, Laplacian, PassiveForce};
+use monolayer::gpu::{
+    patch_storage, GpuContext, GpuMonolayer, GpuRun, GpuRunError, Kernel, Layout, PatchFault, Preconditioner, Slot,
+    NO_FAULT,
+};
+use monolayer::model::{
+    friction_weight, Advection, FreeEnergy, FrictionProblem, FrictionSolver, FrictionWeights, Laplacian, PassiveForce,
+    Patch,
+};
 use monolayer::{Monolayer, Params, Phase};
 
 /// The unit roundoff of f32.
@@ -1009,7 +1009,7 @@ fn check_friction_solve(ctx: &GpuContext, m: &Monolayer, pc: Preconditioner) -> 
 }
 
 /// The largest |a − b| over every padded site of every cell, a the GPU's φ in its layout.
-fn max_phi_difference(layout: &monolayer::gpu::buffers::Layout, gpu: &[f32], cpu: &Monolayer) -> f64 {
+fn max_phi_difference(layout: &monolayer::gpu::Layout, gpu: &[f32], cpu: &Monolayer) -> f64 {
     cpu.cells()
         .iter()
         .enumerate()
@@ -1143,7 +1143,7 @@ fn repatched(m: &Monolayer, shift: usize, grow: usize) -> Monolayer {
 /// relaxation, a coordinate of its centre (`Cell::local_centre`, which is rounded) within 10⁻⁴ of
 /// a half-integer (the initial cells are symmetric disks, whose centre is a half-integer up to
 /// rounding); when active, a site with φ within 10⁻⁵ of the presence threshold (`Cell::support`).
-fn undecided(c: &monolayer::model::cell::Cell, phase: Phase, threshold: f64) -> bool {
+fn undecided(c: &monolayer::model::Cell, phase: Phase, threshold: f64) -> bool {
     let (p, phi) = (c.patch(), c.phi().padded());
     let sites = || (0..p.h).flat_map(move |b| (0..p.w).map(move |a| (a, b)));
     match phase {
@@ -1371,7 +1371,7 @@ fn a_gpu_run_stops_on_a_fault_and_keeps_the_last_good_state() {
     let after = run.download_now(&ctx);
     for (a, b) in after.cells().iter().zip(before.cells()) {
         assert_eq!(a.patch(), b.patch());
-        let bits = |c: &monolayer::model::cell::Cell| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let bits = |c: &monolayer::model::Cell| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(a), bits(b), "the state after the fault must be the one before it");
     }
 }
@@ -1461,7 +1461,7 @@ fn a_run_on_the_gpu_engine_writes_the_cpus_frames() {
         assert!(gpu_dir.join(format!("frames/frame_{step:07}.npz")).exists(), "frame {step} missing");
     }
     let end = |dir: &std::path::Path| {
-        let state = monolayer::run::files::read_checkpoint(&dir.join("checkpoint.npz"), 60).expect("a checkpoint");
+        let state = monolayer::run::read_checkpoint(&dir.join("checkpoint.npz"), 60).expect("a checkpoint");
         let p = Params { box_size: 60, n_cells: 18, relax_steps: 40, xi_substrate: 0.01, ..Params::default() };
         Monolayer::from_state(p, 3, state).expect("the checkpoint loads")
     };

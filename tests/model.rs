@@ -4,9 +4,7 @@
 mod common;
 
 use common::{ellipse, with_cells};
-use monolayer::model::friction::{FrictionProblem, FrictionSolver};
-use monolayer::model::lattice::Patch;
-use monolayer::model::params::{Advection, FrictionWeights, PassiveForce};
+use monolayer::model::{Advection, FrictionProblem, FrictionSolver, FrictionWeights, PassiveForce, Patch};
 use monolayer::{Monolayer, Params};
 use num_complex::Complex64 as C64;
 use rustfft::FftPlanner;

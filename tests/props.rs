@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use common::npz::{npy, replace_npz_entry};
-use monolayer::run::config::load_params;
-use monolayer::run::files::{read_checkpoint, read_frame, write_checkpoint, write_frame, RunRecord};
+use monolayer::formats::RunRecord;
+use monolayer::run::{load_params, read_checkpoint, read_frame, write_checkpoint, write_frame};
 use monolayer::{Monolayer, Params};
 use proptest::prelude::*;
 
@@ -172,7 +172,7 @@ proptest! {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.toml");
         fs::write(&path, lines.join("\n")).unwrap();
-        match monolayer::run::sweep::SweepSpec::from_file(&path) {
+        match monolayer::run::SweepSpec::from_file(&path) {
             Ok(spec) => {
                 if let Err(e) = spec.jobs().map_err(|e| e.to_string()) {
                     prop_assert!(e.starts_with("sweep") || e.contains("parameter"), "{}", e);
@@ -265,7 +265,7 @@ proptest! {
         key in proptest::sample::select(&EDITED[..]),
         factor in 0.5f64..0.95,
     ) {
-        use monolayer::run::runner::RunDir;
+        use monolayer::run::RunDir;
         let dir = tempfile::tempdir().unwrap();
         drop(RunDir::create(dir.path(), small(), 1, 10).unwrap());
         let path = RunRecord::path(dir.path());

@@ -219,10 +219,9 @@ fn shipped_states_further_on_open_their_first_hole_where_the_page_says() {
         );
         let shipped = snapshot::decode_shipped(&bytes, &p, s.seed).unwrap();
         let mut m = Monolayer::from_state(p.clone(), s.seed, shipped).unwrap();
-        let mut regions = monolayer::analysis::holes::VoidRegions::default();
-        let mut holes = |m: &mut Monolayer| {
-            monolayer::web::measure::tissue_stats(m.phi_sum(), p.box_size, p.radius, &mut regions).holes
-        };
+        let mut regions = monolayer::analysis::VoidRegions::default();
+        let mut holes =
+            |m: &mut Monolayer| monolayer::web::tissue_stats(m.phi_sum(), p.box_size, p.radius, &mut regions).holes;
         assert_eq!(holes(&mut m), 0, "preset {}: a hole is open already at the shipped step {}", s.preset, s.step);
         while holes(&mut m) == 0 && m.step_count() <= s.first_hole.max(s.step) + 5_000 {
             m.step().unwrap();
@@ -235,7 +234,7 @@ fn shipped_states_further_on_open_their_first_hole_where_the_page_says() {
             s.seed,
             m.step_count()
         );
-        let every = monolayer::web::readouts::ROW_EVERY;
+        let every = monolayer::web::ROW_EVERY;
         let row = p.relax_steps + (s.first_hole - p.relax_steps).div_ceil(every) * every;
         m.advance(row - m.step_count()).unwrap();
         assert!(holes(&mut m) > 0, "the first hole closed before the readout row at step {row}");

@@ -11,11 +11,11 @@ use std::time::Duration;
 
 use common::npz::{edit_npz, npy, read_npz, replace_npz_entry, write_npz, Npy};
 use common::{arg, lines, monolayer, stderr};
-use monolayer::run::files::{
-    checkpoint_path, frame_path, write_atomic, write_checkpoint, RunFrames, RunLock, RunRecord, RunStatus,
+use monolayer::formats::{RunRecord, RunStatus};
+use monolayer::run::{
+    checkpoint_path, frame_path, memory_estimate, run_sweep, tables, write_atomic, write_checkpoint, RunDir, RunFrames,
+    RunLock, SweepSpec,
 };
-use monolayer::run::runner::{memory_estimate, RunDir};
-use monolayer::run::sweep::{run_sweep, tables, SweepSpec};
 use monolayer::{Monolayer, Params};
 
 /// A small quick protocol: 6 cells on a 48×48 box, on one thread, relaxation to step 100.
@@ -596,7 +596,7 @@ fn a_record_missing_a_parameter_is_refused_by_name() {
 /// before the field existed reads as f64 (every build before it stored f64).
 #[test]
 fn a_run_resumes_only_in_its_own_storage_precision() {
-    use monolayer::model::precision::STORE_NAME;
+    use monolayer::model::STORE_NAME;
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("r");
     ok(&small(&run, 50, &[]));
@@ -713,7 +713,7 @@ fn a_signal_stops_a_run_gracefully_and_it_resumes_to_the_same_bits() {
 /// wraps to 0, RLIMIT_AS is consulted (a run refused, not aborted), and `fingerprint` checks.
 #[test]
 fn the_memory_check_reads_its_variable_and_the_process_limits() {
-    use monolayer::run::runner::{cgroup_room, parse_memory_limit_mb};
+    use monolayer::run::{cgroup_room, parse_memory_limit_mb};
     let fingerprint = |env: Option<&str>, limit_kb: Option<u64>, size: &str| {
         let ulimit = limit_kb.map(|k| format!("ulimit -v {k}; ")).unwrap_or_default();
         let mut c = Command::new("sh");
@@ -759,9 +759,9 @@ fn file_errors_name_the_key_and_the_line() {
     }
     let config = dir.path().join("c.toml");
     fs::write(&config, "zeta = 0.3\nbox_size = 99999999999999999999\n").unwrap();
-    let e = monolayer::run::config::load_params(Some(&config), &[]).unwrap_err().to_string();
+    let e = monolayer::run::load_params(Some(&config), &[]).unwrap_err().to_string();
     assert!(e.contains("c.toml, line 2: key `box_size`: ") && e.contains("too large"), "{e}");
-    let e = monolayer::run::config::load_params(None, &["active_steps=1e19".into()]).unwrap_err().to_string();
+    let e = monolayer::run::load_params(None, &["active_steps=1e19".into()]).unwrap_err().to_string();
     assert!(e.contains("`active_steps`") && e.contains("too large"), "{e}");
     let run = dir.path().join("r");
     RunRecord::new(Params { box_size: 48, n_cells: 6, ..Params::default() }, 1, 50).save(&run).unwrap_or_else(|_| {
@@ -1324,9 +1324,9 @@ fn damaged_checkpoints_configs_and_locks_are_named() {
     refused_within(&["run", "--quiet", "--resume", arg(&run)], &[], &[".lock", "is a FIFO, not a regular file"]);
     let config = dir.path().join("c.toml");
     fs::write(&config, "zeta = 0.3\n  xi_substrate = \"abc\"\n").unwrap();
-    let e = monolayer::run::config::load_params(Some(&config), &[]).unwrap_err().to_string();
+    let e = monolayer::run::load_params(Some(&config), &[]).unwrap_err().to_string();
     assert!(e.contains("c.toml, line 2, column 18: parameter `xi_substrate`"), "{e}");
-    let e = monolayer::run::config::load_params(Some(&config), &["xi_substrate=0.1".into(), "zeta=abc".into()])
+    let e = monolayer::run::load_params(Some(&config), &["xi_substrate=0.1".into(), "zeta=abc".into()])
         .unwrap_err()
         .to_string();
     assert!(e.starts_with("--set: parameter `zeta`"), "{e}");

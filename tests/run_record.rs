@@ -9,9 +9,8 @@ mod common;
 use std::fs;
 
 use common::{quick_run, stderr};
-use monolayer::formats::version::code_version;
-use monolayer::run::files::{RunRecord, RunStatus};
-use monolayer::web::readouts::run_record_json;
+use monolayer::formats::{code_version, RunRecord, RunStatus};
+use monolayer::web::run_record_json;
 use monolayer::{Monolayer, Params};
 
 fn expected(name: &str) -> String {
@@ -75,5 +74,5 @@ fn both_writers_record_the_same_version_with_the_commit() {
     let (crate_version, commit) = native.split_once('+').expect("version+commit");
     assert_eq!(crate_version, env!("CARGO_PKG_VERSION"));
     assert!(!commit.is_empty());
-    assert_eq!(native, monolayer::web::version::code_version(), "the page's codeVersion");
+    assert_eq!(native, monolayer::web::code_version(), "the page's codeVersion");
 }

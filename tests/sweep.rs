@@ -6,8 +6,8 @@ mod common;
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use monolayer::run::files::{checkpoint_path, frame_path, write_checkpoint, RunRecord, RunStatus};
-use monolayer::run::sweep::{run_sweep, steps_to_run, write_tables, SweepSpec};
+use monolayer::formats::{RunRecord, RunStatus};
+use monolayer::run::{checkpoint_path, frame_path, run_sweep, steps_to_run, write_checkpoint, write_tables, SweepSpec};
 use monolayer::Monolayer;
 
 const SPEC: &str = r#"
@@ -23,7 +23,7 @@ chi = [0.1, 0.01]
 zeta = [0.2, 0.4]
 "#;
 
-fn sweep(out: &Path) -> (Vec<monolayer::run::sweep::RunSummary>, u64) {
+fn sweep(out: &Path) -> (Vec<monolayer::run::RunSummary>, u64) {
     let spec: SweepSpec = toml::from_str(SPEC).unwrap();
     let jobs = spec.jobs().unwrap();
     let steps = AtomicU64::new(0);
@@ -68,7 +68,7 @@ fn a_sweep_runs_every_point_once_and_resumes() {
     assert_eq!(steps_to_run(&spec.jobs().unwrap(), out, None), 0);
     let (again, steps) = sweep(out);
     assert_eq!(steps, 0);
-    assert_eq!(monolayer::run::sweep::tables(&again), monolayer::run::sweep::tables(&first));
+    assert_eq!(monolayer::run::tables(&again), monolayer::run::tables(&first));
 
     // A run killed at step 150: its checkpoint and frames up to there, its record still
     // "running". The sweep resumes it from the checkpoint to the same bits.
@@ -89,7 +89,7 @@ fn a_sweep_runs_every_point_once_and_resumes() {
     let (redone, steps) = sweep(out);
     assert!((100..200).contains(&steps), "resumed at 150, not restarted ({steps} steps)");
     assert_eq!(std::fs::read(checkpoint_path(&victim)).unwrap(), final_checkpoint, "not bit-identical");
-    assert_eq!(monolayer::run::sweep::tables(&redone), monolayer::run::sweep::tables(&first));
+    assert_eq!(monolayer::run::tables(&redone), monolayer::run::tables(&first));
 }
 
 #[test]

@@ -18,8 +18,7 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 
 use super::holes::periodic_distance;
-use crate::model::lattice::Patch;
-use crate::model::precision::{load, Real};
+use crate::model::{load, Patch, Real};
 
 /// A cell borders a hole when its centroid lies within this many R of the hole's boundary (a
 /// cell's centroid sits about R from its own edge).

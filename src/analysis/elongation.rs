@@ -10,9 +10,7 @@
 //!   ∮ n_y² ds = ∫₀^{2π} a² sin²t / h dt,   ∮ n_x² ds = ∫₀^{2π} b² cos²t / h dt,
 //! whose ratio rises from 1 (a circle) like (a/b)²/ln(a/b) for long rods.
 
-use crate::model::lattice::{row_neighbourhood, Patch};
-use crate::model::precision::Real;
-use crate::model::shape::shape_tensor;
+use crate::model::{row_neighbourhood, shape_tensor, Patch, Real};
 
 /// Largest aspect ratio reported: beyond it g+/g− is too flat to resolve on a lattice.
 pub const MAX_ASPECT_RATIO: f64 = 50.0;

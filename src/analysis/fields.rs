@@ -9,9 +9,7 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::model::lattice::Patch;
-use crate::model::precision::{load, Real};
-use crate::model::shape::gradient;
+use crate::model::{gradient, load, Patch, Real};
 
 /// The lattice fields of Eq. S4, one array per component.
 #[derive(Clone, Debug)]
@@ -51,8 +49,8 @@ impl CoarseFields {
 
     /// Adds one cell: φ_i on its padded patch storage, its Q̂_i, and optionally its velocity v_i
     /// (padded like φ). Frames store only Σ_i φ_i v_i; they set it with [`Self::set_velocity`].
-    /// The active force is recomputed from φ_i and Q̂_i exactly as [`crate::model::forces`] does, so
-    /// live and offline analyses agree.
+    /// The active force is recomputed from φ_i and Q̂_i exactly as
+    /// [`force_density`](crate::model::force_density) does, so live and offline analyses agree.
     pub fn add_cell<T: Real>(&mut self, patch: Patch, phi: &[T], q_hat: [f64; 2], zeta: f64, v: Option<(&[T], &[T])>) {
         let l = self.l;
         let s = patch.stride();

@@ -269,7 +269,7 @@ pub struct Sample {
     /// ε̇ at the site, and the frame's largest ε̇.
     pub strain_rate: f64,
     pub frame_max_strain_rate: f64,
-    /// Distance to the nearest spiral core / R ([`no_core_distance`] without one).
+    /// Distance to the nearest spiral core / R (`no_core_distance` without one).
     pub core: f64,
     /// Least Σφ within R.
     pub least: f64,
@@ -280,7 +280,7 @@ pub struct Sample {
 }
 
 impl Sample {
-    /// The combination's inputs ([`model_inputs`]).
+    /// The combination's inputs (`model_inputs`).
     pub fn inputs(&self) -> Features {
         model_inputs(self.strain_rate, self.frame_max_strain_rate, self.core, self.least)
     }

@@ -44,8 +44,10 @@ pub fn plaquette_charges(angle: &[f64], period: f64, denominator: i32, out: &mut
 }
 
 /// The paper's flag: the winding around the 8 neighbours of each site, from the plaquette
-/// charges (the sum of the four plaquettes meeting at the site).
-pub fn ring_charges(plaquette: &[i8], out: &mut [i8], l: usize) {
+/// charges (the sum of the four plaquettes meeting at the site). The finders use the plaquettes
+/// themselves; the test below holds this sum to the direct eight-neighbour winding.
+#[cfg(test)]
+fn ring_charges(plaquette: &[i8], out: &mut [i8], l: usize) {
     for y in 0..l {
         let yd = (y + l - 1) % l;
         for x in 0..l {

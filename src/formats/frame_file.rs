@@ -5,7 +5,7 @@
 //! `tests/frame_file.rs` checks the page's path against `monolayer run`'s frames.
 //!
 //! A frame is the analysis's input and both faces write it, so the format lives in `formats`,
-//! below both `run` and `web`; [`super::frame_file_name`] names its files.
+//! below both `run` and `web`; [`frame_file_name`] names its files.
 //!
 //! Arrays of a frame (N cells, L box; lattice arrays are indexed [y, x]): `step` (), `time` (),
 //! `centres` (N, 2), `areas` (N,), `q_hat` (N, 2), `shape_tensor` (N, 2), `patches` (N, 4: x0,
@@ -18,8 +18,13 @@ use ndarray::{arr0, Array0, Array1, Array2, Array3, ArrayD};
 use ndarray_npy::{NpzReader, NpzWriter, ReadNpzError, WriteNpzError};
 use num_complex::Complex64 as C64;
 
-use crate::model::lattice::Patch;
+use crate::model::Patch;
 use crate::Monolayer;
+
+/// The name of the frame file of `step` in a run's `frames/` directory: `frame_0011000.npz`.
+pub fn frame_file_name(step: u64) -> String {
+    format!("frame_{step:07}.npz")
+}
 
 /// One frame as read from a file: what the view and the analysis need of it.
 #[derive(Clone, Debug, PartialEq)]
@@ -99,7 +104,7 @@ pub fn frame_bytes(m: &mut Monolayer) -> Result<Vec<u8>, WriteNpzError> {
 /// Refuses NaN, infinities and absurd magnitudes (beyond 10¹⁰⁰, whose squares overflow): no file
 /// this program writes holds one, so a file that does is damaged, and the tables measured from it
 /// would fill with NaN.
-pub fn finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> Result<(), String> {
+pub fn check_finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> Result<(), String> {
     match values.enumerate().find(|(_, v)| !(v.is_finite() && v.abs() <= 1e100)) {
         Some((k, v)) => Err(format!("array `{name}` holds {v} at index {k}: a damaged file")),
         None => Ok(()),
@@ -215,17 +220,17 @@ fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> Res
         return Err(format!("array `step` = {step}: a step is ≥ 0"));
     }
     let time = time.into_scalar();
-    finite("time", [time].iter())?;
-    finite("phi", phi.iter())?;
-    finite("q_hat", q_hat.iter())?;
-    finite("velocity", velocity.iter())?;
+    check_finite("time", [time].iter())?;
+    check_finite("phi", phi.iter())?;
+    check_finite("q_hat", q_hat.iter())?;
+    check_finite("velocity", velocity.iter())?;
     // The analysis recomputes these from φ and never uses them, but NaN in any array means the
     // file is damaged, and whatever else it holds cannot be trusted either.
     let names = z.names().map_err(|x| format!("not a readable .npz: {x}"))?;
     for name in ["phi_sum", "centres", "areas", "shape_tensor"] {
         if names.iter().any(|n| n.trim_end_matches(".npy") == name) {
             let a: ArrayD<f64> = z.by_name(name).map_err(e(name))?;
-            finite(name, a.iter())?;
+            check_finite(name, a.iter())?;
         }
     }
     let mut cells = Vec::with_capacity(n);

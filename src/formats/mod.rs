@@ -4,20 +4,24 @@
 //! same code builds for wasm32; `run::files` adds the files (atomic writes, locks, the reader's
 //! checks that name the path).
 //!
-//! - [`run_record`]: `run.json`, the record of a run ([`run_record::RunRecord`]);
-//! - [`frame_file`]: frame files (`frames/frame_<step>.npz`), named by [`frame_file_name`];
+//! - `run_record`: `run.json`, the record of a run ([`RunRecord`]);
+//! - `frame_file`: frame files (`frames/frame_<step>.npz`, [`encode_frame`], [`decode_frame`]),
+//!   named by [`frame_file_name`];
 //! - [`snapshot`]: a relaxed state as bytes (`www/assets/*.bin`, the page's confluent start);
-//! - [`version`]: the code version every file records.
+//! - `version`: the code version every file records ([`code_version`]).
 //!
 //! Uses only `model`; `run` and `web` use it, nothing below them does (tested by
-//! `tests/layers.rs`).
+//! `tests/layers.rs`). The modules are private but for [`snapshot`], whose functions (`encode`,
+//! `decode`, the keys) read best under its name; the rest is re-exported here.
 
-pub mod frame_file;
-pub mod run_record;
+mod frame_file;
+mod run_record;
 pub mod snapshot;
-pub mod version;
+mod version;
 
-/// The name of the frame file of `step` in a run's `frames/` directory: `frame_0011000.npz`.
-pub fn frame_file_name(step: u64) -> String {
-    format!("frame_{step:07}.npz")
-}
+pub use frame_file::{
+    check_finite, check_npz_headers, decode_frame, decode_frame_of_box, encode_frame, frame_bytes, frame_file_name,
+    max_array_values, FrameData,
+};
+pub use run_record::{Engine, RunRecord, RunStatus, FORMAT, FORMAT_VERSION};
+pub use version::{code_version, CRATE_VERSION, GIT_COMMIT};

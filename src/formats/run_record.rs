@@ -6,14 +6,14 @@
 use serde::{Deserialize, Serialize};
 
 use super::version::code_version;
-use crate::model::params::Params;
-use crate::model::precision::STORE_NAME;
+use crate::model::{Params, STORE_NAME};
 
 /// The status of the page's downloads: `stopped: …` with this reason.
 pub const PAGE_DOWNLOAD: &str = "the state of the browser page, downloaded";
 
 /// Identifies the files of this program and the version of their layout.
 pub const FORMAT: &str = "monolayer-run";
+/// The version of that layout this program writes and reads.
 pub const FORMAT_VERSION: u32 = 1;
 
 /// How a run stands, as `run.json` records it: `"running"`, `"finished"`, `"failed: …"` or

@@ -16,12 +16,7 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::model::error::SimError;
-use crate::model::hash::fnv1a;
-use crate::model::lattice::Patch;
-use crate::model::monolayer::State;
-use crate::model::params::{FrictionWeights, Params};
-use crate::model::precision::STORE_NAME;
+use crate::model::{fnv1a, FrictionWeights, Params, Patch, SimError, State, STORE_NAME};
 
 const MAGIC: &[u8; 8] = b"MLSTATE\0";
 const VERSION: u32 = 1;
@@ -177,7 +172,7 @@ fn decode_with(bytes: &[u8], l: usize, key_for: impl FnOnce(u64) -> Result<u64, 
     let file_key = r.u64()?;
     let step = r.u64()?;
     // Both phases at their longest: a larger step count is no state of a run (and would wrap).
-    if step > 2 * crate::model::params::MAX_STEPS {
+    if step > 2 * crate::model::MAX_STEPS {
         return Err(bad(format!("step {step}: more than a run's 2·10⁹ steps")));
     }
     let key = key_for(step)?;
@@ -265,7 +260,7 @@ impl Reader<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::monolayer::Monolayer;
+    use crate::model::Monolayer;
 
     fn small() -> Params {
         Params { box_size: 40, n_cells: 6, relax_steps: 30, relax_patch_size: 26, ..Params::default() }

@@ -2,6 +2,7 @@
 //! links): the crate version and the git commit it was built from (`build.rs`), e.g.
 //! `0.1.0+f1cefbb1a2b3`. The same string natively and in the page.
 
+/// The crate's version, from Cargo.toml.
 pub const CRATE_VERSION: &str = env!("CARGO_PKG_VERSION");
 /// 12 hex digits of the commit, or "unknown" when built outside a git checkout.
 pub const GIT_COMMIT: &str = env!("MONOLAYER_GIT_COMMIT");

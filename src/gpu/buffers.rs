@@ -5,19 +5,17 @@
 //! Uploaded from a CPU [`Monolayer`], in f32.
 //!
 //! The per-cell fields (φ, μ, f_x, f_y) are every cell's padded patch storage one after the
-//! other, in cell order, exactly as each [`crate::model::cell::Cell`] stores it; `GpuPatch::offset`
+//! other, in cell order, exactly as each [`crate::model::Cell`] stores it; `GpuPatch::offset`
 //! says where each cell's starts.
 
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use crate::gpu::context::{GpuContext, GpuError};
-use crate::model::free_energy::FreeEnergy;
-use crate::model::lattice::Patch;
-use crate::model::monolayer::{Monolayer, Phase};
-use crate::model::multigrid::level_sides;
-use crate::model::params::{Advection, FrictionWeights, Laplacian, Params, PassiveForce};
-use crate::model::precision::{load, Real};
+use crate::model::{
+    level_sides, load, Advection, FreeEnergy, FrictionWeights, Laplacian, Monolayer, Params, PassiveForce, Patch,
+    Phase, Real,
+};
 
 /// The buffers of the GPU state, each with the binding number every kernel gives it
 /// (`@binding(n)` in `shaders/*.wgsl`).

@@ -13,7 +13,7 @@ use crate::gpu::buffers::{DeviceState, Hierarchy, Layout, Slot, LATTICE_GROUP};
 use crate::gpu::context::{GpuContext, GpuError};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::readback::read_now;
-use crate::model::monolayer::Monolayer;
+use crate::model::Monolayer;
 
 const MODEL_WGSL: &str = include_str!("../../shaders/model.wgsl");
 const GATHER_WGSL: &str = include_str!("../../shaders/gather.wgsl");
@@ -294,7 +294,7 @@ impl Kernel {
     pub fn wgsl(self) -> String {
         let (stage, _) = self.source();
         if stage == MULTIGRID_WGSL {
-            use crate::model::multigrid::{COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
+            use crate::model::{COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
             let cycle = format!(
                 "const COARSEST_SIDE: u32 = {COARSEST_SIDE}u;\nconst OMEGA: f32 = {:?};\n\
                  const OVER_CORRECTION: f32 = {:?};\nconst COARSE_CORRECTIONS: u32 = {COARSE_CORRECTIONS}u;\n",
@@ -512,7 +512,7 @@ const GATHER_CHUNK: usize = 64;
 /// sides (level 1 first): each loop over a level's sites is its share per invocation, each
 /// visit of the coarsest level n products into one sum.
 fn coarse_cycle_steps(sides: &[usize]) -> u64 {
-    use crate::model::multigrid::COARSE_CORRECTIONS;
+    use crate::model::COARSE_CORRECTIONS;
     let share = |k: usize| sides[k - 1].pow(2).div_ceil(LATTICE_GROUP) as u64;
     let last = sides.len();
     if last == 0 {
@@ -763,7 +763,7 @@ impl GpuMonolayer {
 
     /// The patches as they are on the device now (they move with every [`Self::step`]).
     /// Blocking, native only, as the three below: tests and diagnostics; a run reads its state
-    /// through [`crate::gpu::readback::read_words`].
+    /// through `readback::read_words`, a future.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn read_patches(&self, ctx: &GpuContext) -> Vec<GpuPatch> {
         bytemuck::cast_slice(&read_now(ctx, self.state.buffer(Slot::Patches))).to_vec()

@@ -1,6 +1,7 @@
 //! The GPU stepper's stages on wgpu compute, f32, beside the CPU core that stays the
-//! reference: a device ([`context`]), the state the kernels read and write on it ([`buffers`]),
-//! and the kernels of one step ([`kernels`]), each mirroring its CPU module one to one:
+//! reference: a device (`context`, [`GpuContext`]), the state the kernels read and write on it
+//! (`buffers`), and the kernels of one step (`kernels`, [`Kernel`]), each mirroring its CPU
+//! module one to one:
 //!
 //! | kernel (`shaders/`)                  | CPU                                   | paper           |
 //! |--------------------------------------|---------------------------------------|-----------------|
@@ -20,19 +21,24 @@
 //! tests and diagnostics. [`GpuMonolayer::step`] takes a whole Heun step on fixed patches in one
 //! submission, with the friction solve of Eq. 2 (conjugate gradients preconditioned by the
 //! CPU's aggregation multigrid, its scalars and stop flags on the device) where the phase has
-//! one, then the patches following the cells; [`stepper::GpuRun`] takes many steps with the
+//! one, then the patches following the cells; [`GpuRun`] (`stepper`) takes many steps with the
 //! faults checked between submissions, natively and in the page's worker
-//! (`web::gpu_engine`), its readbacks futures ([`readback`]) (docs/gpu.md).
+//! (`web::gpu_engine`), its readbacks futures (`readback`) (docs/gpu.md).
 //!
-//! A layer beside `analysis`: it imports only `model` (tested by `tests/layers.rs`).
+//! A layer beside `analysis`: it imports only `model` (tested by `tests/layers.rs`). The modules
+//! are private; what `run`, `web` and the tests use is re-exported here.
 
-pub mod buffers;
-pub mod context;
-pub mod iterations;
-pub mod kernels;
-pub mod readback;
-pub mod stepper;
+mod buffers;
+mod context;
+mod iterations;
+mod kernels;
+mod readback;
+mod stepper;
 
-pub use buffers::{DeviceState, Slot, NO_FAULT};
+pub use buffers::{
+    patch_storage, DeviceState, GpuParams, GpuPatch, Layout, PatchFault, Slot, SolveScalars, CAPACITY_FACTOR, NO_FAULT,
+};
 pub use context::{GpuContext, GpuError};
-pub use kernels::{GpuMonolayer, Kernel, Preconditioner};
+pub use iterations::LOWER_AFTER;
+pub use kernels::{serial_chain, GpuMonolayer, Kernel, Preconditioner, JACOBI_ITERATIONS, SOLVE_ITERATIONS};
+pub use stepper::{Faults, GpuRun, GpuRunError};

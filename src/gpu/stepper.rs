@@ -13,9 +13,7 @@ use crate::gpu::context::{GpuContext, GpuError};
 use crate::gpu::iterations::{steps_per_submission, AfterFailure, IterationRule};
 use crate::gpu::kernels::{GpuMonolayer, Kernel};
 use crate::gpu::readback::read_words;
-use crate::model::lattice::Patch;
-use crate::model::monolayer::{Monolayer, Phase, State};
-use crate::model::params::Params;
+use crate::model::{Monolayer, Params, Patch, Phase, State};
 use num_complex::Complex64 as C64;
 use std::future::Future;
 
@@ -259,7 +257,7 @@ impl GpuRun {
     /// same steps again (`Ok(false)`): a solve that converges gives the same bits whatever the
     /// iterations recorded after it, so the run is the one a larger count would have made.
     /// Otherwise the error says what happened. After accepted steps the count follows what the
-    /// solves took ([`IterationRule`]: lowered slowly, never back to a count that failed lately).
+    /// solves took (`IterationRule`: lowered slowly, never back to a count that failed lately).
     pub fn settle(&mut self, ctx: &GpuContext, faults: &Faults) -> Result<bool, GpuRunError> {
         let Some((from, to)) = self.pending.take() else { return Ok(true) };
         self.gpu.state().reset_faults(ctx);

@@ -3,6 +3,8 @@
 use crate::model::friction::SolveError;
 use crate::model::params::ParamError;
 
+/// Why a simulation stopped or refused to start: invalid parameters, an unstable state, a
+/// failed friction solve, a lost cell.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SimError {
     #[error("invalid parameters: {0}")]

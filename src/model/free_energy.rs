@@ -108,7 +108,8 @@ pub fn area<T: Real>(phi: &[T]) -> f64 {
 
 /// The free energy of one cell alone (F_CH + F_area, no repulsion), with the gradient squared
 /// by forward differences: used by tests to check that μ is its derivative.
-pub fn single_cell_energy(p: &Params, patch: Patch, phi: &[f64]) -> f64 {
+#[cfg(test)]
+fn single_cell_energy(p: &Params, patch: Patch, phi: &[f64]) -> f64 {
     let s = patch.stride();
     let mut ch = 0.0;
     // Sum over the padded patch including the halo, so that every bond is counted.

@@ -1,34 +1,52 @@
 //! The physics core: the model of Pinto, Rozman & Yeomans, one module per concept, in the order
 //! of one evaluation of the right-hand side:
 //!
-//! [`params`] (every knob) → [`init`] (random disks) → [`free_energy`] (μ_i) → [`shape`]
-//! (Q_i, Q̂_i) → [`forces`] (f^p, f^a) → [`friction`] (Eq. 2 on the lattice, preconditioned by
-//! [`multigrid`]) → [`motion`] (v_i, ∂_t φ_i), driven by [`monolayer`] (Heun steps, the
-//! protocol, patches, stability checks).
+//! `params` (every knob) → `init` (random disks) → `free_energy` (μ_i) → `shape` (Q_i, Q̂_i) →
+//! `forces` (f^p, f^a) → `friction` (Eq. 2 on the lattice, preconditioned by `multigrid`) →
+//! `motion` (v_i, ∂_t φ_i), driven by `monolayer` ([`Monolayer`]: Heun steps, the protocol,
+//! patches, stability checks).
 //!
-//! [`lattice`] and [`cell`] hold the geometry, [`counters`] the time per stage, [`par`] the
-//! deterministic parallel loops, [`error`] what can go wrong, `hash` the one hash (FNV-1a) of
+//! `lattice` and `cell` hold the geometry, `counters` the time per stage, `par` the
+//! deterministic parallel loops, `error` what can go wrong, `hash` the one hash (FNV-1a) of
 //! fingerprints and of the relaxed states' keys and checksums (`formats::snapshot`),
-//! [`precision`] the type the cells' per-site fields are stored in, [`sum`] the order of every
-//! sum over sites. Nothing here touches files, clocks or threads directly (threads only through
-//! [`par`], behind the `parallel` feature), so the core compiles for `wasm32-unknown-unknown`
+//! `precision` the type the cells' per-site fields are stored in, `sum` the order of every sum
+//! over sites. Nothing here touches files, clocks or threads directly (threads only through
+//! `par`, behind the `parallel` feature), so the core compiles for `wasm32-unknown-unknown`
 //! with the same bits. It imports nothing from `analysis`, `formats`, `gpu`, `run` or `web`
 //! (tested by `tests/layers.rs`).
+//!
+//! The modules are private; what the other layers, the binary and the tests use is re-exported
+//! here, each item with its one-line summary.
 
-pub mod cell;
-pub mod counters;
-pub mod error;
-pub mod forces;
-pub mod free_energy;
-pub mod friction;
-pub(crate) mod hash;
-pub mod init;
-pub mod lattice;
-pub mod monolayer;
-pub mod motion;
-pub mod multigrid;
-pub mod par;
-pub mod params;
-pub mod precision;
-pub mod shape;
-pub mod sum;
+mod cell;
+mod counters;
+mod error;
+mod forces;
+mod free_energy;
+mod friction;
+mod hash;
+mod init;
+mod lattice;
+mod monolayer;
+mod motion;
+mod multigrid;
+mod par;
+mod params;
+mod precision;
+mod shape;
+mod sum;
+
+pub use cell::{Cell, PatchField};
+pub use counters::{Counters, Laps, Stage};
+pub use error::SimError;
+pub use forces::force_density;
+pub use free_energy::FreeEnergy;
+pub use friction::{FrictionProblem, FrictionSolver, SolveError, SolveStats};
+pub(crate) use hash::fnv1a;
+pub use lattice::{row_neighbourhood, Neighbourhood, Patch, Run, Runs};
+pub use monolayer::{LatticeFields, Monolayer, Phase, State};
+pub use motion::friction_weight;
+pub use multigrid::{level_sides, COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
+pub use params::{Advection, FrictionWeights, Laplacian, ParamError, Params, PassiveForce, MAX_STEPS};
+pub use precision::{load, Real, Store, STORE_NAME};
+pub use shape::{axis_angle, gradient, shape_tensor};

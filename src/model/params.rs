@@ -140,7 +140,7 @@ pub struct Params {
     /// Radius of the initial disks, as a fraction of R.
     pub initial_radius_fraction: f64,
     /// Smallest distance between the edges of two initial disks, in sites (see
-    /// [`crate::model::init::random_disks`] for why they start apart).
+    /// `model::init::random_disks` for why they start apart).
     pub initial_gap: f64,
 
     // --- units (reporting only; the dynamics never read them) ---------------------------------

@@ -11,11 +11,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::analysis::Analysis;
-use crate::formats::snapshot;
-use crate::model::monolayer::Monolayer;
-use crate::model::params::Params;
+use crate::formats::{snapshot, RunRecord};
+use crate::model::{Monolayer, Params};
 use crate::run::error::RunError;
-use crate::run::files::{frame_path, write_frame, RunRecord};
+use crate::run::files::{frame_path, write_frame};
 use crate::run::offline::analyze_run;
 use crate::run::plots::Background;
 
@@ -31,12 +30,15 @@ pub struct BenchOptions {
     pub threads: Vec<usize>,
     pub blocks: u64,
     pub seed: u64,
-    /// A relaxed-state file to start from instead of relaxing (see [`relaxed_start`]).
+    /// A relaxed-state file to start from instead of relaxing (see `relaxed_start`).
     pub from_relaxed: Option<PathBuf>,
 }
 
 fn pool(n: usize) -> Result<rayon::ThreadPool, RunError> {
-    rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| RunError::Message(format!("--threads {n}: {e}")))
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()
+        .map_err(|e| RunError::from(e).context(format!("--threads {n}")))
 }
 
 /// The median of a few timings (the mean of the middle two for an even count).
@@ -62,10 +64,10 @@ fn best(v: &[f64]) -> f64 {
 /// thread counts include 1 and 2) the ceiling of two independent one-thread simulations.
 pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
     if o.threads.is_empty() || o.threads.contains(&0) {
-        return Err(RunError::Message(format!("--threads {:?}: every count must be ≥ 1", o.threads)));
+        return Err(RunError::Options(format!("--threads {:?}: every count must be ≥ 1", o.threads)));
     }
     if o.blocks == 0 || o.blocks > o.steps {
-        return Err(RunError::Message(format!("--blocks {}: must be in [1, --steps = {}]", o.blocks, o.steps)));
+        return Err(RunError::invalid("--blocks", o.blocks, format!("in [1, --steps = {}]", o.steps)));
     }
     if o.chis.is_empty() {
         return Err("--chi: give at least one value".into());
@@ -206,10 +208,10 @@ pub fn relaxed_start(file: &Path, params: &Params, seed: u64) -> Result<Monolaye
     // A relaxed state holds less than the simulation it starts: a larger file is not one.
     let max = crate::run::runner::memory_estimate(params);
     let bytes = crate::run::files::read_input(file, "a relaxed state (--from-relaxed)", max)
-        .map_err(|e| RunError::Message(format!("--from-relaxed {e}")))?;
+        .map_err(|e| RunError::FromRelaxed(e.to_string()))?;
     let state = snapshot::decode_relaxed(&bytes, params, seed).map_err(|e| {
-        RunError::Message(format!(
-            "--from-relaxed {}: {e} (give the relaxation's parameters: --relax-steps, --seed, --set box_size=…, n_cells=…, gamma=…)",
+        RunError::FromRelaxed(format!(
+            "{}: {e} (give the relaxation's parameters: --relax-steps, --seed, --set box_size=…, n_cells=…, gamma=…)",
             file.display()
         ))
     })?;
@@ -364,11 +366,11 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
 
     // A run as the page's GPU engine takes it (gpu::stepper::GpuRun): submissions of 50 steps,
     // each checked by one readback, the recorded iterations following what the solves need.
-    let mut run = crate::gpu::stepper::GpuRun::new(&ctx, &m).map_err(RunError::gpu)?;
+    let mut run = crate::gpu::GpuRun::new(&ctx, &m).map_err(RunError::gpu)?;
     let recorded = run.gpu().solve_iterations;
     // Enough submissions for the recorded iterations to settle (the rule lowers them only after
     // `LOWER_AFTER` in a row asked for fewer), then the timed ones.
-    let settle = u64::from(crate::gpu::iterations::LOWER_AFTER) + 1;
+    let settle = u64::from(crate::gpu::LOWER_AFTER) + 1;
     run.advance(&ctx, settle * run.check_every).map_err(RunError::gpu)?;
     let t = Instant::now();
     let steps = 2 * run.check_every;
@@ -403,7 +405,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
          iterations one after another on one invocation, Kernel::serial_steps): {} as recorded, {coarse} of them in \
          the coarse levels",
         needed.len(),
-        crate::gpu::kernels::serial_chain(&recorded_list, run.gpu().state())
+        crate::gpu::serial_chain(&recorded_list, run.gpu().state())
     );
     // Each dispatch timed on the device, in its own pass between two timestamps: one step from
     // the uploaded state, the recorded list.
@@ -428,13 +430,15 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     }
     // Every recorded dispatch is launched, the ones after convergence too; the bytes and the
     // serial steps are those of the dispatches that work.
-    let working_chain = crate::gpu::kernels::serial_chain(&working_kernels, gpu.state());
+    let working_chain = crate::gpu::serial_chain(&working_kernels, gpu.state());
     println!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, working_chain)));
     Ok(())
 }
 
 /// A laptop GPU's time per full-size step, projected from the counts of a step (what works
 /// in it), with the assumed costs below. Not a measurement: no GPU was at hand (docs/gpu.md).
+/// Only `bench --gpu` prints it (and the tests check it).
+#[cfg(any(feature = "gpu", test))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LaptopProjection {
     pub dispatches: usize,
@@ -447,15 +451,20 @@ pub struct LaptopProjection {
 }
 
 /// Launch and dependency cost of one dispatch within a compute pass on a laptop GPU, µs.
+#[cfg(any(feature = "gpu", test))]
 pub const DISPATCH_US: (f64, f64) = (2.0, 10.0);
 /// Memory bandwidth, GB/s: a discrete laptop GPU, an integrated one.
+#[cfg(any(feature = "gpu", test))]
 pub const BANDWIDTH_GB_S: (f64, f64) = (200.0, 60.0);
 /// One serial step of an invocation (a loop iteration with its loads from cache, or a barrier
 /// phase), µs.
+#[cfg(any(feature = "gpu", test))]
 pub const SERIAL_STEP_US: (f64, f64) = (0.05, 0.5);
 /// The host's cost of encoding one dispatch (pipeline, bind group, dispatch), µs.
+#[cfg(any(feature = "gpu", test))]
 pub const ENCODE_US: (f64, f64) = (0.5, 2.0);
 
+#[cfg(any(feature = "gpu", test))]
 impl LaptopProjection {
     pub fn of(dispatches: usize, megabytes: f64, serial_steps: u64) -> Self {
         let at = |i: usize| {
@@ -471,6 +480,7 @@ impl LaptopProjection {
 }
 
 /// The line `bench --gpu` prints, labelled as a projection.
+#[cfg(any(feature = "gpu", test))]
 pub fn projection_line(p: &LaptopProjection) -> String {
     format!(
         "PROJECTION for a laptop GPU, not a measurement: {} dispatches × {}–{} µs, {:.1} MB at {}–{} GB/s, \

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::model::params::Params;
+use crate::model::Params;
 use crate::run::error::RunError;
 
 /// A value typed on the command line: TOML syntax (`0.3`, `true`, `"x"`), and where that fails a
@@ -191,7 +191,7 @@ mod tests {
     fn overrides_and_unknown_keys() {
         let p = set(&["zeta=0.3", "passive_force=grad_mu"]).unwrap();
         assert_eq!(p.zeta, 0.3);
-        assert_eq!(p.passive_force, crate::model::params::PassiveForce::GradMu);
+        assert_eq!(p.passive_force, crate::model::PassiveForce::GradMu);
         let e = set(&["zeta_typo=0.3"]).unwrap_err();
         assert!(e.contains("zeta_typo"), "{e}");
         let e = set(&["zeta"]).unwrap_err();

@@ -4,8 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::model::error::SimError;
-use crate::model::params::ParamError;
+use crate::model::{ParamError, SimError};
 
 /// What went wrong in a command of this layer.
 #[derive(Debug, thiserror::Error)]
@@ -34,7 +33,7 @@ pub enum RunError {
     /// An option or a value outside what it takes: `NAME VALUE: must be ALLOWED`.
     #[error("{name} {value}: must be {allowed}")]
     Invalid { name: String, value: String, allowed: String },
-    /// Parameters [`Params::validate`](crate::model::params::Params::validate) refuses.
+    /// Parameters [`Params::validate`](crate::model::Params::validate) refuses.
     #[error(transparent)]
     Params(#[from] ParamError),
     /// The simulation failed.
@@ -77,9 +76,81 @@ pub enum RunError {
         #[source]
         source: Box<RunError>,
     },
-    /// A message built in a shape of its own (several causes listed, a plot backend's error).
+    /// Options that do not make a command as given, beyond one value's range: two that set one
+    /// parameter, a grid axis or a point's key given twice, a frame interval past the active
+    /// phase, an output path an `#SBATCH` line cannot hold, a whole plan without `--yes`.
+    #[error("{0}")]
+    Options(String),
+    /// A directory that holds a run other than the one asked for, or a run already: `DIR why`.
+    #[error("{} {why}", dir.display())]
+    OtherRun { dir: PathBuf, why: String },
+    /// Two frame files of one run hold the same step.
+    #[error(
+        "{} and {} both hold step {step}: remove what this run did not write ({}; its own is {})",
+        first.display(),
+        second.display(),
+        foreign.join(", "),
+        own.display()
+    )]
+    DuplicateFrames { first: PathBuf, second: PathBuf, step: u64, foreign: Vec<String>, own: PathBuf },
+    /// A simulation larger than the memory the process may use.
+    #[error(
+        "box_size = {box_size}, n_cells = {n_cells} need about {need_mb} MB{held}, more than {limit} \
+         ({limit_mb} MB): lower box_size or n_cells"
+    )]
+    Memory { box_size: usize, n_cells: usize, need_mb: u64, held: String, limit: &'static str, limit_mb: u64 },
+    /// A relaxed-state file (`--from-relaxed`) that cannot be read or is not the relaxation
+    /// asked for: `--from-relaxed FILE: what is wrong`.
+    #[error("--from-relaxed {0}")]
+    FromRelaxed(String),
+    /// Runs of a sweep that could not run, one line each (`NAME: error`, or the runs another
+    /// process is writing).
+    #[error("{}", .0.join("\n"))]
+    Jobs(Vec<String>),
+    /// Runs of a sweep stopped by an error of the machine, not of the run (left out of its
+    /// tables): their names and errors.
+    #[error(
+        "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \
+         same command again: they continue from their checkpoints",
+        .0.len(),
+        .0.join("\n")
+    )]
+    Stopped(Vec<String>),
+    /// The figures asked for runs of their plan that are not finished: how many of `total`, in
+    /// `dir`, the first names with their status.
+    #[error(
+        "{} of the plan's {total} runs in {} are not finished: {}; run them first (`monolayer figures --stage runs` \
+         with the same --scale, --only and --set, or the Slurm array)",
+        missing.len(),
+        dir.display(),
+        first_five(missing)
+    )]
+    Unfinished { missing: Vec<String>, total: usize, dir: PathBuf },
+    /// A held-out forecast over runs of fewer than two seeds.
+    #[error("the runs have {0} seed(s): leaving one seed out needs runs of at least two seeds")]
+    TooFewSeeds(usize),
+    /// `sbatch` could not be run or refused a script.
+    #[error("{0}")]
+    Slurm(String),
+    /// A pool of worker threads could not be made.
+    #[error(transparent)]
+    Threads(#[from] rayon::ThreadPoolBuildError),
+    /// The handlers of SIGTERM and SIGINT could not be installed.
+    #[error("signal handler: {0}")]
+    SignalHandler(#[source] std::io::Error),
+    /// The default parameters could not be written as TOML.
+    #[error(transparent)]
+    Toml(#[from] toml::ser::Error),
+    /// A message of a layer below that reports its errors as text (`crate::formats`), or of this
+    /// layer's own `?` on such a result.
     #[error("{0}")]
     Message(String),
+}
+
+/// The first five of `names`, joined, with `, …` when there are more.
+fn first_five(names: &[String]) -> String {
+    let shown: Vec<&str> = names.iter().take(5).map(String::as_str).collect();
+    format!("{}{}", shown.join(", "), if names.len() > shown.len() { ", …" } else { "" })
 }
 
 /// A result of this layer.
@@ -139,5 +210,80 @@ mod tests {
         assert_eq!(RunError::from("boom").context("run a").to_string(), "run a: boom");
         let stop = RunError::Interrupted { signal: "SIGTERM", detail: ": again".into() };
         assert_eq!(stop.to_string(), "stopped by SIGTERM: again");
+    }
+
+    /// The variants that replaced one-off messages print what the messages printed, each
+    /// compared here with the format it replaced.
+    #[test]
+    fn the_former_one_off_messages_are_unchanged() {
+        let dir = Path::new("/x/runs/a");
+        let why = "was run with other parameters or seed than this sweep gives it: use another --out";
+        assert_eq!(
+            RunError::OtherRun { dir: dir.into(), why: why.into() }.to_string(),
+            format!(
+                "{} was run with other parameters or seed than this sweep gives it: use another --out",
+                dir.display()
+            )
+        );
+        let (first, second, own) = (dir.join("f_1.npz"), dir.join("f_2.npz"), dir.join("frames/f_1.npz"));
+        let foreign = vec![second.display().to_string()];
+        let step = 1000;
+        assert_eq!(
+            RunError::DuplicateFrames {
+                first: first.clone(),
+                second: second.clone(),
+                step,
+                foreign: foreign.clone(),
+                own: own.clone()
+            }
+            .to_string(),
+            format!(
+                "{} and {} both hold step {step}: remove what this run did not write ({}; its own is {})",
+                first.display(),
+                second.display(),
+                foreign.join(", "),
+                own.display()
+            )
+        );
+        let (held, what) = (" for the 2 simulations held at once".to_string(), "MemAvailable");
+        assert_eq!(
+            RunError::Memory { box_size: 140, n_cells: 100, need_mb: 300, held: held.clone(), limit: what, limit_mb: 200 }
+                .to_string(),
+            format!(
+                "box_size = {}, n_cells = {} need about {} MB{held}, more than {what} ({} MB): lower box_size or n_cells",
+                140, 100, 300, 200
+            )
+        );
+        assert_eq!(RunError::FromRelaxed("f.bin: no".into()).to_string(), "--from-relaxed f.bin: no");
+        let lines = vec!["a: one".to_string(), "b: two".to_string()];
+        assert_eq!(RunError::Jobs(lines.clone()).to_string(), lines.join("\n"));
+        assert_eq!(
+            RunError::Stopped(lines.clone()).to_string(),
+            format!(
+                "{} run(s) stopped by an error that is not theirs (left out of regimes.csv):\n{}\nfix it, then run the \
+                 same command again: they continue from their checkpoints",
+                lines.len(),
+                lines.join("\n")
+            )
+        );
+        for n in [2, 5, 7] {
+            let missing: Vec<String> = (0..n).map(|k| format!("run{k} (not started)")).collect();
+            let shown: Vec<&str> = missing.iter().take(5).map(String::as_str).collect();
+            let old = format!(
+                "{} of the plan's {} runs in {} are not finished: {}{}; run them first (`monolayer figures --stage runs` with the same --scale, --only and --set, or the Slurm array)",
+                missing.len(),
+                9,
+                dir.display(),
+                shown.join(", "),
+                if missing.len() > shown.len() { ", …" } else { "" }
+            );
+            assert_eq!(RunError::Unfinished { missing, total: 9, dir: dir.into() }.to_string(), old);
+        }
+        assert_eq!(
+            RunError::TooFewSeeds(1).to_string(),
+            "the runs have 1 seed(s): leaving one seed out needs runs of at least two seeds"
+        );
+        let e = std::io::Error::other("refused");
+        assert_eq!(RunError::SignalHandler(e).to_string(), "signal handler: refused");
     }
 }

@@ -1,532 +1,34 @@
-//! `monolayer figures`: the paper's figures from one plan of runs (docs/cli.md, "figures").
+//! `monolayer figures`: the paper's figures from one plan of runs (docs/cli.md, "figures"), in
+//! five stages, a file each, each taking the previous stage's output and returning its own:
 //!
-//! Every figure names the parameter points it needs and how many seeds (the paper's counts at the
-//! `paper` scale); the plan is their union, so a run at χ = 0.001, ζ = 0.3, seed 1 made for Fig. 3d
-//! also serves Figs. 1c, 2, 3c and S3. The runs go through the sweep machinery (`OUT/runs/NAME`,
-//! one per core, resumable, single-threaded so that a Slurm task and a laptop give the same bits);
-//! the figures are drawn afterwards from the runs' frames, each as PNG and SVG beside a CSV of
-//! exactly what is drawn, and `OUT/figures.md` sets each beside what the paper says.
+//! 1. `plan`: the runs every figure needs, their union, each figure's points ([`Plan`]);
+//! 2. `runs`: the estimate ([`Speed`]), then the runs through the sweep machinery (or, with
+//!    `--slurm`, as a job array: `slurm`); hands on the finished runs with their records (`Runs`);
+//! 3. `measures`: every run measured once (`Measures`);
+//! 4. `draw`: `plan.csv` and each figure as PNG and SVG beside a CSV of exactly what is drawn
+//!    (`Drawn`; the plots themselves in `plot`);
+//! 5. `report`: `OUT/figures.md`, each figure beside what the paper says.
 //!
-//! - [`command`]: the command: plan, estimate, runs, figures;
-//! - [`data`]: one run measured once, and every figure's table from the runs;
-//! - [`draw`]: the plots; [`report`]: `figures.md`; [`slurm`]: the sbatch scripts.
+//! This file is the command that runs them in order: `--stage runs` stops after the runs,
+//! `--stage figures` starts from runs that must all be there. The stages' modules are private;
+//! the plan's types, the estimate and the command are re-exported here.
 
-pub mod command;
-pub mod data;
-pub mod draw;
-pub mod report;
-pub mod slurm;
+mod draw;
+mod measures;
+mod plan;
+mod plot;
+mod report;
+mod runs;
+mod slurm;
 
-use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::model::monolayer::Monolayer;
-use crate::model::params::Params;
-use crate::run::config::load_params;
+pub use plan::{Figure, Friction, Plan, Point, Scale, ScaleSpec, S1_BOX, S1_INITIAL_GAP, UNSTATED_ZETA};
+pub use runs::Speed;
+
 use crate::run::error::RunError;
-use crate::run::sweep::{steps_to_run, Job};
-
-/// How many runs, how long, how large.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Scale {
-    /// Proves the pipeline: tiny boxes, few steps, one seed; minutes on 2 cores.
-    Smoke,
-    /// Full size, a few seeds and half the paper's active steps: one machine overnight.
-    Standard,
-    /// The paper's protocol (10,000 relaxation and 100,000 active steps, a frame every 1,000)
-    /// with the fewest seeds a verdict needs: 4 per point for Figs. 2 and 3c, 3 elsewhere
-    /// 75 runs, some 20 core-hours.
-    Evidence,
-    /// The paper's counts: 10 simulations of 100 frames per point (100 for Figs. 2 and 3c).
-    Paper,
-}
-
-impl Scale {
-    pub const ALL: [Scale; 4] = [Scale::Smoke, Scale::Standard, Scale::Evidence, Scale::Paper];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Scale::Smoke => "smoke",
-            Scale::Standard => "standard",
-            Scale::Evidence => "evidence",
-            Scale::Paper => "paper",
-        }
-    }
-
-    /// What the scale sets: parameter overrides (before the user's `--set`) and seed counts.
-    pub fn spec(self) -> ScaleSpec {
-        match self {
-            // 10 cells of R = 8 on 48² is the paper's density (N πR² ≈ L²). So small a box cannot
-            // hold a stretched cell for long (it comes to span the box after ~1,000 active steps
-            // at ζ = 0.5), and 200 relaxation steps leave gaps that close under activity: holes
-            // enough to exercise every figure's code, not physics. 50-step frames give the
-            // precursor figures 10 frames of history.
-            Scale::Smoke => ScaleSpec {
-                overrides: &["box_size=48", "n_cells=10", "relax_steps=200", "active_steps=1000"],
-                frame_interval: 50,
-                few: 1,
-                many: 2,
-                correlations: 1,
-                correlation_box: None,
-            },
-            Scale::Standard => ScaleSpec {
-                overrides: &["relax_steps=10000", "active_steps=50000"],
-                frame_interval: 1000,
-                few: 2,
-                many: 4,
-                correlations: 2,
-                correlation_box: Some(S1_BOX),
-            },
-            Scale::Evidence => ScaleSpec {
-                overrides: &["relax_steps=10000", "active_steps=100000"],
-                frame_interval: 1000,
-                few: 3,
-                many: 4,
-                correlations: 3,
-                correlation_box: Some(S1_BOX),
-            },
-            Scale::Paper => ScaleSpec {
-                overrides: &["relax_steps=10000", "active_steps=100000"],
-                frame_interval: 1000,
-                few: 10,
-                many: 100,
-                correlations: 3,
-                correlation_box: Some(S1_BOX),
-            },
-        }
-    }
-}
-
-impl std::str::FromStr for Scale {
-    type Err = RunError;
-    fn from_str(s: &str) -> Result<Self, RunError> {
-        Scale::ALL.into_iter().find(|c| c.name() == s).ok_or_else(|| {
-            RunError::Parse(format!("--scale {s}: the scale is one of smoke, standard, evidence, paper"))
-        })
-    }
-}
-
-/// Fig. S1's box: "we reduce the system size to 120 × 120 lattice sites to make sure that no holes
-/// are formed", with the same 100 cells (a denser tissue, 1.4 cells' areas per box area). The
-/// paper's density, 73 cells, would not stop holes; only crowding the same cells does.
-pub const S1_BOX: (usize, usize) = (120, 100);
-/// The initial gap between S1's disks: 100 disks of radius R/2 with the default gap of 2 sites
-/// would need 55 % of 120² to be placed apart (the placement asks for at most 50 %); a gap of
-/// 1 needs 44 % (gaps of 0–3 sites relax every seed tested, `model::init::random_disks`).
-pub const S1_INITIAL_GAP: f64 = 1.0;
-
-/// The settings of a scale.
-#[derive(Clone, Debug)]
-pub struct ScaleSpec {
-    pub overrides: &'static [&'static str],
-    pub frame_interval: u64,
-    /// Seeds for Figs. 1c–d, 3a–b, 3d, S2, S3 (the paper: 10).
-    pub few: u64,
-    /// Seeds for Figs. 2 and 3c (the paper: 100).
-    pub many: u64,
-    /// Seeds for Fig. S1 (the paper: 3).
-    pub correlations: u64,
-    /// (L, N) of Fig. S1's runs (the paper: a 120² box); None: the scale's box.
-    pub correlation_box: Option<(usize, usize)>,
-}
-
-/// A figure of the paper.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Figure {
-    Fig1c,
-    Fig1d,
-    Fig2,
-    Fig3ab,
-    Fig3c,
-    Fig3d,
-    FigS1,
-    FigS2,
-    FigS3,
-    /// The mechanism's claims no figure of the paper measures: antiparallel +½
-    /// pairs, no holes at −½ defects, cells tangential to a hole's edge.
-    Mechanism,
-}
-
-impl Figure {
-    pub const ALL: [Figure; 10] = [
-        Figure::Fig1c,
-        Figure::Fig1d,
-        Figure::Fig2,
-        Figure::Fig3ab,
-        Figure::Fig3c,
-        Figure::Fig3d,
-        Figure::FigS1,
-        Figure::FigS2,
-        Figure::FigS3,
-        Figure::Mechanism,
-    ];
-
-    /// Its name on the command line and the stem of its files (`fig1c.png`, `fig1c.csv`).
-    pub fn id(self) -> &'static str {
-        match self {
-            Figure::Fig1c => "1c",
-            Figure::Fig1d => "1d",
-            Figure::Fig2 => "2",
-            Figure::Fig3ab => "3ab",
-            Figure::Fig3c => "3c",
-            Figure::Fig3d => "3d",
-            Figure::FigS1 => "S1",
-            Figure::FigS2 => "S2",
-            Figure::FigS3 => "S3",
-            Figure::Mechanism => "mechanism",
-        }
-    }
-
-    pub fn stem(self) -> String {
-        format!("fig{}", self.id())
-    }
-
-    /// `--only 1c,3d,S1` (3a and 3b are one figure of two panels).
-    pub fn parse_list(s: &str) -> Result<Vec<Figure>, RunError> {
-        let mut out = BTreeSet::new();
-        for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-            let p = part.trim_start_matches("fig").trim_start_matches("Fig");
-            let f = match p.to_ascii_lowercase().as_str() {
-                "3a" | "3b" | "3a-b" => Some(Figure::Fig3ab),
-                q => Figure::ALL.into_iter().find(|f| f.id().to_ascii_lowercase() == q),
-            };
-            out.insert(f.ok_or_else(|| {
-                format!("--only {part}: not a figure; the figures are 1c, 1d, 2, 3a, 3b (drawn together as 3ab), 3c, 3d, S1, S2, S3, mechanism")
-            })?);
-        }
-        if out.is_empty() {
-            return Err("--only: name at least one figure (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3, mechanism)".into());
-        }
-        Ok(out.into_iter().collect())
-    }
-}
-
-/// The friction of a run: a ratio χ = ξ_s/ξ_cell, or the dry limit ξ_cell = 0, ξ_s = 1 (Fig. S1).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Friction {
-    Chi(f64),
-    Dry,
-}
-
-impl Friction {
-    pub fn label(self) -> String {
-        match self {
-            Friction::Chi(c) => format!("{c}"),
-            Friction::Dry => "dry".into(),
-        }
-    }
-}
-
-/// ζ of the figures whose ζ the paper does not state (Figs. 1c–d, S1, S2), unless the user's
-/// `--set zeta=…` says otherwise: the lowest of the paper's three, as the figures had it while
-/// it was the parameters' default (now ζ = 0.5, where `run` opens holes soonest).
-pub const UNSTATED_ZETA: f64 = 0.3;
-
-/// A parameter point of the plan; the rest of the parameters are the scale's base.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Point {
-    pub friction: Friction,
-    pub zeta: f64,
-    pub gamma: f64,
-    /// (L, N), or None for the base's.
-    pub size: Option<(usize, usize)>,
-}
-
-/// The χ and ζ the paper's figures name (captions of Figs. 1–3, S1–S3).
-pub const CHI_REGIMES: [f64; 5] = [0.1, 0.05, 0.01, 0.005, 0.001];
-pub const CHI_FIG2: [f64; 3] = [0.01, 0.005, 0.001];
-pub const CHI_FIG3AB: [f64; 3] = [0.1, 0.01, 0.001];
-pub const CHI_FIG3C: [f64; 2] = [0.005, 0.001];
-pub const CHI_S1: [f64; 3] = [0.1, 0.01, 0.001];
-pub const ZETAS: [f64; 3] = [0.3, 0.4, 0.5];
-/// Fig. S3 varies γ at χ = 0.001, ζ = 0.3 without giving the values. The text "increase\[s\] the
-/// elasticity of the monolayer through the surface tension": the default 0.06 and above. (Below
-/// it, at γ = 0.04, the paper's half-size initial disks overshoot the φ guard `phi_max` = 1.5 in
-/// the first relaxation steps; docs/cli.md, "S3's surface tensions".)
-pub const GAMMAS_S3: [f64; 4] = [0.06, 0.08, 0.1, 0.12];
-
-/// The plan: every run once, and which figures use it.
-#[derive(Clone, Debug)]
-pub struct Plan {
-    pub scale: Scale,
-    pub base: Params,
-    pub frame_interval: u64,
-    pub figures: Vec<Figure>,
-    pub jobs: Vec<Job>,
-    /// Per job, its point and the figures it serves.
-    pub points: Vec<(Point, Vec<Figure>)>,
-    /// The user's `--set` overrides, as given (passed on to Slurm tasks).
-    pub sets: Vec<String>,
-}
-
-impl Plan {
-    /// The runs `figures` need at `scale`, with `sets` (`KEY=VALUE`) over the scale's base.
-    /// Every run's parameters are validated here, before anything runs.
-    pub fn new(scale: Scale, figures: &[Figure], sets: &[String]) -> Result<Plan, RunError> {
-        let spec = scale.spec();
-        let mut all: Vec<String> = vec![format!("zeta={UNSTATED_ZETA}")];
-        all.extend(spec.overrides.iter().map(|s| s.to_string()));
-        all.extend(sets.iter().cloned());
-        let base = load_params(None, &all)?;
-        base.validate().map_err(|e| format!("--set: {e}"))?;
-        let zeta0 = base.zeta;
-        let gamma0 = base.gamma;
-        let mut wanted: Vec<(Point, u64, Figure)> = Vec::new();
-        let mut want = |f: Figure, friction: Friction, zeta: f64, gamma: f64, size, seeds| {
-            wanted.push((Point { friction, zeta, gamma, size }, seeds, f));
-        };
-        for &f in figures {
-            match f {
-                // The paper does not state ζ for Figs. 1c–d and S2: the base's (UNSTATED_ZETA
-                // unless `--set zeta=…`).
-                Figure::Fig1c | Figure::Fig1d | Figure::FigS2 | Figure::Mechanism => {
-                    for chi in CHI_REGIMES {
-                        want(f, Friction::Chi(chi), zeta0, gamma0, None, spec.few);
-                    }
-                }
-                Figure::Fig2 => {
-                    for chi in CHI_FIG2 {
-                        for zeta in ZETAS {
-                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
-                        }
-                    }
-                }
-                Figure::Fig3ab => {
-                    for chi in CHI_FIG3AB {
-                        for zeta in ZETAS {
-                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
-                        }
-                    }
-                }
-                Figure::Fig3c => {
-                    for chi in CHI_FIG3C {
-                        for zeta in ZETAS {
-                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
-                        }
-                    }
-                }
-                Figure::Fig3d => {
-                    for chi in CHI_REGIMES {
-                        for zeta in ZETAS {
-                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
-                        }
-                    }
-                }
-                Figure::FigS1 => {
-                    for chi in CHI_S1 {
-                        want(f, Friction::Chi(chi), zeta0, gamma0, spec.correlation_box, spec.correlations);
-                    }
-                    want(f, Friction::Dry, zeta0, gamma0, spec.correlation_box, spec.correlations);
-                }
-                Figure::FigS3 => {
-                    for gamma in GAMMAS_S3 {
-                        want(f, Friction::Chi(0.001), 0.3, gamma, None, spec.few);
-                    }
-                }
-            }
-        }
-        let mut jobs: Vec<Job> = Vec::new();
-        let mut points: Vec<(Point, Vec<Figure>)> = Vec::new();
-        for (point, seeds, figure) in wanted {
-            let params = point_params(&base, &point)?;
-            for seed in 1..=seeds {
-                let name = run_name(&point, &params, seed);
-                match jobs.iter().position(|j| j.name == name) {
-                    Some(k) => {
-                        if !points[k].1.contains(&figure) {
-                            points[k].1.push(figure);
-                        }
-                    }
-                    None => {
-                        jobs.push(Job { name, values: point_values(&point, &params), params: params.clone(), seed });
-                        points.push((point, vec![figure]));
-                    }
-                }
-            }
-        }
-        Ok(Plan {
-            scale,
-            base,
-            frame_interval: spec.frame_interval,
-            figures: figures.to_vec(),
-            jobs,
-            points,
-            sets: sets.to_vec(),
-        })
-    }
-
-    /// The runs that serve `figure`, with their points.
-    pub fn runs_of(&self, figure: Figure) -> impl Iterator<Item = (&Job, &Point)> + '_ {
-        self.jobs.iter().zip(&self.points).filter(move |(_, (_, f))| f.contains(&figure)).map(|(j, (p, _))| (j, p))
-    }
-
-    /// `plan.csv`: one row per run, what it is and which figures use it.
-    pub fn table(&self) -> String {
-        let mut s = String::from("run,chi,zeta,gamma,box_size,n_cells,seed,relax_steps,active_steps,figures\n");
-        for (j, (p, figs)) in self.jobs.iter().zip(&self.points) {
-            let f: Vec<&str> = figs.iter().map(|f| f.id()).collect();
-            s += &format!(
-                "{},{},{},{},{},{},{},{},{},{}\n",
-                j.name,
-                p.friction.label(),
-                p.zeta,
-                p.gamma,
-                j.params.box_size,
-                j.params.n_cells,
-                j.seed,
-                j.params.relax_steps,
-                j.params.active_steps,
-                f.join(" ")
-            );
-        }
-        s
-    }
-}
-
-/// The base with a point's values.
-fn point_params(base: &Params, p: &Point) -> Result<Params, RunError> {
-    let mut q = base.clone();
-    q.zeta = p.zeta;
-    q.gamma = p.gamma;
-    match p.friction {
-        Friction::Chi(c) => q.set_chi(c),
-        Friction::Dry => {
-            // The paper's dry limit (Fig. S1): ξ_cell = 0 with ξ_s = 1.
-            q.xi_cell = 0.0;
-            q.xi_substrate = 1.0;
-        }
-    }
-    if let Some((l, n)) = p.size {
-        q.box_size = l;
-        q.n_cells = n;
-        // S1's crowded box: the disks must fit apart (a smaller gap given by --set stays).
-        q.initial_gap = q.initial_gap.min(S1_INITIAL_GAP);
-    }
-    q.validate().map_err(|e| format!("figures, run at χ = {}, ζ = {}: {e}", p.friction.label(), p.zeta))?;
-    Ok(q)
-}
-
-fn point_values(p: &Point, params: &Params) -> Vec<(String, String)> {
-    vec![
-        ("chi".into(), p.friction.label()),
-        ("zeta".into(), format!("{}", p.zeta)),
-        ("gamma".into(), format!("{}", p.gamma)),
-        ("box_size".into(), format!("{}", params.box_size)),
-    ]
-}
-
-/// One name per distinct run: the same point and seed in two figures is one directory.
-fn run_name(p: &Point, params: &Params, seed: u64) -> String {
-    let friction = match p.friction {
-        Friction::Chi(c) => format!("chi{c}"),
-        Friction::Dry => "dry".into(),
-    };
-    format!("{friction}_zeta{}_gamma{}_L{}_seed{seed}", p.zeta, p.gamma, params.box_size)
-}
-
-/// Milliseconds per step on one thread, measured on a short run of each lattice size the plan
-/// uses: (L, N) → (relaxation, active).
-#[derive(Clone, Debug)]
-pub struct Speed {
-    pub sizes: Vec<((usize, usize), (f64, f64))>,
-}
-
-impl Speed {
-    /// Times `steps` relaxation and `steps` active steps at each (L, N) of `jobs`, at the plan's
-    /// lowest friction (the costliest solve), after `warm_up` untimed steps of each (the first
-    /// steps from the small initial disks, and the first solves from rest, cost more than the
-    /// rest of a run). The tissue is not yet confluent this early, so this is an estimate, not a
-    /// bound; it is what the machine does now, not what a README says.
-    pub fn measure(jobs: &[&Job], warm_up: u64, steps: u64) -> Result<Speed, RunError> {
-        let mut sizes: Vec<((usize, usize), (f64, f64))> = Vec::new();
-        let pool =
-            rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| RunError::Message(e.to_string()))?;
-        for job in jobs {
-            let key = (job.params.box_size, job.params.n_cells);
-            if sizes.iter().any(|s| s.0 == key) {
-                continue;
-            }
-            // What is timed is the cost of a step, not the physics: a job that blows up this early
-            // (γ = 0.04 does within 22 relaxation steps) gives way to the next job of its
-            // size, and failing all, to the default physics at that size. A run that blows up is
-            // a result of the runs (`failed: …`), never a failure of the estimate.
-            let mut candidates: Vec<Params> = jobs
-                .iter()
-                .filter(|j| (j.params.box_size, j.params.n_cells) == key)
-                .map(|j| j.params.clone())
-                .collect();
-            candidates.push(Params {
-                box_size: key.0,
-                n_cells: key.1,
-                radius: job.params.radius,
-                relax_patch_size: job.params.relax_patch_size,
-                patch_margin: job.params.patch_margin,
-                ..Params::default()
-            });
-            let mut last = String::new();
-            let mut timed = None;
-            for p in candidates {
-                match time_steps(&pool, p, warm_up, steps) {
-                    Ok(t) => {
-                        timed = Some(t);
-                        break;
-                    }
-                    Err(e) => last = e.to_string(),
-                }
-            }
-            let timed = timed.ok_or_else(|| {
-                format!(
-                    "timing a run at L = {}, N = {}: every job of this size and the defaults failed ({last})",
-                    key.0, key.1
-                )
-            })?;
-            sizes.push((key, timed));
-        }
-        Ok(Speed { sizes })
-    }
-
-    /// Estimated core-seconds of the steps `jobs` still have in `out`.
-    pub fn core_seconds(&self, jobs: &[&Job], out: &Path) -> f64 {
-        jobs.iter()
-            .map(|j| {
-                let left = steps_to_run(std::slice::from_ref(*j), out, None);
-                let done = j.params.total_steps() - left;
-                let relax_left = j.params.relax_steps.saturating_sub(done);
-                let (r, a) = self
-                    .sizes
-                    .iter()
-                    .find(|s| s.0 == (j.params.box_size, j.params.n_cells))
-                    .map(|s| s.1)
-                    .unwrap_or((0.0, 0.0));
-                1e-3 * (relax_left as f64 * r + (left - relax_left) as f64 * a)
-            })
-            .sum()
-    }
-}
-
-/// (relaxation, active) ms per step of `p` at χ = 0.001, after `warm_up` untimed steps of each.
-fn time_steps(pool: &rayon::ThreadPool, mut p: Params, warm_up: u64, steps: u64) -> Result<(f64, f64), RunError> {
-    p.relax_steps = warm_up + steps;
-    if p.xi_cell == 0.0 {
-        p.xi_cell = 1.0;
-    }
-    p.set_chi(0.001);
-    // Some seeds cannot place their disks at the paper's density: take the first that can.
-    let mut m = (1..=10)
-        .find_map(|seed| Monolayer::new(p.clone(), seed).ok())
-        .ok_or_else(|| format!("timing a run at L = {}, N = {}: no seed of 1–10 starts", p.box_size, p.n_cells))?;
-    let mut timed = |n: u64| -> Result<f64, RunError> {
-        let t = Instant::now();
-        pool.install(|| m.advance(n)).map_err(RunError::from)?;
-        Ok(1e3 * t.elapsed().as_secs_f64() / n as f64)
-    };
-    timed(warm_up)?;
-    let relax = timed(steps)?;
-    timed(warm_up.min(10))?;
-    let active = timed(steps)?;
-    Ok((relax, active))
-}
+use crate::run::sweep::{Job, Shard};
 
 /// What `figures` does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -546,27 +48,132 @@ impl std::str::FromStr for Stage {
             "all" => Ok(Stage::All),
             "runs" => Ok(Stage::Runs),
             "figures" => Ok(Stage::Figures),
-            _ => Err(RunError::Message(format!("--stage {s}: the stage is one of all, runs, figures"))),
+            _ => Err(RunError::Parse(format!("--stage {s}: the stage is one of all, runs, figures"))),
         }
     }
 }
 
-/// Draws every figure of the plan from its runs in `out/runs` into `out`: the figures, their CSVs,
-/// `plan.csv` and `figures.md`. Returns the files written.
-pub fn make_figures(plan: &Plan, out: &Path, workers: usize) -> Result<Vec<PathBuf>, RunError> {
-    let runs = data::measure_runs(plan, out, workers)?;
-    let mut written = Vec::new();
-    let plan_path = out.join("plan.csv");
-    data::write_text(&plan_path, &plan.table())?;
-    written.push(plan_path);
-    let mut sections = Vec::new();
-    for &figure in &plan.figures {
-        let made = data::figure(plan, figure, &runs, out)?;
-        written.extend(made.files.iter().cloned());
-        sections.push(made);
+/// What the command line asked for.
+#[derive(Clone, Debug)]
+pub struct FiguresOptions {
+    pub out: PathBuf,
+    pub scale: Scale,
+    /// `--only` as given.
+    pub only: Option<String>,
+    pub sets: Vec<String>,
+    pub jobs: usize,
+    pub yes: bool,
+    pub stage: Stage,
+    pub shard: Option<Shard>,
+    pub quiet: bool,
+    pub slurm: bool,
+    pub dry_run: bool,
+    pub throttle: usize,
+    pub partition: Option<String>,
+}
+
+/// Runs `monolayer figures`; the files written are printed, the rest goes to stderr.
+pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
+    let figures = match &o.only {
+        Some(list) => Figure::parse_list(list)?,
+        None => Figure::ALL.to_vec(),
+    };
+    if o.jobs == 0 {
+        return Err("--jobs 0: must be ≥ 1".into());
     }
-    let md = out.join("figures.md");
-    data::write_text(&md, &report::markdown(plan, &runs, &sections))?;
-    written.push(md);
-    Ok(written)
+    // 1. The plan.
+    let plan = Plan::new(o.scale, &figures, &o.sets)?;
+    if !o.dry_run {
+        crate::run::files::remove_dead_temporaries(&o.out);
+    }
+    if o.stage == Stage::Figures {
+        return draw_figures(&plan, &o.out, o.jobs);
+    }
+    // 2. The runs: what they will cost, then here or on Slurm.
+    runs::check_memory(&plan)?;
+    let share = runs::Share::of(&plan, &o.out, o.shard);
+    let ids: Vec<&str> = figures.iter().map(|f| f.id()).collect();
+    eprintln!(
+        "figures (scale {}): {} need {} runs{}; {} to run, {} steps",
+        o.scale.name(),
+        ids.join(", "),
+        plan.jobs.len(),
+        o.shard.map(|s| format!(" ({} in shard {}/{})", share.mine.len(), s.index, s.count)).unwrap_or_default(),
+        share.todo.len(),
+        share.steps()
+    );
+    // The longest run and the whole plan, for the estimate and for Slurm's time limits.
+    let sample: Vec<&Job> = if share.todo.is_empty() && !o.slurm { Vec::new() } else { plan.jobs.iter().collect() };
+    let speed = Speed::measure(&sample, 100, 30)?;
+    for ((l, n), (r, a)) in &speed.sizes {
+        eprintln!(
+            "  measured on one thread at L = {l}, N = {n}: {r:.2} ms/step relaxing, {a:.2} ms/step active (χ = 0.001)"
+        );
+    }
+    if o.slurm {
+        if o.stage != Stage::All || o.shard.is_some() {
+            return Err("--slurm submits the whole plan: it takes neither --stage nor --shard".into());
+        }
+        let request = slurm::SlurmRequest {
+            out: &o.out,
+            only: o.only.as_deref(),
+            throttle: o.throttle,
+            partition: o.partition.as_deref(),
+            dry_run: o.dry_run,
+        };
+        return slurm::run_on_slurm(&plan, &request, &speed);
+    }
+    let core_seconds = share.core_seconds(&speed);
+    let workers = o.jobs.min(share.todo.len().max(1));
+    if !share.todo.is_empty() {
+        eprintln!(
+            "  estimate: {:.2} core-hours, about {} on {} core(s) (measured before the tissue is confluent: runs with holes cost more)",
+            core_seconds / 3600.0,
+            runs::hours(core_seconds / workers as f64),
+            workers
+        );
+    }
+    if o.dry_run {
+        eprintln!("dry run: nothing run or written");
+        return Ok(());
+    }
+    // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
+    if matches!(o.scale, Scale::Paper | Scale::Evidence) && !o.yes && o.shard.is_none() && !share.todo.is_empty() {
+        return Err(RunError::Options(format!(
+            "--scale {} runs {} simulations here, about {} on {} core(s): refused without --yes; \
+             on a cluster, --slurm submits them as a job array (--slurm --dry-run prints the scripts)",
+            o.scale.name(),
+            share.todo.len(),
+            runs::hours(core_seconds / workers as f64),
+            workers
+        )));
+    }
+    if !share.todo.is_empty() {
+        runs::execute(&plan, &share, &o.out, o.jobs, o.quiet)?;
+    }
+    if let Some((name, _)) = crate::run::runner::stop_signal() {
+        return Err(RunError::Interrupted {
+            signal: name,
+            detail: ": the same command again continues the runs from their checkpoints".into(),
+        });
+    }
+    if o.stage == Stage::All {
+        draw_figures(&plan, &o.out, o.jobs)?;
+    }
+    Ok(())
+}
+
+/// Stages 2 (the runs, all finished) to 5 from the runs in `out/runs`: the figures, their CSVs,
+/// `plan.csv` and `figures.md` into `out`, each file's path printed.
+fn draw_figures(plan: &Plan, out: &Path, workers: usize) -> Result<(), RunError> {
+    let t = Instant::now();
+    let finished = runs::finished(plan, out)?;
+    let measured = measures::measure(finished, workers)?;
+    let drawn = draw::draw(measured, out)?;
+    let md = report::write(&drawn, out)?;
+    for path in drawn.files.iter().chain([&md]) {
+        println!("{}", path.display());
+    }
+    eprintln!("figures drawn in {:.1} s: {}", t.elapsed().as_secs_f64(), out.join("figures.md").display());
+    Ok(())
 }

@@ -14,14 +14,9 @@ use ndarray::{arr0, Array1, Array2, Array3};
 use ndarray_npy::{NpzReader, NpzWriter};
 use num_complex::Complex64 as C64;
 
-use crate::formats::frame_file::{self, FrameData};
-use crate::formats::frame_file_name;
-use crate::model::lattice::Patch;
-use crate::model::monolayer::{Monolayer, State};
-use crate::model::params::Params;
+use crate::formats::{self, frame_file_name, FrameData, RunRecord, FORMAT, FORMAT_VERSION};
+use crate::model::{Monolayer, Params, Patch, State};
 use crate::run::error::RunError;
-
-pub use crate::formats::run_record::{Engine, RunRecord, RunStatus, FORMAT, FORMAT_VERSION};
 
 pub type IoResult<T> = Result<T, RunError>;
 
@@ -38,6 +33,7 @@ pub const CHECKPOINT: &str = "checkpoint.npz";
 /// The state before the step that made a run unstable.
 pub const LAST_GOOD_STATE: &str = "last_good_state.npz";
 
+/// Where the checkpoint of the run in `dir` is: `dir/checkpoint.npz`.
 pub fn checkpoint_path(dir: &Path) -> PathBuf {
     dir.join(CHECKPOINT)
 }
@@ -66,6 +62,11 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
         let _ = fs::remove_file(&tmp);
         io(path, e)
     })
+}
+
+/// Writes `text` to `path` atomically ([`write_atomic`]): the tables, reports and scripts.
+pub fn write_text(path: &Path, text: &str) -> IoResult<()> {
+    write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| io(path, e)))
 }
 
 /// The file a rename into `path` replaces: `path` itself, or the regular file a symbolic link
@@ -336,9 +337,9 @@ fn npz_err(path: &Path) -> impl Fn(ndarray_npy::WriteNpzError) -> RunError + '_ 
     move |e| err(path, e)
 }
 
-/// [`frame_file::finite`], the error naming the file.
+/// [`formats::check_finite`], the error naming the file.
 fn finite<'a>(path: &Path, name: &str, values: impl Iterator<Item = &'a f64>) -> IoResult<()> {
-    frame_file::finite(name, values).map_err(|e| err(path, e))
+    formats::check_finite(name, values).map_err(|e| err(path, e))
 }
 
 type Npz = NpzWriter<Cursor<Vec<u8>>>;
@@ -371,9 +372,9 @@ fn complex_field(v: &[C64], l: usize) -> Array3<f64> {
 }
 
 /// Writes one frame of the current state (after [`Monolayer::evaluate_now`] so that velocities
-/// belong to this φ), atomically; the format is [`frame_file::frame_bytes`]'s.
+/// belong to this φ), atomically; the format is [`formats::frame_bytes`]'s.
 pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
-    let bytes = frame_file::frame_bytes(m).map_err(npz_err(path))?;
+    let bytes = formats::frame_bytes(m).map_err(npz_err(path))?;
     write_atomic(path, |w| w.write_all(&bytes).map_err(|x| io(path, x)))
 }
 
@@ -415,16 +416,16 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
 }
 
 /// Checks every array's header in the `.npz` at `path` before anything is allocated from it
-/// ([`frame_file::check_npz_headers`]).
+/// ([`formats::check_npz_headers`]).
 fn check_npz_file_headers(path: &Path, max_values: u64) -> IoResult<()> {
     check_input(path, "a checkpoint", MAX_FRAME_BYTES)?;
     let file = File::open(path).map_err(|e| io(path, e))?;
-    frame_file::check_npz_headers(BufReader::new(file), max_values).map_err(|e| err(path, e))
+    formats::check_npz_headers(BufReader::new(file), max_values).map_err(|e| err(path, e))
 }
 
 /// Reads a checkpoint written by [`write_checkpoint`].
 pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
-    check_npz_file_headers(path, frame_file::max_array_values(l))?;
+    check_npz_file_headers(path, formats::max_array_values(l))?;
     let file = File::open(path).map_err(|e| io(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let e = |name: &str| {
@@ -508,7 +509,7 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
 /// continue one trajectory under another's parameters. Checkpoints written before they held
 /// their parameters are not checked.
 pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> {
-    check_npz_file_headers(path, frame_file::max_array_values(record.params.box_size))?;
+    check_npz_file_headers(path, formats::max_array_values(record.params.box_size))?;
     let file = File::open(path).map_err(|e| io(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let has_key = z.names().map_err(|x| err(path, x))?.iter().any(|n| n.trim_end_matches(".npy") == RUN_PARAMS);
@@ -608,13 +609,13 @@ impl RunFrames {
             let own = frame_path(dir, step);
             let foreign: Vec<String> =
                 frames.iter().filter(|f| f.0 == step && f.1 != own).map(|f| f.1.display().to_string()).collect();
-            return Err(RunError::Message(format!(
-                "{} and {} both hold step {step}: remove what this run did not write ({}; its own is {})",
-                w[0].1.display(),
-                w[1].1.display(),
-                foreign.join(", "),
-                own.display()
-            )));
+            return Err(RunError::DuplicateFrames {
+                first: w[0].1.clone(),
+                second: w[1].1.clone(),
+                step,
+                foreign,
+                own,
+            });
         }
         // A gap would be measured as one frame interval: holes would seem to open and close
         // faster, and a lifetime would end early. The frames need not start at the end of the
@@ -655,8 +656,8 @@ impl RunFrames {
 /// smaller. A larger file is not a frame, and reading it whole would exhaust the memory.
 const MAX_FRAME_BYTES: u64 = 1 << 32;
 
-/// Reads one frame of a run on an L×L lattice ([`frame_file::decode_frame_of_box`], the decoder
-/// the page uses), checking every array's shape.
+/// Reads one frame of a run on an L×L lattice ([`formats::decode_frame_of_box`], the decoder the
+/// page uses), checking every array's shape.
 pub fn read_frame(path: &Path, l: usize) -> Result<Frame, RunError> {
     // A FIFO or a device would block the reader, or never end.
     let meta = fs::metadata(path).map_err(|e| io(path, e))?;
@@ -667,7 +668,7 @@ pub fn read_frame(path: &Path, l: usize) -> Result<Frame, RunError> {
         return Err(err(path, format!("{} bytes: larger than any frame ({MAX_FRAME_BYTES} at most)", meta.len())));
     }
     let bytes = fs::read(path).map_err(|e| io(path, e))?;
-    let data = frame_file::decode_frame_of_box(&path.display().to_string(), &bytes, l)?;
+    let data = formats::decode_frame_of_box(&path.display().to_string(), &bytes, l)?;
     Ok(Frame { path: path.to_path_buf(), data })
 }
 

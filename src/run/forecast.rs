@@ -12,15 +12,13 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
-use super::files::{check_frame, read_frame, write_atomic, RunFrames, RunStatus};
+use super::files::{check_frame, read_frame, write_atomic, RunFrames};
 use super::plots::{both_of, plot_err, Draw, FONT, PALETTE};
-use crate::analysis::forecast::{
-    caught_in_top, forecast_samples, matched_baseline, roc_auc, roc_curve, BaselineRow, Features, Logistic, Predictor,
-    RunHistory, Sample, ThinningRow, HORIZONS,
+use crate::analysis::{
+    caught_in_top, forecast_samples, matched_baseline, roc_auc, roc_curve, Analysis, BaselineRow, Features,
+    HoleTracker, Logistic, Precursor, Predictor, RunHistory, Sample, ThinningRow, DEPTH, HORIZONS,
 };
-use crate::analysis::holes::HoleTracker;
-use crate::analysis::precursors::{Precursor, DEPTH};
-use crate::analysis::Analysis;
+use crate::formats::RunStatus;
 use crate::run::error::RunError;
 
 /// The fit sees every tearing site and one in this many of the others; the intercept is
@@ -33,7 +31,7 @@ pub const SHOWN_HORIZON: usize = 1;
 struct RunData {
     name: String,
     seed: u64,
-    params: crate::model::params::Params,
+    params: crate::model::Params,
     /// (step, path) of every frame, in order.
     frames: Vec<(u64, PathBuf)>,
     history: RunHistory,
@@ -67,11 +65,10 @@ fn measure_run(dir: &Path, partial: bool) -> Result<RunData, RunError> {
     let run = RunFrames::open(dir)?;
     let record = &run.record;
     if !partial && record.status != RunStatus::Finished {
-        return Err(RunError::Message(format!(
-            "{}: the run has not finished ({}); --partial scores the frames written so far",
-            dir.display(),
-            record.status
-        )));
+        return Err(RunError::file(
+            dir,
+            format!("the run has not finished ({}); --partial scores the frames written so far", record.status),
+        ));
     }
     let params = &record.params;
     let mut a = Analysis::new(params);
@@ -84,7 +81,7 @@ fn measure_run(dir: &Path, partial: bool) -> Result<RunData, RunError> {
         tracker.update(&a.voids, frame.data.time);
         history.push(&a, &tracker, *step);
     }
-    let thinning = crate::analysis::forecast::thinning_before(&history, DEPTH);
+    let thinning = crate::analysis::thinning_before(&history, DEPTH);
     let baseline = matched_baseline(&history, DEPTH);
     let samples = forecast_samples(&history);
     // The frames' fields are no longer needed; the nucleations and the sub-grid are.
@@ -494,10 +491,7 @@ pub fn forecast(
     }
     let seeds: BTreeSet<u64> = runs.iter().map(|r| r.seed).collect();
     if seeds.len() < 2 {
-        return Err(RunError::Message(format!(
-            "the runs have {} seed(s): leaving one seed out needs runs of at least two seeds",
-            seeds.len()
-        )));
+        return Err(RunError::TooFewSeeds(seeds.len()));
     }
     let (scores, pooled) = cross_validate(&runs);
     let all: Vec<&RunData> = runs.iter().collect();

@@ -1,26 +1,51 @@
 //! Native only (feature `cli`): everything that touches files, clocks and the terminal.
 //!
-//! - [`bench`](mod@bench): `monolayer bench`, stage by stage, and the two-thread ceiling;
-//! - [`config`]: parameters from config files, `--set` and `--grid`, the one KEY=VALUE parser;
-//! - [`error`]: the errors of this layer, by cause ([`RunError`]);
-//! - [`files`]: frames, checkpoints and `run.json`, the writer and the reader of each together;
-//! - [`runner`]: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume);
-//! - [`sweep`]: a grid of runs, one per core, resumable, its summary and regime map;
+//! - `bench`: `monolayer bench`, stage by stage, and the two-thread ceiling ([`bench()`]);
+//! - `config`: parameters from config files, `--set` and `--grid`, the one KEY=VALUE parser
+//!   ([`load_params`]);
+//! - `error`: the errors of this layer, by cause ([`RunError`]);
+//! - `files`: frames, checkpoints and `run.json`, the writer and the reader of each together;
+//! - `runner`: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume;
+//!   [`RunDir`]);
+//! - `sweep`: a grid of runs, one per core, resumable, its summary and regime map
+//!   ([`SweepSpec`], [`run_sweep`]);
 //! - [`figures`]: `monolayer figures`, the paper's figures from one plan of runs, here or on Slurm;
-//! - [`offline`]: `monolayer analyze`, the tables of a run's frames; [`plots`]: its figures;
-//! - [`forecast`]: `monolayer forecast`, thinning, matched chance and the held-out hole forecast.
+//! - `offline`: `monolayer analyze`, the tables of a run's frames ([`analyze_run`]); `plots`: its
+//!   figures;
+//! - `forecast`: `monolayer forecast`, thinning, matched chance and the held-out hole forecast
+//!   ([`forecast()`]).
 //!
-//! Uses `model` and `analysis`; nothing below it uses this layer.
+//! Uses `model`, `analysis`, `formats` and `gpu`; nothing below it uses this layer. The modules
+//! are private but for [`figures`], a pipeline of its own; what the binary and the tests use is
+//! re-exported here.
 
-pub mod bench;
-pub mod config;
-pub mod error;
+mod bench;
+mod config;
+mod error;
 pub mod figures;
-pub mod files;
-pub mod forecast;
-pub mod offline;
-pub mod plots;
-pub mod runner;
-pub mod sweep;
+mod files;
+mod forecast;
+mod offline;
+mod plots;
+mod runner;
+mod sweep;
 
+#[cfg(feature = "gpu")]
+pub use bench::bench_gpu;
+pub use bench::{bench, bench_analysis, BenchOptions};
+pub use config::{load_params, parse_assignment};
 pub use error::{RunError, RunResult};
+pub use files::{
+    checkpoint_path, frame_path, read_checkpoint, read_frame, replaceable, write_atomic, write_checkpoint, write_frame,
+    Frame, RunFrames, RunLock,
+};
+pub use forecast::forecast;
+pub use offline::analyze_run;
+pub use plots::Background;
+pub use runner::{
+    cgroup_room, check_frame_interval, check_memory, check_memory_of, memory_estimate, parse_memory_limit_mb,
+    stop_gracefully_on_signals, stop_signal, Event, RunDir,
+};
+pub use sweep::{
+    jobs_of_runs, measure_existing, run_sweep, steps_to_run, tables, write_tables, Job, RunSummary, Shard, SweepSpec,
+};

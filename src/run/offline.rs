@@ -11,14 +11,11 @@ use std::path::{Path, PathBuf};
 
 use super::files::{check_frame, read_frame, Frame, RunFrames};
 use super::plots::{self, Background};
-use crate::analysis::alignment::{boundary_sites, tangential_angles, AWAY_RADII, BORDER_RADII};
-use crate::analysis::correlations::correlation_length;
-use crate::analysis::holes::HoleTracker;
-use crate::analysis::nucleation::HoleProbability;
-use crate::analysis::precursors::Precursors;
-use crate::analysis::{Analysis, FrameSummary};
-use crate::model::monolayer::Monolayer;
-use crate::model::params::Params;
+use crate::analysis::{
+    boundary_sites, correlation_length, tangential_angles, Analysis, FrameSummary, HoleProbability, HoleTracker,
+    Precursors, AWAY_RADII, BORDER_RADII,
+};
+use crate::model::{Monolayer, Params};
 use crate::run::error::RunError;
 use crate::run::files::{frame_path, write_atomic};
 
@@ -197,10 +194,10 @@ impl RunAnalysis {
         let mut probability =
             String::from("strain_rate_bin_low,strain_rate_bin_high,sites,sites_opening_into_a_new_hole,probability\n");
         for (lo, n, h, p) in self.hole_probability.table() {
-            let hi = lo + crate::analysis::nucleation::STRAIN_RATE_BIN;
+            let hi = lo + crate::analysis::STRAIN_RATE_BIN;
             let _ = writeln!(probability, "{lo:.6},{hi:.6},{n},{h},{p:.6e}");
         }
-        let precursor_table = |rows: &[crate::analysis::precursors::Precursor]| {
+        let precursor_table = |rows: &[crate::analysis::Precursor]| {
             let mut t = String::from(
                 "hole,frames_before,spiral_core_distance_over_r,plus_half_distance_over_r,\
                  second_plus_half_distance_over_r,max_strain_rate_within_r_half_over_max,\
@@ -361,11 +358,7 @@ fn measure_frames(
         let frame = read_frame(path, params.box_size)?;
         check_frame(&frame, params)?;
         if frame.data.step != *step {
-            return Err(RunError::Message(format!(
-                "{}: holds step {}, its name says {step}",
-                path.display(),
-                frame.data.step
-            )));
+            return Err(RunError::file(path, format!("holds step {}, its name says {step}", frame.data.step)));
         }
         ra.push_frame(&frame);
         if Some(*step) == keep {
@@ -421,7 +414,7 @@ impl LiveRun {
                 let path = out.join(format!("{}.{ext}", snapshot_name(old)));
                 match fs::remove_file(&path) {
                     Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                        return Err(RunError::Message(format!("{}: {e}", path.display())));
+                        return Err(RunError::io(&path, e));
                     }
                     _ => {}
                 }

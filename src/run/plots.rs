@@ -19,9 +19,8 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 
 use super::files::Frame;
-use crate::analysis::holes::Hole;
-use crate::analysis::Analysis;
-use crate::model::cell::Cell;
+use crate::analysis::{Analysis, Hole};
+use crate::model::Cell;
 use crate::run::error::RunError;
 use crate::run::files::write_atomic;
 
@@ -227,7 +226,7 @@ fn diverging(t: f64) -> RGBColor {
 
 /// Segments of the φ = ½ contour of one cell (marching squares on its padded patch, the zero
 /// halo closing the outline), in lattice coordinates.
-fn outline(patch: crate::model::lattice::Patch, phi: &[f64], l: usize) -> Vec<[(f64, f64); 2]> {
+fn outline(patch: crate::model::Patch, phi: &[f64], l: usize) -> Vec<[(f64, f64); 2]> {
     let s = patch.stride();
     let rows = patch.h + 2;
     let mut segs = Vec::new();
@@ -347,10 +346,10 @@ pub fn snapshot(base: &Path, frame: &Frame, a: &Analysis, background: Background
 pub(crate) fn regime_marker<DB: DrawingBackend>(
     chart: &mut ChartContext<'_, DB, Cartesian2d<LogCoord<f64>, RangedCoordf64>>,
     (x, y): (f64, f64),
-    regime: crate::analysis::regime::Regime,
+    regime: crate::analysis::Regime,
     failed: bool,
 ) -> Result<(), RunError> {
-    use crate::analysis::regime::Regime;
+    use crate::analysis::Regime;
     let (red, blue, green) = (PALETTE[3], PALETTE[0], PALETTE[2]);
     match regime {
         Regime::NoHoles => chart.draw_series(std::iter::once(Circle::new((x, y), 7, red.filled()))),

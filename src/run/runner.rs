@@ -6,13 +6,12 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::model::monolayer::Monolayer;
-use crate::model::params::Params;
-use crate::model::precision::STORE_NAME;
+use crate::formats::{Engine, RunRecord, RunStatus};
+use crate::model::{Monolayer, Params, STORE_NAME};
 use crate::run::error::RunError;
 use crate::run::files::{
     check_checkpoint_params, checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint,
-    write_frame, Engine, RunLock, RunRecord, RunStatus, LAST_GOOD_STATE,
+    write_frame, RunLock, LAST_GOOD_STATE,
 };
 use crate::run::offline::LiveRun;
 
@@ -56,7 +55,7 @@ pub fn stop_gracefully_on_signals() -> Result<(), RunError> {
 }
 
 fn signal_handler(e: std::io::Error) -> RunError {
-    RunError::Message(format!("signal handler: {e}"))
+    RunError::SignalHandler(e)
 }
 
 /// The signal that asked this process to stop, if one did: (name, number).
@@ -202,13 +201,14 @@ pub fn check_memory_of(params: &Params, copies: u64) -> Result<(), RunError> {
     let need = memory_estimate(params).saturating_mul(copies.max(1));
     let held = if copies > 1 { format!(" for the {copies} simulations held at once") } else { String::new() };
     match memory_limit()? {
-        Some((limit, what)) if need > limit => Err(RunError::Message(format!(
-            "box_size = {}, n_cells = {} need about {} MB{held}, more than {what} ({} MB): lower box_size or n_cells",
-            params.box_size,
-            params.n_cells,
-            need >> 20,
-            limit >> 20
-        ))),
+        Some((limit, what)) if need > limit => Err(RunError::Memory {
+            box_size: params.box_size,
+            n_cells: params.n_cells,
+            need_mb: need >> 20,
+            held,
+            limit: what,
+            limit_mb: limit >> 20,
+        }),
         _ => Ok(()),
     }
 }
@@ -221,7 +221,7 @@ pub fn check_frame_interval(flag: &str, frame_interval: u64, params: &Params) ->
         return Err(RunError::invalid(flag, 0, "≥ 1"));
     }
     if params.active_steps > 0 && frame_interval > params.active_steps {
-        return Err(RunError::Message(format!(
+        return Err(RunError::Options(format!(
             "{flag} {frame_interval}: larger than active_steps = {}, so the run would write no frame of its \
              active phase: give a frame interval in [1, {0}]",
             params.active_steps
@@ -424,7 +424,7 @@ impl RunDir {
         live: Option<&mut LiveRun>,
         watch: &mut dyn FnMut(&Monolayer, &Event),
     ) -> Result<(), Stop> {
-        use crate::gpu::stepper::GpuRun;
+        use crate::gpu::GpuRun;
         let p = self.monolayer.params().clone();
         let total = p.total_steps();
         let fi = self.record.frame_interval;
@@ -521,15 +521,14 @@ fn write_scheduled(
 }
 
 fn already_a_run(dir: &Path) -> RunError {
-    RunError::Message(if checkpoint_path(dir).exists() {
-        format!("{} already holds a run: continue it with --resume {0}, or choose another --out", dir.display())
+    let why = if checkpoint_path(dir).exists() {
+        format!("already holds a run: continue it with --resume {}, or choose another --out", dir.display())
     } else {
-        format!(
-            "{} already holds a run that stopped before its first checkpoint: delete it to start again, or choose \
-             another --out",
-            dir.display()
-        )
-    })
+        "already holds a run that stopped before its first checkpoint: delete it to start again, or choose another \
+         --out"
+            .to_string()
+    };
+    RunError::OtherRun { dir: dir.to_path_buf(), why }
 }
 
 /// `--engine gpu` in a build without feature `gpu`.

@@ -25,14 +25,13 @@ use std::sync::Mutex;
 
 use serde::Deserialize;
 
-use crate::analysis::holes::{counted_holes, HoleCounting};
-use crate::analysis::regime::{classify, fitted_lifetime, Regime};
-use crate::analysis::FrameSummary;
-use crate::model::params::Params;
+use crate::analysis::{classify, counted_holes, fitted_lifetime, FrameSummary, HoleCounting, Regime};
+use crate::formats::{RunRecord, RunStatus};
+use crate::model::Params;
 use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
 use crate::run::error::RunError;
 use crate::run::files::{check_frame, read_frame, RunFrames};
-use crate::run::files::{checkpoint_path, write_atomic, RunLock, RunRecord, RunStatus};
+use crate::run::files::{checkpoint_path, write_atomic, RunLock};
 use crate::run::offline::RunAnalysis;
 use crate::run::runner::{Event, RunDir};
 
@@ -94,7 +93,7 @@ impl SweepSpec {
     pub fn add_grid(&mut self, arg: &str) -> Result<(), RunError> {
         let (k, values) = parse_list("--grid", arg)?;
         if self.grid.contains_key(&k) {
-            return Err(RunError::Message(format!(
+            return Err(RunError::Options(format!(
                 "--grid {arg}: `{k}` is already a grid axis (give its values in one --grid {k}=V1,V2,…)"
             )));
         }
@@ -108,7 +107,7 @@ impl SweepSpec {
         for pair in arg.split(',') {
             let (k, v) = parse_assignment("--point", pair)?;
             if point.insert(k.clone(), v).is_some() {
-                return Err(RunError::Message(format!("--point {arg}: sets `{k}` twice")));
+                return Err(RunError::Options(format!("--point {arg}: sets `{k}` twice")));
             }
         }
         self.points.push(point);
@@ -454,18 +453,20 @@ fn existing_record(job: &Job, dir: &Path, frame_interval: u64) -> Result<Option<
     }
     let record = RunRecord::load(dir)?;
     if record.params != job.params || record.seed != job.seed {
-        return Err(RunError::Message(format!(
-            "{} was run with other parameters or seed than this sweep gives it: use another --out",
-            dir.display()
-        )));
+        return Err(RunError::OtherRun {
+            dir: dir.to_path_buf(),
+            why: "was run with other parameters or seed than this sweep gives it: use another --out".into(),
+        });
     }
     if record.frame_interval != frame_interval {
-        return Err(RunError::Message(format!(
-            "{} was run with a frame interval of {}, this sweep asks for {frame_interval}: use the same \
-             --frame-interval, or another --out",
-            dir.display(),
-            record.frame_interval
-        )));
+        return Err(RunError::OtherRun {
+            dir: dir.to_path_buf(),
+            why: format!(
+                "was run with a frame interval of {}, this sweep asks for {frame_interval}: use the same \
+                 --frame-interval, or another --out",
+                record.frame_interval
+            ),
+        });
     }
     Ok(Some(record))
 }
@@ -507,7 +508,7 @@ fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() +
         Start::Fresh => {
             job.params.validate().map_err(RunError::from)?;
             crate::run::runner::check_memory(&job.params)?;
-            let m = crate::model::monolayer::Monolayer::new(job.params.clone(), job.seed).map_err(RunError::from)?;
+            let m = crate::model::Monolayer::new(job.params.clone(), job.seed).map_err(RunError::from)?;
             RunDir::create_locked(lock, dir, m, frame_interval)?
         }
     };
@@ -609,7 +610,7 @@ pub fn run_sweep(
         ));
     }
     if !errors.is_empty() {
-        return Err(RunError::Message(errors.join("\n")));
+        return Err(RunError::Jobs(errors));
     }
     let seconds = seconds.into_inner().expect("no panics hold it");
     let mut summaries = measure_existing(jobs, out)?;

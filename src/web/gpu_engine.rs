@@ -1,5 +1,5 @@
 //! `WebGpuEngine`: the page's GPU engine, the model stepped on WebGPU compute in f32 by
-//! [`crate::gpu::stepper::GpuRun`] (the kernels the native tests compare with the CPU core
+//! [`crate::gpu::GpuRun`] (the kernels the native tests compare with the CPU core
 //! stage by stage). It runs in the page's worker, steps without reading back, and hands the
 //! state to the worker's [`WebSim`] only when the page draws or measures, so that everything
 //! drawn and read out comes from the same `analysis` code as on the CPU engine.
@@ -15,11 +15,10 @@ use std::rc::Rc;
 
 use wasm_bindgen::prelude::*;
 
-use super::js_err;
+use super::binding::js_err;
 
 use super::sim::{GpuState, WebSim};
-use crate::gpu::stepper::{GpuRun, GpuRunError};
-use crate::gpu::GpuContext;
+use crate::gpu::{GpuContext, GpuRun, GpuRunError};
 
 struct Engine {
     ctx: GpuContext,
@@ -34,6 +33,8 @@ impl Engine {
     }
 }
 
+/// The model stepped on WebGPU compute ([`GpuRun`]), handing its state to a [`WebSim`] to draw
+/// and measure.
 #[wasm_bindgen]
 pub struct WebGpuEngine(Rc<Engine>);
 

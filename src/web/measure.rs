@@ -3,7 +3,7 @@
 //! (4-neighbours, periodic) form a region; a region counts as a hole above the nucleation area
 //! πR²/4 (a quarter of a cell); the packing fraction is the fraction of sites with Σφ ≥ ½.
 
-use crate::analysis::holes::{nucleation_area, VoidRegions};
+use crate::analysis::{nucleation_area, VoidRegions};
 
 /// Holes and coverage of one Σφ field.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

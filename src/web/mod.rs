@@ -1,41 +1,55 @@
 //! The browser demo: a thin `#[wasm_bindgen]` layer over the same [`crate::Monolayer`] the native
 //! tests run, and the wgpu drawing of its fields.
 //!
-//! - [`view`]: the per-site and per-cell data the shaders draw, built from the core's fields;
-//! - [`measure`]: what the page reads out (holes from void sites, packing fraction);
+//! - `view`: the per-site and per-cell data the shaders draw, built from the core's fields
+//!   ([`FieldKind`]);
+//! - `measure`: what the page reads out (holes from void sites, packing fraction;
+//!   [`tissue_stats`]);
+//! - `readouts`: the readout log the page downloads, and its run record ([`run_record_json`]);
+//! - `playback`: a native run's frames opened in the page ([`Playback`]);
+//! - `version`: the code version the page names ([`code_version`]);
 //! - `sim` (wasm32): `WebSim`, the simulation object the page drives (step, parameters, brushes);
 //! - `render` (wasm32): `Renderer`, wgpu on WebGPU or WebGL2, with the shaders of `shaders/`;
+//! - `player` (wasm32): `WebPlayback`, the binding of `playback`;
+//! - `binding` (wasm32): what the bindings share (the start hook, the error they throw);
 //! - `gpu_engine` (wasm32, feature `gpu`): `WebGpuEngine`, the model stepped on WebGPU compute
 //!   (`crate::gpu`), handing its state to a `WebSim` to draw and measure.
 //!
-//! `view` and `measure` are plain Rust, built and unit-tested natively like the rest of the
-//! crate; only the binding and the GPU need the browser.
+//! All but the bindings are plain Rust, built and unit-tested natively like the rest of the
+//! crate; only the bindings and the GPU need the browser. The modules are private: the page
+//! reaches the bindings through wasm-bindgen's exports, the tests what is re-exported here.
 
-pub mod measure;
-pub mod playback;
-pub mod readouts;
-pub mod version;
-pub mod view;
+mod measure;
+mod playback;
+mod readouts;
+mod version;
+mod view;
 
+#[cfg(target_arch = "wasm32")]
+mod binding;
 #[cfg(all(target_arch = "wasm32", feature = "gpu"))]
-pub mod gpu_engine;
+mod gpu_engine;
 #[cfg(target_arch = "wasm32")]
-pub mod player;
+mod player;
 #[cfg(target_arch = "wasm32")]
-pub mod render;
+mod render;
 #[cfg(target_arch = "wasm32")]
-pub mod sim;
+mod sim;
 
-/// An error of the core as the exception a binding throws to the page.
-#[cfg(target_arch = "wasm32")]
-pub(crate) fn js_err(e: impl std::fmt::Display) -> wasm_bindgen::JsError {
-    wasm_bindgen::JsError::new(&e.to_string())
-}
+pub use measure::{tissue_stats, TissueStats};
+pub use playback::{Playback, RunInfo};
+pub use readouts::{run_record_json, ReadoutLog, Row, ROW_EVERY};
+pub use version::code_version;
+pub use view::{FieldKind, Segment, View, ViewBuilder};
 
-/// Runs once when the module is instantiated: a Rust panic then reaches the console with its
-/// message, and the page (which wraps every call) shows it instead of freezing silently.
+// The bindings the page's JavaScript drives (wasm32), named here for Rust as well.
+#[cfg(all(target_arch = "wasm32", feature = "gpu"))]
+pub use gpu_engine::WebGpuEngine;
 #[cfg(target_arch = "wasm32")]
-#[wasm_bindgen::prelude::wasm_bindgen(start)]
-pub fn start() {
-    console_error_panic_hook::set_once();
-}
+pub use player::WebPlayback;
+#[cfg(target_arch = "wasm32")]
+pub use render::{Renderer, WebView};
+#[cfg(all(target_arch = "wasm32", feature = "gpu"))]
+pub use sim::GpuState;
+#[cfg(target_arch = "wasm32")]
+pub use sim::{CoreCopy, WebSim};

@@ -4,14 +4,13 @@
 //! by the same analysis as the live tissue. Plain Rust, tested natively; `sim::WebPlayback` is
 //! its binding.
 
-use crate::analysis::holes::VoidRegions;
-use crate::model::monolayer::State;
+use crate::analysis::VoidRegions;
+use crate::model::State;
 use crate::{Monolayer, Params};
 
 use super::measure::{tissue_stats, TissueStats};
 use super::view::{FieldKind, View, ViewBuilder};
-use crate::formats::frame_file::{decode_frame, FrameData};
-use crate::formats::run_record::{FORMAT, FORMAT_VERSION};
+use crate::formats::{decode_frame, FrameData, FORMAT, FORMAT_VERSION};
 
 /// What the page needs of a run's `run.json` (`formats::run_record::RunRecord`).
 #[derive(Clone, Debug, PartialEq)]
@@ -139,7 +138,7 @@ impl Playback {
 mod tests {
     use super::*;
     use crate::analysis::Analysis;
-    use crate::formats::frame_file::encode_frame;
+    use crate::formats::encode_frame;
 
     fn run_json(p: &Params, seed: u64) -> String {
         serde_json::json!({"format": "monolayer-run", "format_version": 1, "version": "x", "seed": seed,

@@ -7,6 +7,7 @@ use super::playback::Playback;
 use super::render::WebView;
 use super::view::FieldKind;
 
+/// A native run's frames opened in the page ([`Playback`]), fed by worker.js.
 #[wasm_bindgen]
 pub struct WebPlayback(Playback);
 

@@ -2,11 +2,11 @@
 //! steps since the tissue was made (a Reset makes a new one), measured by the analysis module
 //! as offline ([`Analysis::summary`]), and the CSV with a header naming the code version, the
 //! seed and the parameters. With it the page writes the current state as a frame file
-//! ([`crate::formats::frame_file::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
+//! ([`crate::formats::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
 
 use crate::analysis::{Analysis, Detail};
-use crate::formats::run_record::RunRecord;
-use crate::model::error::SimError;
+use crate::formats::RunRecord;
+use crate::model::SimError;
 use crate::Monolayer;
 
 use super::version::code_version;

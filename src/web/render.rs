@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 use bytemuck::Zeroable;
 use wasm_bindgen::prelude::*;
 
-use super::js_err;
+use super::binding::js_err;
 use web_sys::HtmlCanvasElement;
 use wgpu::util::DeviceExt;
 
@@ -127,6 +127,7 @@ impl Layout {
     }
 }
 
+/// The page's drawing of a [`WebView`] on its canvas, wgpu on WebGPU or WebGL2.
 #[wasm_bindgen]
 pub struct Renderer {
     canvas: HtmlCanvasElement,

@@ -4,16 +4,14 @@
 
 use wasm_bindgen::prelude::*;
 
-use super::js_err;
+use super::binding::js_err;
 
 use super::measure::{tissue_stats, TissueStats};
 use super::readouts::{run_record_json, ReadoutLog};
 use super::render::WebView;
 use super::view::{FieldKind, ViewBuilder};
-use crate::analysis::holes::VoidRegions;
-use crate::formats::frame_file::encode_frame;
-use crate::formats::frame_file_name;
-use crate::formats::snapshot;
+use crate::analysis::VoidRegions;
+use crate::formats::{encode_frame, frame_file_name, snapshot};
 use crate::{Monolayer, Params};
 
 /// The page's parameters: its size and the three sliders; every other one is the native default.
@@ -37,6 +35,8 @@ impl GpuState {
     }
 }
 
+/// The simulation object the page drives (step, parameters, brushes): a [`Monolayer`], its view
+/// and its readouts.
 #[wasm_bindgen]
 pub struct WebSim {
     m: Monolayer,

@@ -11,13 +11,9 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::analysis::defects::Defect;
-use crate::analysis::forecast::{score_field, SHIPPED_MODEL};
-use crate::analysis::spirals::PlusOne;
-use crate::analysis::Analysis;
-use crate::formats::frame_file::FrameData;
-use crate::model::precision::Real;
-use crate::model::shape::gradient;
+use crate::analysis::{score_field, Analysis, Defect, PlusOne, SHIPPED_MODEL};
+use crate::formats::FrameData;
+use crate::model::{gradient, Real};
 use crate::Monolayer;
 
 /// Which field the page shows under the cells' outlines. Exported to JS (`FieldKind.Speed`, …)
@@ -391,7 +387,7 @@ fn push(out: &mut Vec<Segment>, a: [f64; 2], b: [f64; 2], colour: [f32; 4], widt
 /// How elongated a cell is, in [0, 1]: |Q| of Eq. 5 over ½∫|∇φ|², its largest possible value
 /// (reached when every gradient is parallel). 0 for a disk, → 1 for a needle; 0.48 for an
 /// ellipse of aspect ratio 2, 0.79 for 4. Q̂ cannot say this: it is normalised.
-pub fn elongation<T: Real>(patch: crate::model::lattice::Patch, phi: &[T], shape: [f64; 2]) -> f64 {
+pub fn elongation<T: Real>(patch: crate::model::Patch, phi: &[T], shape: [f64; 2]) -> f64 {
     let s = patch.stride();
     let mut norm = 0.0;
     for b in 0..patch.h {
@@ -410,8 +406,7 @@ pub fn elongation<T: Real>(patch: crate::model::lattice::Patch, phi: &[T], shape
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::lattice::Patch;
-    use crate::model::shape::shape_tensor;
+    use crate::model::{shape_tensor, Patch};
     use crate::Params;
 
     /// A small tissue a few steps into activity: velocities, forces and Q̂ are all non-zero.
@@ -472,7 +467,7 @@ mod tests {
         let keys = keys(&m);
         let mut b = ViewBuilder::default();
         let mut forecast = Vec::new();
-        crate::analysis::forecast::score_field(&a, &SHIPPED_MODEL, &mut forecast);
+        crate::analysis::score_field(&a, &SHIPPED_MODEL, &mut forecast);
         let expect: [(FieldKind, Vec<f64>); 6] = [
             (FieldKind::Forecast, forecast),
             (FieldKind::PhiSum, phi_sum),

@@ -5,7 +5,7 @@ pub mod npz;
 
 use std::sync::OnceLock;
 
-use monolayer::model::lattice::Patch;
+use monolayer::model::Patch;
 use monolayer::{Monolayer, Params, State};
 use num_complex::Complex64 as C64;
 

@@ -1,20 +1,32 @@
-//! `figures.md`: each figure beside what the paper says about it, with the parameters used where
-//! the paper states none, and the numbers measured.
+//! The report, the last stage of `monolayer figures`: `figures.md`, each figure drawn beside what
+//! the paper says about it, with the parameters used where the paper states none, and the
+//! numbers measured.
 
 use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
-use super::data::{Made, RunData};
-use super::{Figure, Plan, GAMMAS_S3};
+use super::draw::Drawn;
+use super::plan::{Figure, Plan, S1_INITIAL_GAP};
+use crate::run::error::RunError;
+use crate::run::files::write_text;
+
+/// Writes `out/figures.md` from the figures drawn; returns its path.
+pub fn write(drawn: &Drawn, out: &Path) -> Result<PathBuf, RunError> {
+    let md = out.join("figures.md");
+    write_text(&md, &markdown(drawn))?;
+    Ok(md)
+}
 
 /// (title, the paper's statement, the parameters used here).
 fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
     let zeta = plan.base.zeta;
     let s1_box = plan
-        .scale
-        .spec()
+        .spec
         .correlation_box
-        .map(|(l, n)| format!("L = {l}, N = {n} (the paper's 120² box with the same 100 cells, a denser tissue: the text shrinks the box \"to make sure that no holes are formed\"; initial gap {} sites so the disks fit)", super::S1_INITIAL_GAP))
+        .map(|(l, n)| format!("L = {l}, N = {n} (the paper's 120² box with the same 100 cells, a denser tissue: the text shrinks the box \"to make sure that no holes are formed\"; initial gap {S1_INITIAL_GAP} sites so the disks fit)"))
         .unwrap_or_else(|| format!("the scale's box, L = {}, N = {}", plan.base.box_size, plan.base.n_cells));
+    // The γ of Fig. S3's points, as the plan gives them.
+    let gammas: Vec<f64> = plan.points_of(Figure::FigS3).iter().map(|p| p.gamma).collect();
     match figure {
         Figure::Fig1c => (
             "Fig. 1c: distance from the hole to the nearest spiral core before nucleation",
@@ -64,7 +76,7 @@ fn about(figure: Figure, plan: &Plan) -> (&'static str, &'static str, String) {
         Figure::FigS3 => (
             "Fig. S3: largest hole area and number of holes against γ",
             "“as γ increases, both the average number and the average maximum area of holes decrease.” χ = 0.001, ζ = 0.3.",
-            format!("γ ∈ {GAMMAS_S3:?} (the paper gives no values; its text increases γ: the default 0.06 and above), χ = 0.001, ζ = 0.3; normalised as Fig. 3a."),
+            format!("γ ∈ {gammas:?} (the paper gives no values; its text increases γ: the default 0.06 and above), χ = 0.001, ζ = 0.3; normalised as Fig. 3a."),
         ),
     }
 }
@@ -74,10 +86,11 @@ fn name(v: &impl serde::Serialize) -> String {
     serde_json::to_string(v).unwrap_or_default().trim_matches('"').to_string()
 }
 
-pub fn markdown(plan: &Plan, runs: &[RunData], sections: &[Made]) -> String {
+fn markdown(drawn: &Drawn) -> String {
+    let plan = drawn.measures.plan;
     let b = &plan.base;
     let failed: Vec<&str> =
-        plan.jobs.iter().zip(runs).filter(|(_, r)| r.failed()).map(|(j, _)| j.name.as_str()).collect();
+        plan.jobs.iter().zip(&drawn.measures.runs).filter(|(_, r)| r.failed()).map(|(j, _)| j.name.as_str()).collect();
     let mut s = String::new();
     let _ = writeln!(s, "# The paper's figures, reproduced (scale `{}`)\n", plan.scale.name());
     let _ = writeln!(
@@ -87,7 +100,7 @@ pub fn markdown(plan: &Plan, runs: &[RunData], sections: &[Made]) -> String {
          that needs it: `plan.csv`). Each figure is a PNG and an SVG beside the CSV of what it draws.\n",
         plan.jobs.len()
     );
-    let spec = plan.scale.spec();
+    let spec = &plan.spec;
     let _ = writeln!(
         s,
         "- Scale `{}`: L = {}, N = {}, R = {}, {} relaxation and {} active steps, a frame every {} steps; \
@@ -123,7 +136,7 @@ pub fn markdown(plan: &Plan, runs: &[RunData], sections: &[Made]) -> String {
             failed.join(", ")
         );
     }
-    for m in sections {
+    for m in &drawn.figures {
         let (title, paper, here) = about(m.figure, plan);
         let stem = m.figure.stem();
         let _ = writeln!(s, "## {title}\n");

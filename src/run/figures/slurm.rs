@@ -10,9 +10,82 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use super::data::write_text;
-use super::Plan;
+use super::plan::Plan;
+use super::runs::{hours, Speed};
 use crate::run::error::RunError;
+use crate::run::files::write_text;
+use crate::run::sweep::Job;
+
+/// What `--slurm` was given besides the plan.
+#[derive(Clone, Debug)]
+pub struct SlurmRequest<'a> {
+    /// `--out` as given.
+    pub out: &'a Path,
+    /// `--only` as given, passed on.
+    pub only: Option<&'a str>,
+    pub throttle: usize,
+    pub partition: Option<&'a str>,
+    pub dry_run: bool,
+}
+
+/// `monolayer figures --slurm`: the plan's runs and the figures as Slurm jobs, with time limits
+/// from the estimate `speed`; with `dry_run` the scripts are printed, else written and submitted.
+pub fn run_on_slurm(plan: &Plan, r: &SlurmRequest, speed: &Speed) -> Result<(), RunError> {
+    // The jobs may start in another directory: every path they see is absolute.
+    let out = std::path::absolute(r.out).map_err(|e| format!("--out {}: {e}", r.out.display()))?;
+    // `#SBATCH --output=…` takes no quotes: a space ends the option, Slurm expands `%`, and a
+    // newline would make the rest of the path a command.
+    for (what, text) in
+        [("--out", out.display().to_string()), ("--partition", r.partition.unwrap_or_default().to_string())]
+    {
+        if let Some(c) = text.chars().find(|c| c.is_whitespace() || c.is_control() || "%\"'\\$`".contains(*c)) {
+            return Err(RunError::Options(format!(
+                "{what} {text:?}: holds {c:?}, which an #SBATCH line cannot hold (spaces, %, quotes, $, `, \\ and \
+                 control characters): choose one without"
+            )));
+        }
+    }
+    let binary = std::env::current_exe().map_err(|e| format!("the path of this program: {e}"))?;
+    // Every run from its start: the cluster runs the whole plan.
+    let whole = |j: &Job| speed.core_seconds(j, j.params.total_steps());
+    let total: f64 = plan.jobs.iter().map(whole).sum();
+    let longest = plan.jobs.iter().map(whole).fold(0.0, f64::max);
+    let opts = SlurmOptions {
+        throttle: r.throttle,
+        partition: r.partition.map(str::to_string),
+        binary,
+        only: r.only.map(str::to_string),
+        longest_run_seconds: longest,
+        total_seconds: total,
+    };
+    eprintln!(
+        "  estimate: {:.2} core-hours in all, the longest run {}; {} array task(s), {} at a time",
+        total / 3600.0,
+        hours(longest),
+        array_tasks(plan),
+        r.throttle
+    );
+    if r.dry_run {
+        let (runs, figures, submit) = scripts(plan, &out, &opts);
+        println!("# ---- {}/slurm/runs.sbatch\n{runs}", out.display());
+        println!("# ---- {}/slurm/figures.sbatch\n{figures}", out.display());
+        println!("# ---- {}/slurm/submit.sh\n{submit}", out.display());
+        eprintln!("dry run: nothing written or submitted");
+        return Ok(());
+    }
+    for path in write_scripts(plan, &out, &opts)? {
+        println!("{}", path.display());
+    }
+    let (runs, figures) = submit(&out)?;
+    eprintln!(
+        "submitted: job array {runs} (runs), job {figures} (figures, after the array succeeds); \
+         `squeue -j {runs},{figures}` to watch; logs in {}/slurm/; figures.md appears in {} at the end",
+        out.display(),
+        out.display()
+    );
+    println!("runs_job_id={runs}\nfigures_job_id={figures}");
+    Ok(())
+}
 
 /// Slurm's default MaxArraySize is 1001 (indices 0–1000): more runs than that share tasks.
 pub const MAX_ARRAY_TASKS: usize = 1000;
@@ -159,10 +232,12 @@ pub fn submit(out: &Path) -> Result<(String, String), RunError> {
     let dir = out.join("slurm");
     let sbatch = |args: &[&str]| -> Result<String, RunError> {
         let o = Command::new("sbatch").args(args).current_dir(&dir).output().map_err(|e| {
-            format!("sbatch: {e} (is this a Slurm login node? --dry-run prints the scripts without submitting)")
+            RunError::Slurm(format!(
+                "sbatch: {e} (is this a Slurm login node? --dry-run prints the scripts without submitting)"
+            ))
         })?;
         if !o.status.success() {
-            return Err(RunError::Message(format!(
+            return Err(RunError::Slurm(format!(
                 "sbatch {}: {}",
                 args.join(" "),
                 String::from_utf8_lossy(&o.stderr).trim()
