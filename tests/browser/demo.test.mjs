@@ -613,6 +613,10 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       const drawn = await p.evaluate(() => window.demo.drawn);
       const gpu = await stepped(p, GPU_STEPS);
       await until(p, 'a frame of the GPU state', (d) => window.demo.drawn > d, drawn);
+      // The page reports the GPU engine's speed as it measured it (the steps just taken).
+      await until(p, 'the measured speed', () => window.demo.stepsPerSecond > 0);
+      const speed = await p.textContent('#speed');
+      assert(/^Measured here: [0-9.]+ steps\/s on the GPU engine\.$/.test(speed), `speed label: ${speed}`);
       const look = await canvasShot(p, shot('gpu-engine'));
       assert(look.colours > 20, `the GPU engine's tissue drawn in only ${look.colours} colours`);
       const q = await open(context, base, '/?preset=persistent&engine=cpu&paused', errors);

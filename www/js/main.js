@@ -78,6 +78,7 @@ worker.onmessage = (e) => {
   const m = e.data;
   if (m.type === 'frame') {
     page.stats = m.stats;
+    showSpeed(m.stats);
     loop.receive(m);
   } else if (m.type === 'result') {
     const c = calls.get(m.id);
@@ -125,6 +126,14 @@ function showEngine(s) {
   $('engine').textContent = text;
   demo.engine = s.engine;
   demo.engineNote = s.engineNote;
+}
+
+// The engine's speed as measured in this page (steps and their time since the engine was
+// chosen, hand-offs and checks included), beside the engine's name.
+function showSpeed(s) {
+  const v = s.stepsPerSecond;
+  $('speed').textContent = v ? `Measured here: ${v < 10 ? v.toFixed(2) : v.toFixed(0)} steps/s on the ${s.engine === 'gpu' ? 'GPU' : 'CPU'} engine.` : '';
+  demo.stepsPerSecond = v ?? null;
 }
 
 // Where a tissue from a shipped state further on than its relaxation came from: its seed and

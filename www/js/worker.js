@@ -54,6 +54,14 @@ let scheduled = false;
 // A batch of steps is sized to take about this long, so that messages are answered promptly.
 const BATCH_MS = 12;
 let msPerStep = 5;
+// Steps taken and their milliseconds since the engine was last chosen (hand-offs and checks
+// included): the speed the page reports as measured here.
+let speed = { steps: 0, ms: 0 };
+
+function timed(steps, ms) {
+  speed.steps += steps;
+  speed.ms += ms;
+}
 
 // console_error_panic_hook writes a Rust panic's message to console.error before the trap.
 let lastConsoleError = '';
@@ -119,7 +127,9 @@ function pump() {
       if (n >= 1) {
         const t0 = performance.now();
         if (takeSteps(n)) {
-          msPerStep = 0.8 * msPerStep + 0.2 * ((performance.now() - t0) / n);
+          const ms = performance.now() - t0;
+          msPerStep = 0.8 * msPerStep + 0.2 * (ms / n);
+          timed(n, ms);
           budget -= n;
           changed = true;
         }
@@ -246,6 +256,7 @@ function gpuLost(why) {
     // Already freed: nothing to release.
   }
   gpuNote = `the GPU device failed (${why}); the tissue goes on on the CPU engine from step ${sim.step_count()}`;
+  speed = { steps: 0, ms: 0 };
   changed = true;
   postMessage({ type: 'engine', stats: stats(), lost: gpuNote });
 }
@@ -295,7 +306,9 @@ async function gpuTurn() {
         const t0 = performance.now();
         const k = await gpuStepsToRow(n);
         if (k) {
-          msPerStep = 0.8 * msPerStep + 0.2 * ((performance.now() - t0) / k);
+          const ms = performance.now() - t0;
+          msPerStep = 0.8 * msPerStep + 0.2 * (ms / k);
+          timed(k, ms);
           budget -= k;
           changed = true;
         }
@@ -341,6 +354,7 @@ function stats() {
     // Which engine steps, and why (main.js, showEngine).
     engine: gpu ? 'gpu' : 'cpu',
     engineNote: gpuNote,
+    stepsPerSecond: speed.steps > 0 && speed.ms > 0 ? (1000 * speed.steps) / speed.ms : null,
     solveIterations: gpu ? gpu.engine.solve_iterations() : null,
   };
 }
@@ -379,7 +393,9 @@ const CALLS = {
     }
     if (gpu) await gpuDown();
     if (left > 0 && !takeSteps(left)) return null;
-    return performance.now() - t0;
+    const ms = performance.now() - t0;
+    timed(n, ms);
+    return ms;
   },
   // Destroys the GPU engine's device, as a driver reset would (the browser tests' forced loss).
   gpu_destroy: () => gpu?.engine.destroy_device(),
@@ -569,6 +585,7 @@ async function handle(m) {
         if (!sim) return;
         if (gpu) await gpuDown();
         await chooseEngine(m.engine);
+        speed = { steps: 0, ms: 0 };
         changed = true;
         postMessage({ type: 'engine', stats: stats() });
       });
