@@ -234,15 +234,10 @@ fn apply_c(x: u32, v: u32) -> vec2<f32> {
 }
 
 
-// The operator for the current n (`FrictionSolver::prepare`): N, diag(C) = n (ξ_s + ξ_c N)
-// (0 where n = 0) and the mobility 1/[ξ_s + ξ_c N] into `drag`.z (ξ_s(x) is `drag`.w).
-@compute @workgroup_size(256)
-fn friction_setup(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let x = gid.x;
-    let l = params.box_size;
-    if x >= l * l {
-        return;
-    }
+// The operator for the current n at site x (`FrictionSolver::prepare`): N, diag(C) =
+// n (ξ_s + ξ_c N) (0 where n = 0) and the mobility 1/[ξ_s + ξ_c N] into `drag`.z (ξ_s(x) is
+// `drag`.w); returns the diagonal.
+fn set_up_site(x: u32) -> f32 {
     var nb = 0.0;
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
@@ -255,12 +250,15 @@ fn friction_setup(@builtin(global_invocation_id) gid: vec3<u32>) {
     let total = xi_s + params.xi_cell * nb;
     drag[x].z = 1.0 / total;
     let n = weight[x];
-    diagonal[x] = select(0.0, n * total, n > 0.0);
+    let d = select(0.0, n * total, n > 0.0);
+    diagonal[x] = d;
+    return d;
 }
 
-// r = F − C u from the warm start u, p = 0 (the first `cg_product` then sets p = z); partial
-// sums of ‖r‖² and ‖F‖² (`Component::load` and the start of `Component::pcg`). The previous
-// r·z is cleared: the first direction is z alone.
+// The solve's start: the operator for the current n (`set_up_site`), then r = F − C u from the
+// warm start u (C's row at x needs only its own diagonal), and partial sums of ‖r‖² and ‖F‖²
+// (`Component::load` and the start of `Component::pcg`). The previous r·z is cleared, so the
+// first direction is z alone (β = 0: the old p is not read).
 @compute @workgroup_size(256)
 fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
             @builtin(workgroup_id) wg: vec3<u32>) {
@@ -276,15 +274,26 @@ fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoca
     var rr = vec2<f32>(0.0, 0.0);
     var ff = 0.0;
     if x < l * l {
+        let d = set_up_site(x);
         ff = force_squared(x);
-        if diagonal[x] > 0.0 {
-            let r = force[x] - apply_c(x, U);
+        if d > 0.0 {
+            // C u at x, with u's neighbour sum written out: `apply_c` would bind p's buffer too,
+            // one storage buffer beyond the eight a kernel may have.
+            var s = vec2<f32>(0.0, 0.0);
+            for (var dy = -1; dy <= 1; dy++) {
+                for (var dx = -1; dx <= 1; dx++) {
+                    if dx != 0 || dy != 0 {
+                        let y = neighbour(x, dx, dy);
+                        s += weight[y] * mean_velocity[y];
+                    }
+                }
+            }
+            let r = force[x] - (d * mean_velocity[x] - params.xi_cell * weight[x] * s);
             residual[x] = r;
             rr = r * r;
         } else {
             residual[x] = vec2<f32>(0.0, 0.0);
         }
-        direction[x] = vec2<f32>(0.0, 0.0);
     }
     store_partial(t, RR, wg.x, vec4<f32>(rr, ff, 0.0));
 }
@@ -376,10 +385,12 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
     store_partial(t, PQ, wg.x, vec4<f32>(pq, select(vec2<f32>(0.0, 0.0), rz, t == 0u)));
 }
 
-// p′ = z + β p at site y for the components still iterating, p for those done.
+// p′ = z + β p at site y for the components still iterating (z alone where β = 0: the first
+// iteration, whose old p is not this solve's), p for those done.
 fn next_direction(y: u32, beta: vec2<f32>, done: vec2<bool>) -> vec2<f32> {
     let p = direction[y];
-    return select(preconditioned[y] + beta * p, p, done);
+    let bp = select(beta * p, vec2<f32>(0.0, 0.0), beta == vec2<f32>(0.0, 0.0));
+    return select(preconditioned[y] + bp, p, done);
 }
 
 // α = r·z / p′·Cp′ for each component still iterating (p′·Cp′ > 0 there; `cg_product` wrote 0

@@ -53,10 +53,9 @@ pub enum Kernel {
     /// Heun's corrector and the range check (`shaders/monolayer.wgsl`); needs the predictor's
     /// φ_n and R(φ_n), and the rate at φ*.
     Correct,
-    /// The friction operator for the current n: its diagonal and the mobility
-    /// (`shaders/friction.wgsl`, as `FrictionSolver::prepare`).
-    FrictionSetup,
-    /// r = F − C u from the warm start, p = 0, and the partial sums of ‖r‖² and ‖F‖².
+    /// The friction operator for the current n (its diagonal and the mobility, as
+    /// `FrictionSolver::prepare`), r = F − C u from the warm start, and the partial sums of ‖r‖²
+    /// and ‖F‖².
     CgStart,
     /// The stop test and β, p′ = z + β p, q = C p′ and partial sums of p′·q.
     CgProduct,
@@ -146,7 +145,7 @@ enum Grid {
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 24] = [
+    pub const ALL: [Kernel; 23] = [
         Kernel::LatticeSums,
         Kernel::CellArea,
         Kernel::ChemicalPotential,
@@ -156,7 +155,6 @@ impl Kernel {
         Kernel::VelocityAndRate,
         Kernel::Predict,
         Kernel::Correct,
-        Kernel::FrictionSetup,
         Kernel::CgStart,
         Kernel::CgProduct,
         Kernel::CgUpdate,
@@ -197,13 +195,12 @@ impl Kernel {
     };
 
     /// The friction solve of Eq. 2 with `iterations` CG iterations recorded (those after both
-    /// components converged return at once): the operator and its preconditioner, the residual
-    /// of the warm start and its preconditioning, the iterations, then the pull and the check of
-    /// the true residual.
+    /// components converged return at once): the operator with the residual of the warm start,
+    /// the preconditioner's set-up and its first application, the iterations, then the pull and
+    /// the check of the true residual.
     pub fn friction_solve(pc: Preconditioner, iterations: usize) -> Vec<Kernel> {
-        let mut out = vec![Kernel::FrictionSetup];
+        let mut out = vec![Kernel::CgStart];
         out.extend_from_slice(pc.setup());
-        out.push(Kernel::CgStart);
         out.extend_from_slice(pc.kernels());
         for _ in 0..iterations {
             out.extend_from_slice(&Kernel::cg_iteration(pc));
@@ -279,7 +276,6 @@ impl Kernel {
             Kernel::VelocityAndRate => (MOTION_WGSL, "velocity_and_rate"),
             Kernel::Predict => (MONOLAYER_WGSL, "predict"),
             Kernel::Correct => (MONOLAYER_WGSL, "correct"),
-            Kernel::FrictionSetup => (FRICTION_WGSL, "friction_setup"),
             Kernel::CgStart => (FRICTION_WGSL, "cg_start"),
             Kernel::CgProduct => (FRICTION_WGSL, "cg_product"),
             Kernel::CgUpdate => (FRICTION_WGSL, "cg_update"),
@@ -321,8 +317,7 @@ impl Kernel {
             Kernel::VelocityAndRate => &[Params, Patches, Phi, Mu, Fx, Fy, Drag, Velocity, Rate],
             Kernel::Predict => &[Params, Patches, Phi, Rate, Phi0, K1],
             Kernel::Correct => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
-            Kernel::FrictionSetup => &[Params, Weight, Drag, Diagonal],
-            Kernel::CgStart => &[Params, Weight, Force, Diagonal, MeanVelocity, Residual, Direction, Partials, Solve],
+            Kernel::CgStart => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, Residual, Partials, Solve],
             Kernel::CgProduct => {
                 &[Params, Weight, Diagonal, Direction, Product, Partials, Solve, Preconditioned, DirectionNext]
             }
@@ -353,8 +348,7 @@ impl Kernel {
             | Kernel::Correct
             | Kernel::Relayout
             | Kernel::CommitPatches => Grid::Sites,
-            Kernel::FrictionSetup
-            | Kernel::CgStart
+            Kernel::CgStart
             | Kernel::CgProduct
             | Kernel::CgUpdate
             | Kernel::FrictionPull
@@ -395,10 +389,8 @@ impl Kernel {
             Kernel::Predict => 2 * padded + 3 * padded + n,
             // φ_n, R(φ_n) and the rate read; φ written.
             Kernel::Correct => 3 * padded + padded + n,
-            // n and the drag read; the diagonal and the mobility written.
-            Kernel::FrictionSetup => l2 + 4 * l2 + l2 + l2,
-            // n, F, the diagonal and u read; r and p written.
-            Kernel::CgStart => l2 + 2 * l2 + l2 + 2 * l2 + 4 * l2,
+            // n, the drag, F and u read; the drag, the diagonal and r written.
+            Kernel::CgStart => l2 + 4 * l2 + 2 * l2 + 2 * l2 + 4 * l2 + l2 + 2 * l2,
             // z, p, n and the diagonal read; p′ and q written.
             Kernel::CgProduct => 4 * l2 + 2 * l2 + 4 * l2,
             // u, p′, r, q and F read; u, p and r written.
@@ -458,7 +450,6 @@ impl Kernel {
             | Kernel::Correct
             | Kernel::Relayout
             | Kernel::CommitPatches
-            | Kernel::FrictionSetup
             | Kernel::MgCoarsenFine => 1,
             Kernel::CgStart => 2 * tree256 + 1,
             Kernel::CgProduct | Kernel::CgUpdate | Kernel::FrictionPull => done + tree256 + 1,

@@ -11,7 +11,7 @@
 //! | `shape.wgsl` `shape_tensor`          | `model::shape` (Q_i, Q̂_i)            | Eq. 5           |
 //! | `forces.wgsl` `force_density`        | `model::forces::force_density`        | Eqs. 3, 4       |
 //! | `gather.wgsl` `friction_sums`        | `model::monolayer` gathers of n and F | Eq. 2 (Σ_j)     |
-//! | `friction.wgsl` `friction_setup`, `cg_*`, `friction_pull` | `model::friction` (`FrictionSolver`) | Eq. 2 |
+//! | `friction.wgsl` `cg_*`, `friction_pull`, `friction_check` | `model::friction` (`FrictionSolver`) | Eq. 2 |
 //! | `multigrid.wgsl` `mg_*`                | `model::multigrid` (the preconditioner) | —             |
 //! | `motion.wgsl` `velocity_and_rate`    | `model::motion::velocity_and_rate`    | Eq. 1           |
 //! | `monolayer.wgsl` `predict`, `correct`| `model::monolayer` `Then` (Heun)      | —               |
