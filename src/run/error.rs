@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::formats::FormatError;
 use crate::model::{ParamError, SimError};
 
 /// What went wrong in a command of this layer.
@@ -141,8 +142,11 @@ pub enum RunError {
     /// The default parameters could not be written as TOML.
     #[error(transparent)]
     Toml(#[from] toml::ser::Error),
-    /// A message of a layer below that reports its errors as text (`crate::formats`), or of this
-    /// layer's own `?` on such a result.
+    /// A file's bytes that `crate::formats` refuses (a frame, a status, an engine), or a frame
+    /// it could not encode.
+    #[error(transparent)]
+    Format(#[from] FormatError),
+    /// A message of this layer's own `?` on a result whose error is text.
     #[error("{0}")]
     Message(String),
 }
@@ -183,7 +187,7 @@ impl RunError {
     }
 }
 
-/// The messages of the layers below that report errors as text (`crate::formats`).
+/// The texts of this layer's own `?` on results whose error is text.
 impl From<String> for RunError {
     fn from(message: String) -> Self {
         RunError::Message(message)
@@ -207,7 +211,7 @@ mod tests {
         assert_eq!(RunError::io(p, io).to_string(), "/x/run.json: gone");
         assert_eq!(RunError::file(p, "not valid JSON").to_string(), "/x/run.json: not valid JSON");
         assert_eq!(RunError::invalid("--jobs", 0, "≥ 1").to_string(), "--jobs 0: must be ≥ 1");
-        assert_eq!(RunError::from("boom").context("run a").to_string(), "run a: boom");
+        assert_eq!(RunError::Parse("boom".into()).context("run a").to_string(), "run a: boom");
         let stop = RunError::Interrupted { signal: "SIGTERM", detail: ": again".into() };
         assert_eq!(stop.to_string(), "stopped by SIGTERM: again");
     }
