@@ -32,7 +32,7 @@ fn frames_written_by_monolayer_run_decode_to_the_arrays_analyze_reads() {
     // A damaged frame: refused with its name and the reason, as analyze refuses it.
     let (_, path) = &frames.frames[1];
     let bytes = fs::read(path).unwrap();
-    let e = decode_frame("frame_0000070.npz", &bytes[..bytes.len() - 100], None).unwrap_err();
+    let e = decode_frame("frame_0000070.npz", &bytes[..bytes.len() - 100], None).unwrap_err().to_string();
     assert!(e.starts_with("frame_0000070.npz: not a readable .npz"), "{e}");
 }
 

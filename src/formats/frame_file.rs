@@ -18,6 +18,7 @@ use ndarray::{arr0, Array0, Array1, Array2, Array3, ArrayD};
 use ndarray_npy::{NpzReader, NpzWriter, ReadNpzError, WriteNpzError};
 use num_complex::Complex64 as C64;
 
+use super::error::{FormatError, FormatResult};
 use crate::model::Patch;
 use crate::Monolayer;
 
@@ -51,9 +52,9 @@ impl FrameData {
 /// The current state of `m` as a frame file, the bytes `monolayer run` writes for it (after
 /// [`Monolayer::evaluate_now`], which leaves the trajectory as it is, so that the velocities
 /// belong to this φ).
-pub fn encode_frame(m: &mut Monolayer) -> Result<Vec<u8>, String> {
-    m.evaluate_now().map_err(|e| e.to_string())?;
-    frame_bytes(m).map_err(|e| format!("writing the frame: {e}"))
+pub fn encode_frame(m: &mut Monolayer) -> FormatResult<Vec<u8>> {
+    m.evaluate_now()?;
+    frame_bytes(m).map_err(FormatError::Write)
 }
 
 /// The frame file of `m` as it stands (its velocities as last evaluated): the one encoder of the
@@ -104,9 +105,9 @@ pub fn frame_bytes(m: &mut Monolayer) -> Result<Vec<u8>, WriteNpzError> {
 /// Refuses NaN, infinities and absurd magnitudes (beyond 10¹⁰⁰, whose squares overflow): no file
 /// this program writes holds one, so a file that does is damaged, and the tables measured from it
 /// would fill with NaN.
-pub fn check_finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> Result<(), String> {
+pub fn check_finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> FormatResult<()> {
     match values.enumerate().find(|(_, v)| !(v.is_finite() && v.abs() <= 1e100)) {
-        Some((k, v)) => Err(format!("array `{name}` holds {v} at index {k}: a damaged file")),
+        Some((index, &value)) => Err(FormatError::NotFinite { array: name.into(), value, index }),
         None => Ok(()),
     }
 }
@@ -114,15 +115,15 @@ pub fn check_finite<'a>(name: &str, values: impl Iterator<Item = &'a f64>) -> Re
 /// Reads a frame file's bytes, checking every array's shape; any box size and number of cells.
 /// `expect` is (L, N) of the run's `run.json` when known. Errors start with `name` (the file's
 /// name) and say which array is wrong, as `monolayer analyze` does.
-pub fn decode_frame(name: &str, bytes: &[u8], expect: Option<(usize, usize)>) -> Result<FrameData, String> {
+pub fn decode_frame(name: &str, bytes: &[u8], expect: Option<(usize, usize)>) -> FormatResult<FrameData> {
     let (l, n) = expect.unzip();
-    decode(bytes, l, n).map_err(|e| format!("{name}: {e}"))
+    decode(bytes, l, n).map_err(|e| FormatError::Frame { name: name.into(), source: Box::new(e) })
 }
 
 /// [`decode_frame`] for a run on an L×L lattice whose number of cells is checked afterwards
 /// against the run's record (`run::files::check_frame`).
-pub fn decode_frame_of_box(name: &str, bytes: &[u8], l: usize) -> Result<FrameData, String> {
-    decode(bytes, Some(l), None).map_err(|e| format!("{name}: {e}"))
+pub fn decode_frame_of_box(name: &str, bytes: &[u8], l: usize) -> FormatResult<FrameData> {
+    decode(bytes, Some(l), None).map_err(|e| FormatError::Frame { name: name.into(), source: Box::new(e) })
 }
 
 /// The shape and item size an `.npy` header declares: `(shape, bytes per item)`.
@@ -155,39 +156,42 @@ pub fn max_array_values(l: usize) -> u64 {
 /// hostile header may declare any shape (ndarray-npy would allocate it whole, and the process
 /// abort). No array holds more than `max_values`, nor more bytes than its zip entry, whose size
 /// deflate bounds by its compressed size.
-pub fn check_npz_headers(archive: impl Read + std::io::Seek, max_values: u64) -> Result<(), String> {
-    let mut zip = zip::ZipArchive::new(archive).map_err(|e| format!("not a readable .npz: {e}"))?;
+pub fn check_npz_headers(archive: impl Read + std::io::Seek, max_values: u64) -> FormatResult<()> {
+    let npz = FormatError::Npz;
+    let mut zip = zip::ZipArchive::new(archive).map_err(|e| npz(format!("not a readable .npz: {e}")))?;
     for i in 0..zip.len() {
-        let mut entry = zip.by_index(i).map_err(|e| format!("not a readable .npz: {e}"))?;
+        let mut entry = zip.by_index(i).map_err(|e| npz(format!("not a readable .npz: {e}")))?;
         let name = entry.name().trim_end_matches(".npy").to_string();
         // Deflate expands at most 1032-fold.
         let (size, packed) = (entry.size(), entry.compressed_size());
         if size > packed.saturating_mul(1100).saturating_add(4096) {
-            return Err(format!("array `{name}`: {size} bytes from {packed} compressed: a damaged file"));
+            return Err(npz(format!("array `{name}`: {size} bytes from {packed} compressed: a damaged file")));
         }
         let mut head = Vec::new();
-        (&mut entry).take(1 << 16).read_to_end(&mut head).map_err(|e| format!("array `{name}`: {e}"))?;
-        let (shape, item) = npy_header(&head).ok_or_else(|| format!("array `{name}`: not a readable .npy header"))?;
+        (&mut entry).take(1 << 16).read_to_end(&mut head).map_err(|e| npz(format!("array `{name}`: {e}")))?;
+        let (shape, item) =
+            npy_header(&head).ok_or_else(|| npz(format!("array `{name}`: not a readable .npy header")))?;
         let values = shape.iter().try_fold(1u64, |a, &d| a.checked_mul(d));
         let bytes = values.and_then(|v| v.checked_mul(item));
         match (values, bytes) {
             (Some(v), Some(b)) if v <= max_values && b <= size => {}
             _ => {
-                return Err(format!(
+                return Err(npz(format!(
                     "array `{name}`: its header declares shape {shape:?}, more than the file holds or a run on this \
                      lattice has ({max_values} values at most): a damaged file"
-                ))
+                )))
             }
         }
     }
     Ok(())
 }
 
-fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> Result<FrameData, String> {
+fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> FormatResult<FrameData> {
+    let npz = FormatError::Npz;
     // Without the run's box, an array is bounded by its bytes alone (≤ 1100× the file's size).
     check_npz_headers(Cursor::new(bytes), expect_l.map_or(u64::MAX, max_array_values))?;
-    let mut z = NpzReader::new(Cursor::new(bytes)).map_err(|e| format!("not a readable .npz: {e}"))?;
-    let e = |name: &'static str| move |x: ReadNpzError| format!("array `{name}`: {x}");
+    let mut z = NpzReader::new(Cursor::new(bytes)).map_err(|e| npz(format!("not a readable .npz: {e}")))?;
+    let e = |name: &'static str| move |x: ReadNpzError| npz(format!("array `{name}`: {x}"));
     let step: Array0<i64> = z.by_name("step").map_err(e("step"))?;
     let time: Array0<f64> = z.by_name("time").map_err(e("time"))?;
     let patches: Array2<i64> = z.by_name("patches").map_err(e("patches"))?;
@@ -197,27 +201,27 @@ fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> Res
     let velocity: Array3<f64> = z.by_name("velocity").map_err(e("velocity"))?;
     let (l, l2, two) = velocity.dim();
     if l != l2 || two != 2 || l < 4 {
-        return Err(format!("array `velocity` is {:?}, not L×L×2 for a box of L ≥ 4 sites", velocity.dim()));
+        return Err(npz(format!("array `velocity` is {:?}, not L×L×2 for a box of L ≥ 4 sites", velocity.dim())));
     }
     let n = patches.nrows();
     if let Some(el) = expect_l.filter(|&el| el != l) {
-        return Err(format!("a {l}×{l} lattice, the run's run.json has box_size = {el}: not a frame of this run"));
+        return Err(npz(format!("a {l}×{l} lattice, the run's run.json has box_size = {el}: not a frame of this run")));
     }
     if let Some(en) = expect_n.filter(|&en| en != n) {
-        return Err(format!("holds {n} cells, the run's run.json has n_cells = {en}: not a frame of this run"));
+        return Err(npz(format!("holds {n} cells, the run's run.json has n_cells = {en}: not a frame of this run")));
     }
     if patches.ncols() != 4 || offsets.len() != n + 1 || q_hat.dim() != (n, 2) {
-        return Err(format!(
+        return Err(npz(format!(
             "`patches` {:?}, `phi_offsets` ({}), `q_hat` {:?} disagree on the number of cells",
             patches.dim(),
             offsets.len(),
             q_hat.dim()
-        ));
+        )));
     }
-    let phi = phi.as_slice().ok_or("array `phi` is not contiguous")?;
+    let phi = phi.as_slice().ok_or_else(|| npz("array `phi` is not contiguous".into()))?;
     let step = step.into_scalar();
     if step < 0 {
-        return Err(format!("array `step` = {step}: a step is ≥ 0"));
+        return Err(npz(format!("array `step` = {step}: a step is ≥ 0")));
     }
     let time = time.into_scalar();
     check_finite("time", [time].iter())?;
@@ -226,7 +230,7 @@ fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> Res
     check_finite("velocity", velocity.iter())?;
     // The analysis recomputes these from φ and never uses them, but NaN in any array means the
     // file is damaged, and whatever else it holds cannot be trusted either.
-    let names = z.names().map_err(|x| format!("not a readable .npz: {x}"))?;
+    let names = z.names().map_err(|x| npz(format!("not a readable .npz: {x}")))?;
     for name in ["phi_sum", "centres", "areas", "shape_tensor"] {
         if names.iter().any(|n| n.trim_end_matches(".npy") == name) {
             let a: ArrayD<f64> = z.by_name(name).map_err(e(name))?;
@@ -238,12 +242,12 @@ fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> Res
         let [x0, y0, w, h] = [0, 1, 2, 3].map(|k| patches[[i, k]]);
         let fits = |v: i64, lo: i64| v >= lo && (v as usize) < l + lo as usize;
         if !(fits(x0, 0) && fits(y0, 0) && fits(w, 1) && fits(h, 1)) {
-            return Err(format!("cell {i}: patch ({x0}, {y0}, {w}, {h}) does not fit the {l}×{l} lattice"));
+            return Err(npz(format!("cell {i}: patch ({x0}, {y0}, {w}, {h}) does not fit the {l}×{l} lattice")));
         }
         let p = Patch { x0: x0 as usize, y0: y0 as usize, w: w as usize, h: h as usize };
         let (a, b) = (offsets[i], offsets[i + 1]);
         if a < 0 || b < a || b as usize > phi.len() || b - a != (p.w * p.h) as i64 {
-            return Err(format!("cell {i}: `phi_offsets` [{a}, {b}) do not hold its {}×{} patch", p.w, p.h));
+            return Err(npz(format!("cell {i}: `phi_offsets` [{a}, {b}) do not hold its {}×{} patch", p.w, p.h)));
         }
         let mut padded = vec![0.0; p.padded_len()];
         for row in 0..p.h {
@@ -252,7 +256,7 @@ fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> Res
         }
         cells.push((p, padded));
     }
-    let v = velocity.as_slice().ok_or("array `velocity` is not contiguous")?;
+    let v = velocity.as_slice().ok_or_else(|| npz("array `velocity` is not contiguous".into()))?;
     Ok(FrameData {
         step: step as u64,
         time,
@@ -296,13 +300,13 @@ mod tests {
     fn damaged_and_foreign_files_are_refused_with_the_file_and_the_reason() {
         let mut m = small();
         let bytes = encode_frame(&mut m).unwrap();
-        let cut = decode_frame("cut.npz", &bytes[..bytes.len() / 2], None).unwrap_err();
+        let cut = decode_frame("cut.npz", &bytes[..bytes.len() / 2], None).unwrap_err().to_string();
         assert!(cut.starts_with("cut.npz: not a readable .npz"), "{cut}");
-        let junk = decode_frame("junk.npz", b"hello", None).unwrap_err();
+        let junk = decode_frame("junk.npz", b"hello", None).unwrap_err().to_string();
         assert!(junk.starts_with("junk.npz: "), "{junk}");
-        let other = decode_frame("o.npz", &bytes, Some((48, 4))).unwrap_err();
+        let other = decode_frame("o.npz", &bytes, Some((48, 4))).unwrap_err().to_string();
         assert!(other.contains("box_size = 48"), "{other}");
-        let other = decode_frame("o.npz", &bytes, Some((40, 5))).unwrap_err();
+        let other = decode_frame("o.npz", &bytes, Some((40, 5))).unwrap_err().to_string();
         assert!(other.contains("n_cells = 5"), "{other}");
     }
 
@@ -324,13 +328,13 @@ mod tests {
 
     #[test]
     fn a_header_declaring_more_than_the_file_holds_is_refused_before_allocating() {
-        let e = decode_frame("big.npz", &npz_declaring("1099511627776,"), None).unwrap_err();
+        let e = decode_frame("big.npz", &npz_declaring("1099511627776,"), None).unwrap_err().to_string();
         assert!(e.starts_with("big.npz: array `step`: its header declares shape [1099511627776]"), "{e}");
-        let e = decode_frame_of_box("big.npz", &npz_declaring("1000, 1000"), 40).unwrap_err();
+        let e = decode_frame_of_box("big.npz", &npz_declaring("1000, 1000"), 40).unwrap_err().to_string();
         assert!(e.contains("106496 values at most"), "{e}");
         // The same archive with an honest header gets past the bound, to ndarray-npy (which
         // refuses an f64 `step`).
-        let e = decode_frame("ok.npz", &npz_declaring("2,"), None).unwrap_err();
+        let e = decode_frame("ok.npz", &npz_declaring("2,"), None).unwrap_err().to_string();
         assert!(e.starts_with("ok.npz: array `step`: error reading npy"), "{e}");
     }
 }

@@ -8,17 +8,20 @@
 //! - `frame_file`: frame files (`frames/frame_<step>.npz`, [`encode_frame`], [`decode_frame`]),
 //!   named by [`frame_file_name`];
 //! - [`snapshot`]: a relaxed state as bytes (`www/assets/*.bin`, the page's confluent start);
-//! - `version`: the code version every file records ([`code_version`]).
+//! - `version`: the code version every file records ([`code_version`]);
+//! - `error`: what is wrong with a file's bytes, by cause ([`FormatError`]).
 //!
 //! Uses only `model`; `run` and `web` use it, nothing below them does (tested by
 //! `tests/layers.rs`). The modules are private but for [`snapshot`], whose functions (`encode`,
 //! `decode`, the keys) read best under its name; the rest is re-exported here.
 
+mod error;
 mod frame_file;
 mod run_record;
 pub mod snapshot;
 mod version;
 
+pub use error::{FormatError, FormatResult};
 pub use frame_file::{
     check_finite, check_npz_headers, decode_frame, decode_frame_of_box, encode_frame, frame_bytes, frame_file_name,
     max_array_values, FrameData,

@@ -5,6 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::error::FormatError;
 use super::version::code_version;
 use crate::model::{Params, STORE_NAME};
 
@@ -55,8 +56,8 @@ impl std::fmt::Display for RunStatus {
 }
 
 impl std::str::FromStr for RunStatus {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = FormatError;
+    fn from_str(s: &str) -> Result<Self, FormatError> {
         match s {
             "running" => Ok(RunStatus::Running),
             "finished" => Ok(RunStatus::Finished),
@@ -65,7 +66,7 @@ impl std::str::FromStr for RunStatus {
             _ if s.starts_with("failed: ") && s.contains("(os error ") => Ok(RunStatus::Stopped(s[8..].into())),
             _ if s.starts_with("failed: ") => Ok(RunStatus::Failed(s[8..].into())),
             _ if s.starts_with("stopped: ") => Ok(RunStatus::Stopped(s[9..].into())),
-            _ => Err(format!("unknown status \"{s}\" (running, finished, failed: …, stopped: …)")),
+            _ => Err(FormatError::UnknownStatus(s.into())),
         }
     }
 }
@@ -109,11 +110,11 @@ impl Engine {
         }
     }
 
-    pub fn parse(s: &str) -> Result<Self, String> {
+    pub fn parse(s: &str) -> Result<Self, FormatError> {
         match s {
             "cpu" => Ok(Engine::Cpu),
             "gpu" | "gpu-f32" => Ok(Engine::Gpu),
-            other => Err(format!("engine {other:?}: must be cpu or gpu")),
+            other => Err(FormatError::UnknownEngine(other.into())),
         }
     }
 }

@@ -70,7 +70,7 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
         return Err(RunError::invalid("--blocks", o.blocks, format!("in [1, --steps = {}]", o.steps)));
     }
     if o.chis.is_empty() {
-        return Err("--chi: give at least one value".into());
+        return Err(RunError::Empty { name: "--chi", need: "value" });
     }
     let pools = o.threads.iter().map(|&n| pool(n)).collect::<Result<Vec<_>, _>>()?;
     let ceiling = o.threads.contains(&1) && o.threads.contains(&2);
@@ -148,7 +148,7 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
                             })
                         })
                         .collect();
-                    handles.into_iter().map(|h| h.join().unwrap_or_else(|_| Err("panicked".into()))).collect()
+                    handles.into_iter().map(|h| h.join().unwrap_or_else(|_| Err(RunError::Panicked))).collect()
                 });
                 if let Some(Err(e)) = results.into_iter().find(|r| r.is_err()) {
                     stopped = Some(e);

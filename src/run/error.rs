@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::formats::FormatError;
 use crate::model::{ParamError, SimError};
 
 /// What went wrong in a command of this layer.
@@ -141,10 +142,40 @@ pub enum RunError {
     /// The default parameters could not be written as TOML.
     #[error(transparent)]
     Toml(#[from] toml::ser::Error),
-    /// A message of a layer below that reports its errors as text (`crate::formats`), or of this
-    /// layer's own `?` on such a result.
-    #[error("{0}")]
-    Message(String),
+    /// An option or argument that takes a list, given none: `NAME: give at least one NEED`.
+    #[error("{name}: give at least one {need}")]
+    Empty { name: &'static str, need: &'static str },
+    /// A path option the operating system cannot resolve: `NAME PATH: the OS's message`.
+    #[error("{name} {}: {source}", path.display())]
+    OptionPath {
+        name: &'static str,
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The path of this program, which the Slurm jobs run, cannot be found.
+    #[error("the path of this program: {0}")]
+    CurrentExe(#[source] std::io::Error),
+    /// `--snapshot STEP` names a step of no frame of the run: its `frames/` directory.
+    #[error("--snapshot {step}: no frame of that step in {}", frames.display())]
+    NoFrame { step: u64, frames: PathBuf },
+    /// A directory given as a sweep's `--out` whose `runs/` cannot be read.
+    #[error("{}: {source} (a sweep's runs are in OUT/runs; give --out of a sweep)", runs.display())]
+    NotASweep {
+        runs: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The time of a run of the plan's sizes could not be measured: L, N and why.
+    #[error("timing a run at L = {l}, N = {n}: {why}")]
+    Timing { l: usize, n: usize, why: String },
+    /// A worker thread panicked.
+    #[error("panicked")]
+    Panicked,
+    /// A file's bytes that `crate::formats` refuses (a frame, a status, an engine), or a frame
+    /// it could not encode.
+    #[error(transparent)]
+    Format(#[from] FormatError),
 }
 
 /// The first five of `names`, joined, with `, …` when there are more.
@@ -183,19 +214,6 @@ impl RunError {
     }
 }
 
-/// The messages of the layers below that report errors as text (`crate::formats`).
-impl From<String> for RunError {
-    fn from(message: String) -> Self {
-        RunError::Message(message)
-    }
-}
-
-impl From<&str> for RunError {
-    fn from(message: &str) -> Self {
-        RunError::Message(message.to_string())
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -207,7 +225,7 @@ mod tests {
         assert_eq!(RunError::io(p, io).to_string(), "/x/run.json: gone");
         assert_eq!(RunError::file(p, "not valid JSON").to_string(), "/x/run.json: not valid JSON");
         assert_eq!(RunError::invalid("--jobs", 0, "≥ 1").to_string(), "--jobs 0: must be ≥ 1");
-        assert_eq!(RunError::from("boom").context("run a").to_string(), "run a: boom");
+        assert_eq!(RunError::Parse("boom".into()).context("run a").to_string(), "run a: boom");
         let stop = RunError::Interrupted { signal: "SIGTERM", detail: ": again".into() };
         assert_eq!(stop.to_string(), "stopped by SIGTERM: again");
     }
@@ -285,5 +303,59 @@ mod tests {
         );
         let e = std::io::Error::other("refused");
         assert_eq!(RunError::SignalHandler(e).to_string(), "signal handler: refused");
+    }
+
+    /// The variants that replaced the texts converted into a catch-all message print what those
+    /// texts printed, each compared here with the format it replaced.
+    #[test]
+    fn the_former_catch_all_messages_are_unchanged() {
+        assert_eq!(RunError::Empty { name: "--chi", need: "value" }.to_string(), "--chi: give at least one value");
+        assert_eq!(
+            RunError::Empty { name: "RUN_DIR", need: "run directory" }.to_string(),
+            "RUN_DIR: give at least one run directory"
+        );
+        let out = Path::new("/x/out");
+        let e = || std::io::Error::other("refused");
+        assert_eq!(
+            RunError::OptionPath { name: "--out", path: out.into(), source: e() }.to_string(),
+            format!("--out {}: {}", out.display(), e())
+        );
+        assert_eq!(RunError::CurrentExe(e()).to_string(), format!("the path of this program: {}", e()));
+        let frames = Path::new("/x/run/frames");
+        assert_eq!(
+            RunError::NoFrame { step: 7000, frames: frames.into() }.to_string(),
+            format!("--snapshot {}: no frame of that step in {}", 7000, frames.display())
+        );
+        let runs = out.join("runs");
+        assert_eq!(
+            RunError::NotASweep { runs: runs.clone(), source: e() }.to_string(),
+            format!("{}: {} (a sweep's runs are in OUT/runs; give --out of a sweep)", runs.display(), e())
+        );
+        let last = "box_size = 8: must be ≥ 16";
+        assert_eq!(
+            RunError::Timing {
+                l: 400,
+                n: 600,
+                why: format!("every job of this size and the defaults failed ({last})")
+            }
+            .to_string(),
+            format!(
+                "timing a run at L = {}, N = {}: every job of this size and the defaults failed ({last})",
+                400, 600
+            )
+        );
+        assert_eq!(
+            RunError::Timing { l: 400, n: 600, why: "no seed of 1–10 starts".into() }.to_string(),
+            format!("timing a run at L = {}, N = {}: no seed of 1–10 starts", 400, 600)
+        );
+        assert_eq!(RunError::Panicked.to_string(), "panicked");
+        let f = FormatError::UnknownEngine("tpu".into());
+        assert_eq!(RunError::Format(f).to_string(), "engine \"tpu\": must be cpu or gpu");
+        // Parameters refused in a context: what `format!("{context}: {e}")` printed.
+        let p = ParamError { name: "zeta", value: "-1".into(), allowed: "must be ≥ 0".into() };
+        let text = format!("--set: {p}");
+        assert_eq!(RunError::Params(p).context("--set").to_string(), text);
+        // The one-off texts now typed as existing variants.
+        assert_eq!(RunError::invalid("--jobs", 0, "≥ 1").to_string(), "--jobs 0: must be ≥ 1");
     }
 }

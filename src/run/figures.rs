@@ -79,7 +79,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         None => Figure::ALL.to_vec(),
     };
     if o.jobs == 0 {
-        return Err("--jobs 0: must be ≥ 1".into());
+        return Err(RunError::invalid("--jobs", 0, "≥ 1"));
     }
     // 1. The plan.
     let plan = Plan::new(o.scale, &figures, &o.sets)?;
@@ -112,7 +112,9 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
     }
     if o.slurm {
         if o.stage != Stage::All || o.shard.is_some() {
-            return Err("--slurm submits the whole plan: it takes neither --stage nor --shard".into());
+            return Err(RunError::Options(
+                "--slurm submits the whole plan: it takes neither --stage nor --shard".into(),
+            ));
         }
         let request = slurm::SlurmRequest {
             out: &o.out,

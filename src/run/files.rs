@@ -704,7 +704,7 @@ mod tests {
     fn atomic_write_leaves_nothing_on_failure() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("x.bin");
-        let r = write_atomic(&path, |_| Err("boom".into()));
+        let r = write_atomic(&path, |_| Err(RunError::Panicked));
         assert!(r.is_err());
         assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 0);
         write_atomic(&path, |w| w.write_all(b"ok").map_err(|e| io(&path, e))).unwrap();

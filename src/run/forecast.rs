@@ -475,7 +475,7 @@ pub fn forecast(
     progress: impl Fn(&str),
 ) -> Result<Vec<PathBuf>, RunError> {
     if dirs.is_empty() {
-        return Err("RUN_DIR: give at least one run directory".into());
+        return Err(RunError::Empty { name: "RUN_DIR", need: "run directory" });
     }
     let mut runs = Vec::with_capacity(dirs.len());
     for d in dirs {

@@ -337,9 +337,7 @@ pub fn analyze_run(
     let mut ra = RunAnalysis::new(params);
     let kept = measure_frames(&mut ra, &run.frames, params, snapshot_step)?;
     let chosen = match snapshot_step {
-        Some(s) => {
-            kept.ok_or_else(|| format!("--snapshot {s}: no frame of that step in {}", dir.join("frames").display()))?
-        }
+        Some(s) => kept.ok_or_else(|| RunError::NoFrame { step: s, frames: dir.join("frames") })?,
         None => snapshot_frame(&ra, dir, params.box_size)?.expect("at least one frame"),
     };
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| dir.join("analysis"));

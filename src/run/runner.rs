@@ -351,7 +351,7 @@ impl RunDir {
     /// The engine that steps this run. A new run (no step taken yet) takes `engine`; a resumed
     /// one must ask for the engine it started on, which its record names.
     pub fn with_engine(mut self, engine: Engine) -> Result<Self, RunError> {
-        let recorded = Engine::parse(&self.record.engine).map_err(RunError::Parse)?;
+        let recorded = Engine::parse(&self.record.engine)?;
         if recorded == engine {
             return Ok(self);
         }
@@ -386,7 +386,7 @@ impl RunDir {
         let outcome = match Engine::parse(&self.record.engine) {
             Ok(Engine::Cpu) => self.protocol(live.as_mut(), watch),
             Ok(Engine::Gpu) => self.protocol_gpu(live.as_mut(), watch),
-            Err(e) => Err(Stop::Simulation(RunError::Parse(e))),
+            Err(e) => Err(Stop::Simulation(RunError::Format(e))),
         };
         self.record.status = match &outcome {
             Ok(()) => RunStatus::Finished,

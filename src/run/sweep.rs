@@ -257,9 +257,9 @@ impl SweepSpec {
             let origin = format!("sweep, run {}", describe());
             let mut params = params_from_table(&table, &origin)?;
             if let Some(c) = chi {
-                params.set_chi(number("chi", &c).map_err(|e| format!("{origin}: {e}"))?);
+                params.set_chi(number("chi", &c).map_err(|e| e.context(origin.as_str()))?);
             }
-            params.validate().map_err(|e| format!("sweep, run {}: {e}", describe()))?;
+            params.validate().map_err(|e| RunError::from(e).context(format!("sweep, run {}", describe())))?;
             for &seed in &self.seeds {
                 let mut name: String = label.iter().map(|(k, v)| format!("{k}{v}_")).collect();
                 name = name.replace(['/', ' ', '"'], "");
@@ -641,8 +641,7 @@ pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, Run
 /// same keys; otherwise the parameters in which the runs differ.
 pub fn jobs_of_runs(out: &Path) -> Result<Vec<Job>, RunError> {
     let runs_dir = out.join("runs");
-    let entries = fs::read_dir(&runs_dir)
-        .map_err(|e| format!("{}: {e} (a sweep's runs are in OUT/runs; give --out of a sweep)", runs_dir.display()))?;
+    let entries = fs::read_dir(&runs_dir).map_err(|e| RunError::NotASweep { runs: runs_dir.clone(), source: e })?;
     let mut runs = Vec::new();
     for entry in entries {
         let entry = entry.map_err(|e| RunError::io(&runs_dir, e))?;

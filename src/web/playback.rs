@@ -83,14 +83,14 @@ impl Playback {
 
     /// Reads a frame file and checks it against the run: its step, or what is wrong with it.
     pub fn check(&self, name: &str, bytes: &[u8]) -> Result<u64, String> {
-        let f = decode_frame(name, bytes, self.expect())?;
+        let f = decode_frame(name, bytes, self.expect()).map_err(|e| e.to_string())?;
         self.params_for(&f).validate().map_err(|e| format!("{name}: {e}"))?;
         Ok(f.step)
     }
 
     /// Shows a frame: its cells become the state drawn, its arrays what the analysis reads.
     pub fn show(&mut self, name: &str, bytes: &[u8]) -> Result<(), String> {
-        let f = decode_frame(name, bytes, self.expect())?;
+        let f = decode_frame(name, bytes, self.expect()).map_err(|e| e.to_string())?;
         let params = self.params_for(&f);
         let l = f.l;
         let seed = self.info.as_ref().map_or(0, |i| i.seed);

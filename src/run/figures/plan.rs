@@ -178,11 +178,13 @@ impl Figure {
                 q => Figure::ALL.into_iter().find(|f| f.id().to_ascii_lowercase() == q),
             };
             out.insert(f.ok_or_else(|| {
-                format!("--only {part}: not a figure; the figures are 1c, 1d, 2, 3a, 3b (drawn together as 3ab), 3c, 3d, S1, S2, S3, mechanism")
+                RunError::Parse(format!("--only {part}: not a figure; the figures are 1c, 1d, 2, 3a, 3b (drawn together as 3ab), 3c, 3d, S1, S2, S3, mechanism"))
             })?);
         }
         if out.is_empty() {
-            return Err("--only: name at least one figure (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3, mechanism)".into());
+            return Err(RunError::Parse(
+                "--only: name at least one figure (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3, mechanism)".into(),
+            ));
         }
         Ok(out.into_iter().collect())
     }
@@ -259,7 +261,7 @@ impl Plan {
         all.extend(spec.overrides.iter().map(|s| s.to_string()));
         all.extend(sets.iter().cloned());
         let base = load_params(None, &all)?;
-        base.validate().map_err(|e| format!("--set: {e}"))?;
+        base.validate().map_err(|e| RunError::from(e).context("--set"))?;
         let zeta0 = base.zeta;
         let gamma0 = base.gamma;
         let mut wanted: Vec<(Point, u64, Figure)> = Vec::new();
@@ -406,7 +408,9 @@ fn point_params(base: &Params, p: &Point) -> Result<Params, RunError> {
         // S1's crowded box: the disks must fit apart (a smaller gap given by --set stays).
         q.initial_gap = q.initial_gap.min(S1_INITIAL_GAP);
     }
-    q.validate().map_err(|e| format!("figures, run at χ = {}, ζ = {}: {e}", p.friction.label(), p.zeta))?;
+    q.validate().map_err(|e| {
+        RunError::from(e).context(format!("figures, run at χ = {}, ζ = {}", p.friction.label(), p.zeta))
+    })?;
     Ok(q)
 }
 

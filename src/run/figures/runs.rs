@@ -125,11 +125,10 @@ impl Speed {
                     Err(e) => last = e.to_string(),
                 }
             }
-            let timed = timed.ok_or_else(|| {
-                format!(
-                    "timing a run at L = {}, N = {}: every job of this size and the defaults failed ({last})",
-                    key.0, key.1
-                )
+            let timed = timed.ok_or_else(|| RunError::Timing {
+                l: key.0,
+                n: key.1,
+                why: format!("every job of this size and the defaults failed ({last})"),
             })?;
             sizes.push((key, timed));
         }
@@ -158,9 +157,11 @@ fn time_steps(pool: &rayon::ThreadPool, mut p: Params, warm_up: u64, steps: u64)
     }
     p.set_chi(0.001);
     // Some seeds cannot place their disks at the paper's density: take the first that can.
-    let mut m = (1..=10)
-        .find_map(|seed| Monolayer::new(p.clone(), seed).ok())
-        .ok_or_else(|| format!("timing a run at L = {}, N = {}: no seed of 1–10 starts", p.box_size, p.n_cells))?;
+    let mut m = (1..=10).find_map(|seed| Monolayer::new(p.clone(), seed).ok()).ok_or_else(|| RunError::Timing {
+        l: p.box_size,
+        n: p.n_cells,
+        why: "no seed of 1–10 starts".into(),
+    })?;
     let mut timed = |n: u64| -> Result<f64, RunError> {
         let t = Instant::now();
         pool.install(|| m.advance(n)).map_err(RunError::from)?;

@@ -32,7 +32,11 @@ pub struct SlurmRequest<'a> {
 /// from the estimate `speed`; with `dry_run` the scripts are printed, else written and submitted.
 pub fn run_on_slurm(plan: &Plan, r: &SlurmRequest, speed: &Speed) -> Result<(), RunError> {
     // The jobs may start in another directory: every path they see is absolute.
-    let out = std::path::absolute(r.out).map_err(|e| format!("--out {}: {e}", r.out.display()))?;
+    let out = std::path::absolute(r.out).map_err(|e| RunError::OptionPath {
+        name: "--out",
+        path: r.out.to_path_buf(),
+        source: e,
+    })?;
     // `#SBATCH --output=…` takes no quotes: a space ends the option, Slurm expands `%`, and a
     // newline would make the rest of the path a command.
     for (what, text) in
@@ -45,7 +49,7 @@ pub fn run_on_slurm(plan: &Plan, r: &SlurmRequest, speed: &Speed) -> Result<(), 
             )));
         }
     }
-    let binary = std::env::current_exe().map_err(|e| format!("the path of this program: {e}"))?;
+    let binary = std::env::current_exe().map_err(RunError::CurrentExe)?;
     // Every run from its start: the cluster runs the whole plan.
     let whole = |j: &Job| speed.core_seconds(j, j.params.total_steps());
     let total: f64 = plan.jobs.iter().map(whole).sum();
