@@ -215,8 +215,54 @@ async function chooseEngine(wanted) {
     gpuNote = `the GPU could not take this tissue (${e.message ?? e}): stepping on the CPU engine`;
     return;
   }
+  if (wanted === 'auto') {
+    // A hardware adapter: the faster engine for this tissue, by a short trial.
+    let t;
+    try {
+      t = await engineTrial(d, TRIAL_STEPS);
+    } catch (e) {
+      gpuNote = `the GPU engine failed its trial (${e.message ?? e}): stepping on the CPU engine`;
+      return;
+    }
+    const ms = `${t.gpu.toFixed(2)} ms per step against ${t.cpu.toFixed(2)} on the CPU engine in a short trial`;
+    if (!(t.gpu < t.cpu)) {
+      gpuNote = `${d.adapter} took ${ms}: stepping on the CPU engine`;
+      return;
+    }
+    gpu = d;
+    gpuNote = `${d.adapter}, ${ms}`;
+    return;
+  }
   gpu = d;
   gpuNote = d.software ? `on a software adapter (${d.adapter}), chosen` : d.adapter;
+}
+
+// Steps per engine in `auto`'s trial: enough to time past the first submission's set-up,
+// few enough to stay under a second on any engine worth choosing.
+const TRIAL_STEPS = 5;
+
+// Milliseconds per step of each engine on the tissue as it is, which the trial leaves as it was:
+// the CPU core on a copy, the GPU engine from an upload of `sim` after one warm-up step (its
+// first submission compiles and sets up), then uploaded again.
+async function engineTrial(d, steps) {
+  const copy = sim.core_copy();
+  let cpu;
+  try {
+    const t0 = performance.now();
+    copy.step(steps);
+    cpu = (performance.now() - t0) / steps;
+  } finally {
+    copy.free();
+  }
+  d.engine.upload(sim);
+  d.engine.submit(1);
+  await d.engine.check();
+  const t1 = performance.now();
+  const k = d.engine.submit(steps);
+  await d.engine.check();
+  const gpuMs = (performance.now() - t1) / Math.max(k, 1);
+  d.engine.upload(sim);
+  return { cpu, gpu: gpuMs };
 }
 
 // Brings `sim` level with the GPU (one readback), so that it can be drawn, measured or edited.
@@ -396,6 +442,13 @@ const CALLS = {
     const ms = performance.now() - t0;
     timed(n, ms);
     return ms;
+  },
+  // `auto`'s timed trial on the GPU engine in use (the tests drive it on a software adapter,
+  // where `auto` does not try): ms per step of each engine; the tissue does not move.
+  engine_trial: async (steps) => {
+    if (!gpu) return null;
+    await gpuDown();
+    return engineTrial(gpu, steps);
   },
   // Destroys the GPU engine's device, as a driver reset would (the browser tests' forced loss).
   gpu_destroy: () => gpu?.engine.destroy_device(),
