@@ -91,10 +91,10 @@ fn groups() -> u32 {
 
 var<workgroup> tree: array<vec4<f32>, 256>;
 
-// Adds tree[0..256) into tree[0] by halving (a fixed order); every invocation of the
+// Adds tree[0..width) into tree[0] by halving (a fixed order); every invocation of the
 // workgroup calls it.
-fn reduce_tree(t: u32) {
-    for (var half = GROUP / 2u; half > 0u; half = half / 2u) {
+fn reduce_tree(t: u32, width: u32) {
+    for (var half = width / 2u; half > 0u; half = half / 2u) {
         workgroupBarrier();
         if t < half {
             tree[t] = tree[t] + tree[t + half];
@@ -107,7 +107,7 @@ fn reduce_tree(t: u32) {
 // workgroup g's entry of `part` in `partials`; every invocation calls it.
 fn store_partial(t: u32, part: u32, g: u32, value: vec4<f32>) {
     tree[t] = value;
-    reduce_tree(t);
+    reduce_tree(t, GROUP);
     if t == 0u {
         partials[part * groups() + g] = tree[0];
     }
@@ -129,12 +129,7 @@ fn total_of(t: u32, part: u32) -> vec4<f32> {
     }
     workgroupBarrier();
     tree[t] = s;
-    for (var half = TOTAL_LANES / 2u; half > 0u; half = half / 2u) {
-        workgroupBarrier();
-        if t < half {
-            tree[t] = tree[t] + tree[t + half];
-        }
-    }
+    reduce_tree(t, TOTAL_LANES);
     // Uniform by construction, and known so to WGSL (a kernel may return on it, then meet a
     // barrier); the barrier after it keeps the next sum from overwriting it too soon.
     let total = workgroupUniformLoad(&tree[0]);
@@ -198,41 +193,25 @@ fn neighbour(x: u32, dx: i32, dy: i32) -> u32 {
     return u32(gy * l + gx);
 }
 
-// The vectors C is applied to (WGSL passes no pointers to storage to functions).
-const U: u32 = 0u;
-const P: u32 = 1u;
-
-// v(y) for v = u (`mean_velocity`) or p (`direction`).
-fn vector_at(v: u32, y: u32) -> vec2<f32> {
-    if v == U {
-        return mean_velocity[y];
-    }
-    return direction[y];
-}
-
-// Σ_{N8} n(x') v(x') (`lattice::neighbour_sum8` of n v).
-fn weighted_sum8(x: u32, v: u32) -> vec2<f32> {
+// Σ_{N8} n(x') u(x') (`lattice::neighbour_sum8` of n u): the pull's S, and C u's coupling.
+fn velocity_sum8(x: u32) -> vec2<f32> {
     var s = vec2<f32>(0.0, 0.0);
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
             if dx != 0 || dy != 0 {
                 let y = neighbour(x, dx, dy);
-                s += weight[y] * vector_at(v, y);
+                s += weight[y] * mean_velocity[y];
             }
         }
     }
     return s;
 }
 
-// (C v)(x) = diag(x) v(x) − ξ_c n(x) Σ_{N8} n v (`multigrid::weights_row`); 0 outside the solve.
-fn apply_c(x: u32, v: u32) -> vec2<f32> {
-    let d = diagonal[x];
-    if d <= 0.0 {
-        return vec2<f32>(0.0, 0.0);
-    }
-    return d * vector_at(v, x) - params.xi_cell * weight[x] * weighted_sum8(x, v);
+// (C u)(x) = d u(x) − ξ_c n(x) Σ_{N8} n u (`multigrid::weights_row`), given the diagonal d > 0
+// and the neighbour sum.
+fn c_times_u(x: u32, d: f32, sum8: vec2<f32>) -> vec2<f32> {
+    return d * mean_velocity[x] - params.xi_cell * weight[x] * sum8;
 }
-
 
 // The operator for the current n at site x (`FrictionSolver::prepare`): N, diag(C) =
 // n (ξ_s + ξ_c N) (0 where n = 0) and the mobility 1/[ξ_s + ξ_c N] into `drag`.z (ξ_s(x) is
@@ -277,18 +256,7 @@ fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoca
         let d = set_up_site(x);
         ff = force_squared(x);
         if d > 0.0 {
-            // C u at x, with u's neighbour sum written out: `apply_c` would bind p's buffer too,
-            // one storage buffer beyond the eight a kernel may have.
-            var s = vec2<f32>(0.0, 0.0);
-            for (var dy = -1; dy <= 1; dy++) {
-                for (var dx = -1; dx <= 1; dx++) {
-                    if dx != 0 || dy != 0 {
-                        let y = neighbour(x, dx, dy);
-                        s += weight[y] * mean_velocity[y];
-                    }
-                }
-            }
-            let r = force[x] - (d * mean_velocity[x] - params.xi_cell * weight[x] * s);
+            let r = force[x] - c_times_u(x, d, velocity_sum8(x));
             residual[x] = r;
             rr = r * r;
         } else {
@@ -363,6 +331,7 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
     var pq = vec2<f32>(0.0, 0.0);
     if x < l * l {
         let d = diagonal[x];
+        let p = next_direction(x, beta, done);
         var q = vec2<f32>(0.0, 0.0);
         if d > 0.0 {
             var s = vec2<f32>(0.0, 0.0);
@@ -374,9 +343,8 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
                     }
                 }
             }
-            q = d * next_direction(x, beta, done) - params.xi_cell * weight[x] * s;
+            q = d * p - params.xi_cell * weight[x] * s;
         }
-        let p = next_direction(x, beta, done);
         direction_next[x] = p;
         product[x] = q;
         pq = select(p * q, vec2<f32>(0.0, 0.0), done);
@@ -463,10 +431,11 @@ fn friction_pull(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_i
             mean_velocity[x] = vec2<f32>(0.0, 0.0);
             drag[x] = vec4<f32>(0.0, 0.0, drag[x].zw);
         } else {
-            let s = params.xi_cell * weighted_sum8(x, U);
-            drag[x] = vec4<f32>(s, drag[x].zw);
-            if diagonal[x] > 0.0 {
-                let r = force[x] - apply_c(x, U);
+            let sum8 = velocity_sum8(x);
+            drag[x] = vec4<f32>(params.xi_cell * sum8, drag[x].zw);
+            let d = diagonal[x];
+            if d > 0.0 {
+                let r = force[x] - c_times_u(x, d, sum8);
                 rr = r * r;
             }
         }

@@ -324,7 +324,7 @@ impl Kernel {
             Kernel::CgUpdate => {
                 &[Params, Force, MeanVelocity, Residual, Direction, Product, Partials, Solve, DirectionNext]
             }
-            Kernel::FrictionPull => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, Direction, Partials, Solve],
+            Kernel::FrictionPull => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, Partials, Solve],
             Kernel::FrictionCheck => &[Params, Partials, Solve],
             Kernel::Jacobi => &[Params, Diagonal, Residual, Partials, Solve, Preconditioned],
             Kernel::MgCoarsenFine | Kernel::MgCoarsenRest => &[Params, Weight, Drag, Diagonal, Hierarchy],

@@ -377,24 +377,18 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     run.advance(&ctx, steps).map_err(RunError::gpu)?;
     let per_step = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
     let adapted = run.gpu().solve_iterations;
-    let recorded_now = [Kernel::step(run.gpu().solve()), Kernel::MOVE_PATCHES.to_vec()].concat().len();
+    let recorded_list = [Kernel::step(run.gpu().solve()), Kernel::MOVE_PATCHES.to_vec()].concat();
+    let recorded_now = recorded_list.len();
     println!(
         "a GPU run (GpuRun, checked every {} steps): {per_step:.3} ms per step over {steps} steps; \
          the recorded CG iterations went from {recorded} to {adapted} per solve, {recorded_now} dispatches recorded per step",
         run.check_every
     );
-    let mut per_stage: Vec<(&str, usize)> = Vec::new();
-    for k in Kernel::step(run.gpu().solve()).into_iter().chain(Kernel::MOVE_PATCHES) {
-        match per_stage.iter_mut().find(|(f, _)| *f == k.shader_file()) {
-            Some((_, n)) => *n += 1,
-            None => per_stage.push((k.shader_file(), 1)),
-        }
-    }
-    let stages: Vec<String> = per_stage.iter().map(|(f, n)| format!("{f} {n}")).collect();
+    let stages: Vec<String> =
+        by_stage(&recorded_list, &vec![1.0; recorded_now]).iter().map(|(f, n)| format!("{f} {n}")).collect();
     println!("dispatches recorded per step by stage (shaders/): {}", stages.join(", "));
     // At the iterations the solve took: what the recorded count tends to when it fits them.
     let needed = [Kernel::step(Some((gpu.preconditioner, taken))), Kernel::MOVE_PATCHES.to_vec()].concat();
-    let recorded_list = [Kernel::step(run.gpu().solve()), Kernel::MOVE_PATCHES.to_vec()].concat();
     let coarse: u64 = recorded_list
         .iter()
         .filter(|&&k| matches!(k, Kernel::MgCoarseCycle | Kernel::MgCoarsenRest))
@@ -412,14 +406,8 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
     match gpu.time_kernels(&ctx, &recorded_list) {
         Some(ms) => {
-            let mut by_stage: Vec<(&str, f64)> = Vec::new();
-            for (k, t) in recorded_list.iter().zip(&ms) {
-                match by_stage.iter_mut().find(|(f, _)| *f == k.shader_file()) {
-                    Some((_, sum)) => *sum += t,
-                    None => by_stage.push((k.shader_file(), *t)),
-                }
-            }
-            let stages: Vec<String> = by_stage.iter().map(|(f, t)| format!("{f} {t:.3}")).collect();
+            let stages: Vec<String> =
+                by_stage(&recorded_list, &ms).iter().map(|(f, t)| format!("{f} {t:.3}")).collect();
             println!(
                 "device time of one step by stage (timestamps around each dispatch), ms: {}; {:.3} in all",
                 stages.join(", "),
@@ -433,6 +421,20 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let working_chain = crate::gpu::serial_chain(&working_kernels, gpu.state());
     println!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, working_chain)));
     Ok(())
+}
+
+/// Each kernel's value added up by its stage (its file in `shaders/`), in the order the stages
+/// first appear.
+#[cfg(feature = "gpu")]
+fn by_stage(kernels: &[crate::gpu::Kernel], values: &[f64]) -> Vec<(&'static str, f64)> {
+    let mut out: Vec<(&str, f64)> = Vec::new();
+    for (k, v) in kernels.iter().zip(values) {
+        match out.iter_mut().find(|(f, _)| *f == k.shader_file()) {
+            Some((_, sum)) => *sum += v,
+            None => out.push((k.shader_file(), *v)),
+        }
+    }
+    out
 }
 
 /// A laptop GPU's time per full-size step, projected from the counts of a step (what works
