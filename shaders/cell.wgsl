@@ -5,19 +5,18 @@
 // where the new patch reaches beyond the old.
 //
 // Each cell's storage has a fixed capacity (`Patch::capacity`, set at upload), so a patch can
-// move and grow without the buffers being made again. Three dispatches: `patch_bounds` (one
-// workgroup per cell) writes each cell's next patch into `next_patches` and a code into
-// `patch_fault`; `relayout` (one invocation per site of the capacity) copies φ into the next
-// layout in `phi0` (Heun's φ_n, free between steps); `commit_patches` copies it back and makes
-// the next patches current. A cell whose patch cannot be made keeps its old one, and its code
-// says why (the CPU's `CellLost`, or a capacity the host must enlarge by uploading again).
+// move and grow without the buffers being made again. One dispatch, one workgroup per cell (a
+// cell's patch and storage are its own, so its workgroup's barriers order everything):
+// `next_patch` finds the next patch and a code for `patch_fault`, `relayout` copies φ into the
+// next layout in `phi0` (Heun's φ_n, free between steps), then φ is copied back and the next
+// patch made current. A cell whose patch cannot be made keeps its old one, and its code says why
+// (the CPU's `CellLost`, or a capacity the host must enlarge by uploading again).
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read_write> patches: array<Patch>;
 @group(0) @binding(2) var<storage, read_write> phi: array<f32>;
 @group(0) @binding(16) var<storage, read_write> phi0: array<f32>;
-@group(0) @binding(29) var<storage, read_write> next_patches: array<Patch>;
-@group(0) @binding(30) var<storage, read_write> patch_fault: array<u32>;
+@group(0) @binding(26) var<storage, read_write> patch_fault: array<u32>;
 
 // `patch_fault` codes (`PatchFault` in src/gpu/buffers.rs).
 const MOVED: u32 = 0u;
@@ -39,13 +38,34 @@ fn wrap(x: u32, d: i32) -> u32 {
     return u32(((i32(x) + d) % l + l) % l);
 }
 
-// The next patch of each cell (`Monolayer::update_patches`): one workgroup per cell. The
-// centre's sums run in a fixed order (strided, then a halving tree); the bounding box is a min
-// and a max, whatever the order.
+var<workgroup> next_here: Patch;
+
+// Cell i's patch follows it (`Monolayer::update_patches`, `Cell::relayout`): one workgroup per
+// cell, the next patch found, φ laid out in it (in `phi0`), then copied back and the patch
+// table updated.
 @compute @workgroup_size(64)
-fn patch_bounds(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
+fn move_patch(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let i = wg.x;
-    let p = patches[i];
+    let old = patches[i];
+    next_patch(i, old, t);
+    let next = workgroupUniformLoad(&next_here);
+    let n = stride(next) * (next.h + 2u);
+    for (var k = t; k < n; k += WORKGROUP) {
+        phi0[next.offset + k] = relayout(old, next, k);
+    }
+    storageBarrier();
+    for (var k = t; k < n; k += WORKGROUP) {
+        phi[next.offset + k] = phi0[next.offset + k];
+    }
+    if t == 0u {
+        patches[i] = next;
+    }
+}
+
+// The next patch of cell i, whose patch is p, into `next_here`, and its code into `patch_fault`
+// (every invocation of the workgroup calls it). The centre's sums run in a fixed order
+// (strided, then a halving tree); the bounding box is a min and a max, whatever the order.
+fn next_patch(i: u32, p: Patch, t: u32) {
     let s = stride(p);
     var bb = EMPTY;
     var c = vec3<f32>(0.0, 0.0, 0.0);
@@ -71,9 +91,14 @@ fn patch_bounds(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_
         }
         workgroupBarrier();
     }
-    if t != 0u {
-        return;
+    if t == 0u {
+        next_here = next_of(i, p);
     }
+}
+
+// Cell i's next patch from its old one p and the workgroup's sums (`boxes`, `centres`), with its
+// code into `patch_fault`.
+fn next_of(i: u32, p: Patch) -> Patch {
     var next = p;
     var code = MOVED;
     if params.active_phase == 0u {
@@ -111,49 +136,28 @@ fn patch_bounds(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_
     if code != MOVED {
         next = p;
     }
-    next_patches[i] = next;
     // Sticky, as the other faults: the first one stays until the host reads and clears it, so
     // that a fault in the middle of a submission is not hidden by a later step.
     if patch_fault[i] == MOVED {
         patch_fault[i] = code;
     }
+    return next;
 }
 
-// φ in the next layout, into `phi0` (`Cell::relayout`): each padded site of the next patch takes
-// φ from the same lattice site of the old patch, or 0 where the old patch does not reach (and
-// on the halo).
-@compute @workgroup_size(64)
-fn relayout(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let old = patches[gid.y];
-    let next = next_patches[gid.y];
-    let site = site_of(next, gid.x);
-    if !site.inside {
-        return;
+// φ at padded site k of the next patch (`Cell::relayout`): from the same lattice site of the old
+// patch, or 0 where the old patch does not reach (and on the halo).
+fn relayout(old: Patch, next: Patch, k: u32) -> f32 {
+    let site = site_of(next, k);
+    if !site.interior {
+        return 0.0;
     }
-    var v = 0.0;
-    if site.interior {
-        let l = params.box_size;
-        let gx = (next.x0 + site.at.x - 1u) % l;
-        let gy = (next.y0 + site.at.y - 1u) % l;
-        let oa = (gx + l - old.x0) % l;
-        let ob = (gy + l - old.y0) % l;
-        if oa < old.w && ob < old.h {
-            v = phi[old.offset + (ob + 1u) * stride(old) + oa + 1u];
-        }
+    let l = params.box_size;
+    let gx = (next.x0 + site.at.x - 1u) % l;
+    let gy = (next.y0 + site.at.y - 1u) % l;
+    let oa = (gx + l - old.x0) % l;
+    let ob = (gy + l - old.y0) % l;
+    if oa < old.w && ob < old.h {
+        return phi[old.offset + (ob + 1u) * stride(old) + oa + 1u];
     }
-    phi0[site.i] = v;
-}
-
-// The next layout made current: φ copied back from `phi0`, and the patch table.
-@compute @workgroup_size(64)
-fn commit_patches(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let next = next_patches[gid.y];
-    let site = site_of(next, gid.x);
-    if !site.inside {
-        return;
-    }
-    phi[site.i] = phi0[site.i];
-    if gid.x == 0u {
-        patches[gid.y] = next;
-    }
+    return 0.0;
 }

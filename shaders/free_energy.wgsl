@@ -1,4 +1,5 @@
-// src/model/free_energy.rs on the GPU: the area A_i = Σ φ_i² of each cell, then
+// src/model/free_energy.rs on the GPU: with the area A_i = Σ φ_i² of each cell (summed in
+// shape.wgsl's pass over the patch, `area_and_shape`),
 //
 //   μ_i = (γ/λ)·8 φ_i(1−φ_i)(1−2φ_i) − 2γλ ∇²φ_i − (4μ/πR²)(1 − A_i/πR²) φ_i
 //         + (c κ/λ) φ_i Σ_{j≠i} φ_j²
@@ -10,36 +11,8 @@
 @group(0) @binding(1) var<storage, read> patches: array<Patch>;
 @group(0) @binding(2) var<storage, read> phi: array<f32>;
 @group(0) @binding(4) var<storage, read> sum_phi2: array<f32>;
-@group(0) @binding(5) var<storage, read_write> area: array<f32>;
+@group(0) @binding(5) var<storage, read> area: array<f32>;
 @group(0) @binding(6) var<storage, read_write> mu: array<f32>;
-
-const WORKGROUP: u32 = 64u;
-var<workgroup> sums: array<f32, WORKGROUP>;
-
-// A_i = Σ φ_i² over the padded patch (`free_energy::area`). One workgroup per cell: invocation
-// t sums sites t, t + 64, ... in order, then a fixed halving tree adds the 64 partial sums. The
-// order is fixed, so the bits are too.
-@compute @workgroup_size(64)
-fn cell_area(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
-    let p = patches[wg.x];
-    let n = stride(p) * (p.h + 2u);
-    var s = 0.0;
-    for (var k = t; k < n; k += WORKGROUP) {
-        let v = phi[p.offset + k];
-        s += v * v;
-    }
-    sums[t] = s;
-    workgroupBarrier();
-    for (var width = WORKGROUP / 2u; width > 0u; width /= 2u) {
-        if t < width {
-            sums[t] += sums[t + width];
-        }
-        workgroupBarrier();
-    }
-    if t == 0u {
-        area[wg.x] = sums[0];
-    }
-}
 
 // The discrete Laplacian at padded index i (`free_energy::laplacian`).
 fn laplacian(i: u32, s: u32) -> f32 {

@@ -23,6 +23,13 @@
 // of `partials` is written by one kernel and read only by the kernels after it, and `solve`
 // keeps only what the host reads and the previous r·z (written by `cg_update`, read by the next
 // `cg_product`).
+//
+// The vectors r, p, p′, q and z share one buffer (`vectors`, sections of L² sites; `Slot::CgVectors`).
+// r is stored one update behind: `cg_update` forms r − α q where it needs it and leaves it to the
+// kernels after it (`residual_now`, with the α it wrote into `solve`), and the next `cg_product`,
+// which reads no neighbour's r, stores it. So the multigrid's restriction, which needs the new r
+// at its aggregate's neighbours, runs in the update's own dispatch (`cg_update_restrict` in
+// multigrid.wgsl) without racing the update's writes.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(11) var<storage, read> weight: array<f32>;
@@ -30,13 +37,35 @@
 @group(0) @binding(13) var<storage, read_write> drag: array<vec4<f32>>;
 @group(0) @binding(19) var<storage, read_write> diagonal: array<f32>;
 @group(0) @binding(20) var<storage, read_write> mean_velocity: array<vec2<f32>>;
-@group(0) @binding(21) var<storage, read_write> residual: array<vec2<f32>>;
-@group(0) @binding(22) var<storage, read_write> direction: array<vec2<f32>>;
-@group(0) @binding(23) var<storage, read_write> product: array<vec2<f32>>;
-@group(0) @binding(24) var<storage, read_write> partials: array<vec4<f32>>;
-@group(0) @binding(25) var<storage, read_write> solve: Solve;
-@group(0) @binding(26) var<storage, read_write> preconditioned: array<vec2<f32>>;
-@group(0) @binding(31) var<storage, read_write> direction_next: array<vec2<f32>>;
+@group(0) @binding(21) var<storage, read_write> vectors: array<vec2<f32>>;
+@group(0) @binding(22) var<storage, read_write> partials: array<vec4<f32>>;
+@group(0) @binding(23) var<storage, read_write> solve: Solve;
+
+// The sections of `vectors` (`CgVector` in src/gpu/buffers.rs): r (stored one update behind),
+// p, p′ = z + β p, q = C p′ and z = M r.
+const RESIDUAL: u32 = 0u;
+const DIRECTION: u32 = 1u;
+const DIRECTION_NEXT: u32 = 2u;
+const PRODUCT: u32 = 3u;
+const PRECONDITIONED: u32 = 4u;
+
+// Where site x of a section is in `vectors`.
+fn at(section: u32, x: u32) -> u32 {
+    return section * params.box_size * params.box_size + x;
+}
+
+// r at site y after the latest update, r − α q with the update's α (0 for a component done, and
+// at the start of a solve, where r is stored as it is).
+fn residual_after(y: u32, alpha: vec2<f32>) -> vec2<f32> {
+    let r = vectors[at(RESIDUAL, y)];
+    let step = select(alpha * vectors[at(PRODUCT, y)], vec2<f32>(0.0, 0.0), alpha == vec2<f32>(0.0, 0.0));
+    return r - step;
+}
+
+// r at site y now, in a kernel after the update that wrote `solve.alpha`.
+fn residual_now(y: u32) -> vec2<f32> {
+    return residual_after(y, solve.alpha);
+}
 
 // The CG scalars of both components (x, y), as `SolveScalars` in src/gpu/buffers.rs.
 struct Solve {
@@ -257,10 +286,10 @@ fn cg_start(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoca
         ff = force_squared(x);
         if d > 0.0 {
             let r = force[x] - c_times_u(x, d, velocity_sum8(x));
-            residual[x] = r;
+            vectors[at(RESIDUAL, x)] = r;
             rr = r * r;
         } else {
-            residual[x] = vec2<f32>(0.0, 0.0);
+            vectors[at(RESIDUAL, x)] = vec2<f32>(0.0, 0.0);
         }
     }
     store_partial(t, RR, wg.x, vec4<f32>(rr, ff, 0.0));
@@ -291,9 +320,9 @@ fn jacobi(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     var rz = vec2<f32>(0.0, 0.0);
     if x < l * l {
         let d = diagonal[x];
-        let r = residual[x];
+        let r = residual_now(x);
         let z = select(vec2<f32>(0.0, 0.0), r / d, d > 0.0);
-        preconditioned[x] = z;
+        vectors[at(PRECONDITIONED, x)] = z;
         rz = r * z;
     }
     store_partial(t, RZ, wg.x, vec4<f32>(rz, stop_flags(t, done)));
@@ -309,8 +338,9 @@ fn stop_flags(t: u32, done: vec2<bool>) -> vec2<f32> {
 // first iteration, whose p is 0), the direction p′ = z + β p, q = C p′ and partial sums of p′·q
 // (0 for a component done, which keeps its p). r·z and the stop flags are the preconditioner's
 // (`RZ`: every workgroup wrote the same flags, so a flag's sum is positive when it is set). p′
-// goes to `direction_next`, since the neighbours' p is read here; `cg_update` makes it p. The
-// r·z used goes beside the sums, for `cg_update`'s α.
+// goes to p′'s section, since the neighbours' p is read here; `cg_update` makes it p. The
+// r·z used goes beside the sums, for `cg_update`'s α. First the previous update's r is stored
+// (no neighbour's r is read here, and q is replaced only after).
 @compute @workgroup_size(256)
 fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
               @builtin(workgroup_id) wg: vec3<u32>) {
@@ -330,6 +360,7 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
     let l = params.box_size;
     var pq = vec2<f32>(0.0, 0.0);
     if x < l * l {
+        vectors[at(RESIDUAL, x)] = residual_now(x);
         let d = diagonal[x];
         let p = next_direction(x, beta, done);
         var q = vec2<f32>(0.0, 0.0);
@@ -345,8 +376,8 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
             }
             q = d * p - params.xi_cell * weight[x] * s;
         }
-        direction_next[x] = p;
-        product[x] = q;
+        vectors[at(DIRECTION_NEXT, x)] = p;
+        vectors[at(PRODUCT, x)] = q;
         pq = select(p * q, vec2<f32>(0.0, 0.0), done);
     }
     // r·z once per workgroup (the tree adds what every invocation gives).
@@ -356,29 +387,31 @@ fn cg_product(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
 // p′ = z + β p at site y for the components still iterating (z alone where β = 0: the first
 // iteration, whose old p is not this solve's), p for those done.
 fn next_direction(y: u32, beta: vec2<f32>, done: vec2<bool>) -> vec2<f32> {
-    let p = direction[y];
+    let p = vectors[at(DIRECTION, y)];
     let bp = select(beta * p, vec2<f32>(0.0, 0.0), beta == vec2<f32>(0.0, 0.0));
-    return select(preconditioned[y] + bp, p, done);
+    return select(vectors[at(PRECONDITIONED, y)] + bp, p, done);
 }
 
 // α = r·z / p′·Cp′ for each component still iterating (p′·Cp′ > 0 there; `cg_product` wrote 0
-// for a component done, whose α is then 0), u += α p′, r −= α q, p = p′; partial sums of ‖r‖²
-// and ‖F‖². r·z is the one `cg_product` used (beside its first sum: every workgroup wrote the
-// same). The first invocation keeps it for the next β and counts the iteration.
-@compute @workgroup_size(256)
-fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
-             @builtin(workgroup_id) wg: vec3<u32>) {
+// for a component done, whose α is then 0), u += α p′, p = p′, and partial sums of the new r's
+// ‖r‖² and ‖F‖² (r − α q, not stored: see `residual_now`). r·z is the one `cg_product` used
+// (beside its first sum: every workgroup wrote the same). The first invocation keeps it for the
+// next β, writes α for the kernels after and counts the iteration. Returns α: 0 where nothing
+// was updated, the same in every invocation.
+fn update_step(x: u32, t: u32, g: u32) -> vec2<f32> {
     if finished_hint(t) {
-        return;
+        return vec2<f32>(0.0, 0.0);
     }
     let pq = total_of(t, PQ).xy;
     let running = pq != vec2<f32>(0.0, 0.0);
     if !any(running) {
-        return;
+        if x == 0u {
+            solve.alpha = vec2<f32>(0.0, 0.0);
+        }
+        return vec2<f32>(0.0, 0.0);
     }
     let rz = partials[PQ * groups()].zw;
     let alpha = select(vec2<f32>(0.0, 0.0), rz / pq, running);
-    let x = gid.x;
     let l = params.box_size;
     if x == 0u {
         let old = solve.rz;
@@ -391,15 +424,22 @@ fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
     var rr = vec2<f32>(0.0, 0.0);
     var ff = 0.0;
     if x < l * l {
-        let p = direction_next[x];
-        direction[x] = p;
+        let p = vectors[at(DIRECTION_NEXT, x)];
+        vectors[at(DIRECTION, x)] = p;
         mean_velocity[x] += alpha * p;
-        let r = residual[x] - alpha * product[x];
-        residual[x] = r;
+        let r = residual_after(x, alpha);
         rr = r * r;
         ff = force_squared(x);
     }
-    store_partial(t, RR, wg.x, vec4<f32>(rr, ff, 0.0));
+    store_partial(t, RR, g, vec4<f32>(rr, ff, 0.0));
+    return alpha;
+}
+
+// An iteration's update (`update_step`), with the Jacobi preconditioner after it.
+@compute @workgroup_size(256)
+fn cg_update(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
+             @builtin(workgroup_id) wg: vec3<u32>) {
+    _ = update_step(gid.x, t, wg.x);
 }
 
 // The pull ξ_c S, S = Σ_{N8} n u, into `drag`.xy (`FrictionSolver::pull_from_solution`); where

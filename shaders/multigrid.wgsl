@@ -15,11 +15,13 @@
 // - The coarsest level is solved by its explicit inverse, computed in parallel (Gauss–Jordan)
 //   and applied by many invocations, where the CPU uses a Cholesky factor in f64: a triangular
 //   solve is a chain of n² dependent steps on one invocation, reached 16 times per W-cycle.
-// - Level 0 is worked by grid-wide kernels (`mg_restrict`, `mg_smooth`, which also finishes
+// - Level 0 is worked by grid-wide kernels (the restriction, `mg_smooth`, which also finishes
 //   the prolongation), every coarser level by one workgroup (`mg_coarse_cycle`: 70² sites and
-//   fewer at the paper's size), so that a whole cycle is three dispatches. The hierarchy is
-//   built by two (`mg_coarsen_fine` for level 1, `mg_coarsen_rest` for the others and the
-//   coarsest level's inverse).
+//   fewer at the paper's size). The restriction rides with the kernel before it: in a CG
+//   iteration the update (`cg_update_restrict`), in the first application the set-up of level 1
+//   (`mg_set_up_fine`); the coarser levels and the coarsest level's inverse are built by the
+//   first cycle's kernel (`mg_set_up_coarse`). So an application is three dispatches, the
+//   set-up none of its own.
 //
 // Storage: `hierarchy` holds, for every level k ≥ 1, six values per site (the diagonal, the
 // bonds east, north-west, north and north-east, i.e. `FORWARD`, and the mass), then the coarsest
@@ -28,8 +30,8 @@
 
 // Compiled after friction.wgsl (src/gpu/kernels.rs), whose bindings (params, n, drag, the
 // diagonal, r, z, the partial sums, the scalars), `GROUP`, `tree` and helpers it uses.
-@group(0) @binding(27) var<storage, read_write> hierarchy: array<f32>;
-@group(0) @binding(28) var<storage, read_write> mg_work: array<vec2<f32>>;
+@group(0) @binding(24) var<storage, read_write> hierarchy: array<f32>;
+@group(0) @binding(25) var<storage, read_write> mg_work: array<vec2<f32>>;
 // COARSEST_SIDE, OMEGA, OVER_CORRECTION and COARSE_CORRECTIONS are `model::multigrid`'s own,
 // written in front of this file by src/gpu/kernels.rs (`Kernel::wgsl`), so the two cycles
 // cannot drift apart.
@@ -194,12 +196,14 @@ fn coarsen_site(fine: Level, coarse: Level, c: u32) {
     }
 }
 
-// Level 1 from C (`Multigrid::setup`, the first `coarsen`): one invocation per site of level 1.
+// Level 1 from C (`Multigrid::setup`, the first `coarsen`) and the first application's
+// restriction to it (r as `cg_start` stored it: α is 0): one invocation per site of level 1.
 @compute @workgroup_size(256)
-fn mg_coarsen_fine(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn mg_set_up_fine(@builtin(global_invocation_id) gid: vec3<u32>) {
     let coarse = level(1u);
     if coarsest() >= 1u && gid.x < coarse.m * coarse.m {
         coarsen_site(level(0u), coarse, gid.x);
+        restrict_to_level_one(gid.x, solve.alpha);
     }
 }
 
@@ -208,10 +212,19 @@ fn barrier() {
     workgroupBarrier();
 }
 
-// Levels 2 to the coarsest, each from the one above, then the coarsest level's inverse
-// (`Coarsest::factor` on the CPU is a Cholesky factor; see `coarsest_inverse`). One workgroup.
+// The first application's coarse levels: levels 2 to the coarsest built, each from the one
+// above, and the coarsest level's inverse (`coarsen_rest`), then the cycle on them
+// (`coarse_cycle`). One workgroup.
 @compute @workgroup_size(256)
-fn mg_coarsen_rest(@builtin(local_invocation_index) t: u32) {
+fn mg_set_up_coarse(@builtin(local_invocation_index) t: u32) {
+    coarsen_rest(t);
+    barrier();
+    coarse_cycle(t);
+}
+
+// Levels 2 to the coarsest, each from the one above, then the coarsest level's inverse
+// (`Coarsest::factor` on the CPU is a Cholesky factor; see `coarsest_inverse`).
+fn coarsen_rest(t: u32) {
     let last = coarsest();
     for (var k = 1u; k < last; k++) {
         let fine = level(k);
@@ -364,51 +377,69 @@ fn coarsest_solve(lv: Level, t: u32) {
     barrier();
 }
 
-// Level 0's part of the cycle before the coarse levels (`Multigrid::cycle` at k = 0): x₀ =
-// ω D⁻¹ r (not stored: `mg_smooth` forms it again where it needs it) and b₁ = Pᵀ (r − C x₀).
-// One invocation per site of level 1.
-@compute @workgroup_size(256)
-fn mg_restrict(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
-    if solve_finished(t) {
-        return;
-    }
+// Level 0's part of the cycle before the coarse levels (`Multigrid::cycle` at k = 0), at site c of
+// level 1: x₀ = ω D⁻¹ r (not stored: `mg_smooth` forms it again where it needs it) and b₁ =
+// Pᵀ (r − C x₀), with r after the update of step α (`residual_after`). n x₀ is formed once per
+// site of the aggregate's 4 × 4 window (its 2 × 2 sites and their ring); the sums run in the
+// order of the stencil loops, as `apply_level`.
+fn restrict_to_level_one(c: u32, alpha: vec2<f32>) {
     let m = params.box_size;
     let one = level(1u);
     let m1 = one.m;
-    let c = gid.x;
-    if c >= m1 * m1 {
-        return;
-    }
     let ic = c % m1;
     let jc = c / m1;
+    let corner = (2u * jc) * m + 2u * ic;
+    var nx0: array<vec2<f32>, 16>;
+    for (var w = 0u; w < 16u; w++) {
+        let y = step_to(corner, i32(w % 4u) - 1, i32(w / 4u) - 1, m);
+        nx0[w] = n_in_solve(y) * smoothed_from_zero(y, alpha);
+    }
     var sum = vec2<f32>(0.0, 0.0);
     for (var j = 2u * jc; j < min(2u * jc + 2u, m); j++) {
         for (var i = 2u * ic; i < min(2u * ic + 2u, m); i++) {
             let f = j * m + i;
-            var cx = diagonal[f] * smoothed_from_zero(f);
+            let w = (j - 2u * jc + 1u) * 4u + (i - 2u * ic + 1u);
+            let r = residual_after(f, alpha);
+            let d = diagonal[f];
+            var cx = d * select(vec2<f32>(0.0, 0.0), OMEGA / d * r, d > 0.0);
             let nf = n_in_solve(f);
             if nf > 0.0 {
                 var s = vec2<f32>(0.0, 0.0);
                 for (var dy = -1; dy <= 1; dy++) {
                     for (var dx = -1; dx <= 1; dx++) {
                         if dx != 0 || dy != 0 {
-                            let y = step_to(f, dx, dy, m);
-                            s += n_in_solve(y) * smoothed_from_zero(y);
+                            s += nx0[u32(i32(w) + dy * 4 + dx)];
                         }
                     }
                 }
                 cx -= params.xi_cell * nf * s;
             }
-            sum += residual[f] - cx;
+            sum += r - cx;
         }
     }
     mg_work[one.b + c] = sum;
 }
 
 // x₀ = ω D⁻¹ r at site y of level 0, 0 outside the solve.
-fn smoothed_from_zero(y: u32) -> vec2<f32> {
+fn smoothed_from_zero(y: u32, alpha: vec2<f32>) -> vec2<f32> {
     let d = diagonal[y];
-    return select(vec2<f32>(0.0, 0.0), OMEGA / d * residual[y], d > 0.0);
+    return select(vec2<f32>(0.0, 0.0), OMEGA / d * residual_after(y, alpha), d > 0.0);
+}
+
+// A CG iteration's update (`update_step` in friction.wgsl) and, in the same dispatch, the next
+// application's restriction to level 1 from the updated r. The update stores no r, so the r the
+// restriction reads around its aggregate is the same in every workgroup. The aggregates are
+// dealt round the workgroups (invocation t of workgroup g takes site t·G + g of level 1, G
+// workgroups), so that every workgroup takes its share of the restriction's work.
+@compute @workgroup_size(256)
+fn cg_update_restrict(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
+                      @builtin(workgroup_id) wg: vec3<u32>) {
+    let alpha = update_step(gid.x, t, wg.x);
+    let one = level(1u);
+    let c = t * groups() + wg.x;
+    if any(alpha != vec2<f32>(0.0, 0.0)) && coarsest() >= 1u && c < one.m * one.m {
+        restrict_to_level_one(c, alpha);
+    }
 }
 
 // The coarse levels' part of the cycle: x₁ ≈ A₁⁻¹ b₁ by the W-cycle from level 1 down, in one
@@ -417,6 +448,10 @@ fn smoothed_from_zero(y: u32) -> vec2<f32> {
 // while a level has coarse corrections left, and smooth on the way up.
 @compute @workgroup_size(256)
 fn mg_coarse_cycle(@builtin(local_invocation_index) t: u32) {
+    coarse_cycle(t);
+}
+
+fn coarse_cycle(t: u32) {
     let last = coarsest();
     if last == 0u {
         return;
@@ -464,7 +499,7 @@ fn mg_coarse_cycle(@builtin(local_invocation_index) t: u32) {
     }
 }
 
-// Level 0's part after the coarse levels: the prolongation x₀′ = x₀ + P x₁ (over-corrected) and
+// Level 0's part after the coarse levels (r as the latest update left it: `residual_now`): the prolongation x₀′ = x₀ + P x₁ (over-corrected) and
 // the last sweep z = x₀′ + ω D⁻¹ (r − C x₀′), x₀′ formed wherever it is needed; z into
 // `preconditioned`, and the partial sums of r·z with the stop flags (`RZ` of `partials`).
 @compute @workgroup_size(256)
@@ -482,37 +517,39 @@ fn mg_smooth(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invoc
     let x = gid.x;
     // Level 1's x, or none where level 0 is the coarsest.
     let coarse = select(-1, i32(level(1u).x), coarsest() >= 1u);
+    let alpha = solve.alpha;
     var rz = vec2<f32>(0.0, 0.0);
     if x < m * m {
         var z = vec2<f32>(0.0, 0.0);
         let d = diagonal[x];
+        let r = residual_after(x, alpha);
         if d > 0.0 {
-            let own = prolonged(x, m, coarse);
+            let own = prolonged(x, m, coarse, alpha);
             var s = vec2<f32>(0.0, 0.0);
             for (var dy = -1; dy <= 1; dy++) {
                 for (var dx = -1; dx <= 1; dx++) {
                     if dx != 0 || dy != 0 {
                         let y = step_to(x, dx, dy, m);
-                        s += n_in_solve(y) * prolonged(y, m, coarse);
+                        s += n_in_solve(y) * prolonged(y, m, coarse, alpha);
                     }
                 }
             }
             let cx = d * own - params.xi_cell * weight[x] * s;
-            z = own + OMEGA / d * (residual[x] - cx);
+            z = own + OMEGA / d * (r - cx);
         }
-        preconditioned[x] = z;
-        rz = residual[x] * z;
+        vectors[at(PRECONDITIONED, x)] = z;
+        rz = r * z;
     }
     store_partial(t, RZ, wg.x, vec4<f32>(rz, stop_flags(t, done)));
 }
 
 // x₀′ at site y of level 0: ω D⁻¹ r + 1.5 x₁ of its aggregate (x₁ from `coarse` in `mg_work`,
 // none if −1), 0 outside the solve.
-fn prolonged(y: u32, m: u32, coarse: i32) -> vec2<f32> {
+fn prolonged(y: u32, m: u32, coarse: i32, alpha: vec2<f32>) -> vec2<f32> {
     let d = diagonal[y];
     var x1 = vec2<f32>(0.0, 0.0);
     if coarse >= 0 {
         x1 = mg_work[u32(coarse) + aggregate(y, m)];
     }
-    return select(vec2<f32>(0.0, 0.0), OMEGA / d * residual[y] + OVER_CORRECTION * x1, d > 0.0);
+    return select(vec2<f32>(0.0, 0.0), OMEGA / d * residual_after(y, alpha) + OVER_CORRECTION * x1, d > 0.0);
 }

@@ -65,30 +65,31 @@ pub enum Slot {
     Diagonal = 19,
     /// u = V/n, (x, y) per lattice site: the friction solve's solution and next warm start.
     MeanVelocity = 20,
-    /// The friction CG's residual r, direction p and product q = C p, (x, y) per site.
-    Residual = 21,
-    Direction = 22,
-    Product = 23,
+    /// The friction CG's work vectors, (x, y) per site, one after the other in one buffer (an
+    /// arena: with its own binding each, the fused kernels would bind more than 8 storage
+    /// buffers, WebGPU's default): the residual r, the direction p, the next direction
+    /// p′ = z + β p (while p is still read), the product q = C p′ and z = M r
+    /// ([`CG_VECTORS`]; `shaders/friction.wgsl`).
+    CgVectors = 21,
     /// Per workgroup of the lattice, partial sums of the CG's inner products ([`PARTIAL_SUMS`]
     /// vec4 each).
-    Partials = 24,
+    Partials = 22,
     /// The CG's scalars, [`SolveScalars`].
-    Solve = 25,
-    /// z = M r, the preconditioned residual, (x, y) per site.
-    Preconditioned = 26,
+    Solve = 23,
     /// The multigrid hierarchy below C: per level k ≥ 1 six values per site (diagonal, four
     /// forward bonds, mass), then the coarsest level's inverse (`shaders/multigrid.wgsl`).
-    Hierarchy = 27,
+    Hierarchy = 24,
     /// Per level k ≥ 1 of the hierarchy, x, b and t of a cycle, (x, y) per site.
-    MgWork = 28,
-    /// Each cell's next patch (`shaders/cell.wgsl`), `GpuPatch` per cell.
-    NextPatches = 29,
+    MgWork = 25,
     /// Per cell, the first [`PatchFault`] code other than `Moved` since the faults were last
     /// cleared (sticky), or `Moved`.
-    PatchFault = 30,
-    /// The CG's next direction p′ = z + β p, (x, y) per site, while p is still read.
-    DirectionNext = 31,
+    PatchFault = 26,
 }
+
+/// How many of the friction CG's vectors [`Slot::CgVectors`] holds, each the lattice's L² (x, y)
+/// pairs, in this order: r, p, p′, q, z (`RESIDUAL` … `PRECONDITIONED` in
+/// `shaders/friction.wgsl`).
+pub const CG_VECTORS: usize = 5;
 
 /// Why a cell's patch did not move (`Slot::PatchFault`; `shaders/cell.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -118,7 +119,7 @@ pub const PARTIAL_SUMS: usize = 4;
 pub const NO_FAULT: u32 = u32::MAX;
 
 impl Slot {
-    pub const ALL: [Slot; 32] = [
+    pub const ALL: [Slot; 27] = [
         Slot::Params,
         Slot::Patches,
         Slot::Phi,
@@ -140,17 +141,12 @@ impl Slot {
         Slot::Fault,
         Slot::Diagonal,
         Slot::MeanVelocity,
-        Slot::Residual,
-        Slot::Direction,
-        Slot::Product,
+        Slot::CgVectors,
         Slot::Partials,
         Slot::Solve,
-        Slot::Preconditioned,
         Slot::Hierarchy,
         Slot::MgWork,
-        Slot::NextPatches,
         Slot::PatchFault,
-        Slot::DirectionNext,
     ];
 
     pub fn binding(self) -> u32 {
@@ -342,7 +338,8 @@ impl Layout {
         };
         let per_dimension = u64::from(limits.max_compute_workgroups_per_dimension);
         let binding = limits.max_storage_buffer_binding_size;
-        let largest = 8 * (self.total as u64).max((self.box_size * self.box_size) as u64);
+        let l2 = (self.box_size * self.box_size) as u64;
+        let largest = (8 * self.total as u64).max(8 * CG_VECTORS as u64 * l2);
         let errors = [
             too_large(
                 "the number of cells (one row of workgroups each)".into(),
@@ -351,7 +348,7 @@ impl Layout {
                 "max_compute_workgroups_per_dimension",
             ),
             too_large(
-                "the largest buffer in bytes (2 f32 per padded patch site or lattice site)".into(),
+                "the largest buffer in bytes (2 f32 per padded patch site, or the CG's vectors: 10 f32 per lattice site)".into(),
                 largest,
                 binding,
                 "max_storage_buffer_binding_size",
@@ -447,12 +444,10 @@ impl DeviceState {
                     Slot::Fault => init(bytemuck::cast_slice(&vec![NO_FAULT; n]), STORAGE),
                     Slot::Diagonal => zeros(l2),
                     Slot::MeanVelocity => init(bytemuck::cast_slice(&warm_start), STORAGE),
-                    Slot::Residual | Slot::Direction | Slot::DirectionNext | Slot::Product => zeros(2 * l2),
+                    Slot::CgVectors => zeros(CG_VECTORS * 2 * l2),
                     Slot::Partials => zeros(PARTIAL_SUMS * 4 * groups),
-                    Slot::Preconditioned => zeros(2 * l2),
                     Slot::Hierarchy => zeros(hierarchy.hierarchy_floats().max(1)),
                     Slot::MgWork => zeros(2 * hierarchy.work_sites().max(1)),
-                    Slot::NextPatches => init(bytemuck::cast_slice(&layout.patches), STORAGE),
                     Slot::PatchFault => zeros(n),
                     Slot::Solve => zeros(std::mem::size_of::<SolveScalars>() / 4),
                 }
@@ -599,17 +594,12 @@ fn slot_label(slot: Slot) -> &'static str {
         Slot::Fault => "fault",
         Slot::Diagonal => "diagonal",
         Slot::MeanVelocity => "mean_velocity",
-        Slot::Residual => "residual",
-        Slot::Direction => "direction",
-        Slot::Product => "product",
+        Slot::CgVectors => "cg_vectors",
         Slot::Partials => "partials",
         Slot::Solve => "solve",
-        Slot::Preconditioned => "preconditioned",
         Slot::Hierarchy => "hierarchy",
         Slot::MgWork => "mg_work",
-        Slot::NextPatches => "next_patches",
         Slot::PatchFault => "patch_fault",
-        Slot::DirectionNext => "direction_next",
     }
 }
 

@@ -36,12 +36,10 @@ const LATTICE_TILE: usize = 8;
 pub enum Kernel {
     /// Σφ and Σφ² on the lattice (`shaders/gather.wgsl`).
     LatticeSums,
-    /// A_i (`shaders/free_energy.wgsl`).
-    CellArea,
+    /// Q_i and Q̂_i, with A_i in the same pass over each patch (`shaders/shape.wgsl`).
+    AreaAndShape,
     /// μ_i (`shaders/free_energy.wgsl`); needs Σφ² and A_i.
     ChemicalPotential,
-    /// Q_i and Q̂_i (`shaders/shape.wgsl`).
-    ShapeTensor,
     /// f_i (`shaders/forces.wgsl`); needs μ_i and Q̂_i.
     ForceDensity,
     /// n = Σ w_j and F = Σ w_j f_j on the lattice (`shaders/gather.wgsl`); needs f_i.
@@ -59,8 +57,12 @@ pub enum Kernel {
     CgStart,
     /// The stop test and β, p′ = z + β p, q = C p′ and partial sums of p′·q.
     CgProduct,
-    /// α, u += α p′, r −= α q, p = p′, and partial sums of ‖r‖².
+    /// α, u += α p′, p = p′, and partial sums of the new r's ‖r‖² (r − α q, stored by the next
+    /// `CgProduct`): with the Jacobi preconditioner.
     CgUpdate,
+    /// `CgUpdate`, and the next multigrid application's restriction to level 1 from the new r
+    /// (`shaders/multigrid.wgsl`).
+    CgUpdateRestrict,
     /// The pull ξ_c S from the solution (`FrictionSolver::pull_from_solution`), and partial
     /// sums of the true residual.
     FrictionPull,
@@ -68,30 +70,27 @@ pub enum Kernel {
     FrictionCheck,
     /// z = r / diag C and partial sums of r·z: the Jacobi preconditioner.
     Jacobi,
-    /// Multigrid level 1 from C (`shaders/multigrid.wgsl`, as `Multigrid::setup`).
-    MgCoarsenFine,
-    /// The coarser levels and the coarsest level's inverse (one workgroup).
-    MgCoarsenRest,
-    /// A cycle's level-0 sweep from zero and its restriction to level 1.
-    MgRestrict,
+    /// Multigrid level 1 from C (`shaders/multigrid.wgsl`, as `Multigrid::setup`), and the first
+    /// application's level-0 sweep from zero and its restriction to level 1.
+    MgSetUpFine,
+    /// The coarser levels and the coarsest level's inverse, then the first application's cycle
+    /// on levels 1 to the coarsest (one workgroup).
+    MgSetUpCoarse,
     /// The cycle on levels 1 to the coarsest (one workgroup).
     MgCoarseCycle,
     /// The prolongation to level 0 and its last sweep: z, and partial sums of r·z.
     MgSmooth,
-    /// Each cell's next patch: re-centred (relaxation) or fitted to its support (active)
-    /// (`shaders/cell.wgsl`, as `Monolayer::update_patches`).
-    PatchBounds,
-    /// φ into the next patches (`Cell::relayout`), in Heun's φ_n storage.
-    Relayout,
-    /// The next patches and their φ made current.
-    CommitPatches,
+    /// Each cell's patch follows it: the next patch, re-centred (relaxation) or fitted to its
+    /// support (active), φ laid out in it (`shaders/cell.wgsl`, as `Monolayer::update_patches`
+    /// and `Cell::relayout`).
+    MovePatch,
 }
 
 /// What preconditions the friction CG on the GPU.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Preconditioner {
     /// One cycle of the CPU's aggregation multigrid (`shaders/multigrid.wgsl`): three dispatches
-    /// per application, few iterations.
+    /// per application (the restriction riding with the kernel before), few iterations.
     Multigrid,
     /// z = r / diag C: one dispatch per application, many iterations.
     Jacobi,
@@ -107,19 +106,22 @@ impl Preconditioner {
         }
     }
 
-    /// The kernels of one application, z = M r with its partial sums of r·z.
-    pub fn kernels(self) -> &'static [Kernel] {
+    /// The kernels of its set-up for a new operator and its first application, z = M r with
+    /// its partial sums of r·z, after `CgStart`.
+    pub fn first_application(self) -> &'static [Kernel] {
         match self {
-            Preconditioner::Multigrid => &[Kernel::MgRestrict, Kernel::MgCoarseCycle, Kernel::MgSmooth],
+            Preconditioner::Multigrid => &[Kernel::MgSetUpFine, Kernel::MgSetUpCoarse, Kernel::MgSmooth],
             Preconditioner::Jacobi => &[Kernel::Jacobi],
         }
     }
 
-    /// The kernels that set it up for a new operator.
-    pub fn setup(self) -> &'static [Kernel] {
+    /// One CG iteration with it: the stop test, β, p and q = C p; α, u and r; z = M r.
+    pub fn iteration(self) -> &'static [Kernel] {
         match self {
-            Preconditioner::Multigrid => &[Kernel::MgCoarsenFine, Kernel::MgCoarsenRest],
-            Preconditioner::Jacobi => &[],
+            Preconditioner::Multigrid => {
+                &[Kernel::CgProduct, Kernel::CgUpdateRestrict, Kernel::MgCoarseCycle, Kernel::MgSmooth]
+            }
+            Preconditioner::Jacobi => &[Kernel::CgProduct, Kernel::CgUpdate, Kernel::Jacobi],
         }
     }
 }
@@ -145,11 +147,10 @@ enum Grid {
 
 impl Kernel {
     /// Every kernel, in the order of one evaluation.
-    pub const ALL: [Kernel; 23] = [
+    pub const ALL: [Kernel; 20] = [
         Kernel::LatticeSums,
-        Kernel::CellArea,
+        Kernel::AreaAndShape,
         Kernel::ChemicalPotential,
-        Kernel::ShapeTensor,
         Kernel::ForceDensity,
         Kernel::FrictionSums,
         Kernel::VelocityAndRate,
@@ -158,39 +159,36 @@ impl Kernel {
         Kernel::CgStart,
         Kernel::CgProduct,
         Kernel::CgUpdate,
+        Kernel::CgUpdateRestrict,
         Kernel::FrictionPull,
         Kernel::FrictionCheck,
         Kernel::Jacobi,
-        Kernel::MgCoarsenFine,
-        Kernel::MgCoarsenRest,
-        Kernel::MgRestrict,
+        Kernel::MgSetUpFine,
+        Kernel::MgSetUpCoarse,
         Kernel::MgCoarseCycle,
         Kernel::MgSmooth,
-        Kernel::PatchBounds,
-        Kernel::Relayout,
-        Kernel::CommitPatches,
+        Kernel::MovePatch,
     ];
 
     /// The patches following the cells after a step (`Monolayer::update_patches`).
-    pub const MOVE_PATCHES: [Kernel; 3] = [Kernel::PatchBounds, Kernel::Relayout, Kernel::CommitPatches];
+    pub const MOVE_PATCHES: [Kernel; 1] = [Kernel::MovePatch];
 
-    /// One evaluation of the rate R(φ) where there is no friction solve: Σφ², A_i, μ_i, Q̂_i, f_i,
-    /// then v_i and ∂_t φ_i. (In relaxation ζ = 0 and Q̂_i is not needed; its dispatch stays so
-    /// that one list serves both phases, as the CPU computes Q_i in both.)
-    pub const RATE: [Kernel; 6] = [
+    /// One evaluation of the rate R(φ) where there is no friction solve: Σφ², A_i with Q̂_i, μ_i,
+    /// f_i, then v_i and ∂_t φ_i. (In relaxation ζ = 0 and Q̂_i is not needed; it is summed
+    /// anyway with A_i, as the CPU computes Q_i in both phases.)
+    pub const RATE: [Kernel; 5] = [
         Kernel::LatticeSums,
-        Kernel::CellArea,
+        Kernel::AreaAndShape,
         Kernel::ChemicalPotential,
-        Kernel::ShapeTensor,
         Kernel::ForceDensity,
         Kernel::VelocityAndRate,
     ];
 
     /// The stages up to the friction solve's right-hand side (n and F): [`Self::RATE`]'s up to
     /// the forces, then the friction sums.
-    pub const FRICTION_SUMS: [Kernel; 6] = {
+    pub const FRICTION_SUMS: [Kernel; 5] = {
         let mut out = Kernel::RATE;
-        out[5] = Kernel::FrictionSums;
+        out[4] = Kernel::FrictionSums;
         out
     };
 
@@ -200,19 +198,11 @@ impl Kernel {
     /// the check of the true residual.
     pub fn friction_solve(pc: Preconditioner, iterations: usize) -> Vec<Kernel> {
         let mut out = vec![Kernel::CgStart];
-        out.extend_from_slice(pc.setup());
-        out.extend_from_slice(pc.kernels());
+        out.extend_from_slice(pc.first_application());
         for _ in 0..iterations {
-            out.extend_from_slice(&Kernel::cg_iteration(pc));
+            out.extend_from_slice(pc.iteration());
         }
         out.extend_from_slice(&[Kernel::FrictionPull, Kernel::FrictionCheck]);
-        out
-    }
-
-    /// One CG iteration: the stop test, β, p and q = C p; α, u and r; z = M r.
-    pub fn cg_iteration(pc: Preconditioner) -> Vec<Kernel> {
-        let mut out = vec![Kernel::CgProduct, Kernel::CgUpdate];
-        out.extend_from_slice(pc.kernels());
         out
     }
 
@@ -258,19 +248,16 @@ impl Kernel {
     /// The stage's WGSL file and the kernel's entry point in it.
     fn source(self) -> (&'static str, &'static str) {
         match self {
-            Kernel::MgCoarsenFine => (MULTIGRID_WGSL, "mg_coarsen_fine"),
-            Kernel::MgCoarsenRest => (MULTIGRID_WGSL, "mg_coarsen_rest"),
-            Kernel::MgRestrict => (MULTIGRID_WGSL, "mg_restrict"),
+            Kernel::MgSetUpFine => (MULTIGRID_WGSL, "mg_set_up_fine"),
+            Kernel::MgSetUpCoarse => (MULTIGRID_WGSL, "mg_set_up_coarse"),
+            Kernel::CgUpdateRestrict => (MULTIGRID_WGSL, "cg_update_restrict"),
             Kernel::MgCoarseCycle => (MULTIGRID_WGSL, "mg_coarse_cycle"),
             Kernel::MgSmooth => (MULTIGRID_WGSL, "mg_smooth"),
             Kernel::Jacobi => (FRICTION_WGSL, "jacobi"),
-            Kernel::PatchBounds => (CELL_WGSL, "patch_bounds"),
-            Kernel::Relayout => (CELL_WGSL, "relayout"),
-            Kernel::CommitPatches => (CELL_WGSL, "commit_patches"),
+            Kernel::MovePatch => (CELL_WGSL, "move_patch"),
             Kernel::LatticeSums => (GATHER_WGSL, "lattice_sums"),
-            Kernel::CellArea => (FREE_ENERGY_WGSL, "cell_area"),
             Kernel::ChemicalPotential => (FREE_ENERGY_WGSL, "chemical_potential"),
-            Kernel::ShapeTensor => (SHAPE_WGSL, "shape_tensor"),
+            Kernel::AreaAndShape => (SHAPE_WGSL, "area_and_shape"),
             Kernel::ForceDensity => (FORCES_WGSL, "force_density"),
             Kernel::FrictionSums => (GATHER_WGSL, "friction_sums"),
             Kernel::VelocityAndRate => (MOTION_WGSL, "velocity_and_rate"),
@@ -309,53 +296,48 @@ impl Kernel {
         use Slot::*;
         match self {
             Kernel::LatticeSums => &[Params, Patches, Phi, SumPhi, SumPhi2],
-            Kernel::CellArea => &[Patches, Phi, Area],
             Kernel::ChemicalPotential => &[Params, Patches, Phi, SumPhi2, Area, Mu],
-            Kernel::ShapeTensor => &[Params, Patches, Phi, Shape, QHat],
+            Kernel::AreaAndShape => &[Params, Patches, Phi, Area, Shape, QHat],
             Kernel::ForceDensity => &[Params, Patches, Phi, Mu, QHat, Fx, Fy],
             Kernel::FrictionSums => &[Params, Patches, Phi, Fx, Fy, Weight, Force],
             Kernel::VelocityAndRate => &[Params, Patches, Phi, Mu, Fx, Fy, Drag, Velocity, Rate],
             Kernel::Predict => &[Params, Patches, Phi, Rate, Phi0, K1],
             Kernel::Correct => &[Params, Patches, Phi, Rate, Phi0, K1, Fault],
-            Kernel::CgStart => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, Residual, Partials, Solve],
-            Kernel::CgProduct => {
-                &[Params, Weight, Diagonal, Direction, Product, Partials, Solve, Preconditioned, DirectionNext]
-            }
-            Kernel::CgUpdate => {
-                &[Params, Force, MeanVelocity, Residual, Direction, Product, Partials, Solve, DirectionNext]
+            Kernel::CgStart => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, CgVectors, Partials, Solve],
+            Kernel::CgProduct => &[Params, Weight, Diagonal, CgVectors, Partials, Solve],
+            Kernel::CgUpdate => &[Params, Force, MeanVelocity, CgVectors, Partials, Solve],
+            Kernel::CgUpdateRestrict => {
+                &[Params, Weight, Force, Diagonal, MeanVelocity, CgVectors, Partials, Solve, MgWork]
             }
             Kernel::FrictionPull => &[Params, Weight, Force, Drag, Diagonal, MeanVelocity, Partials, Solve],
             Kernel::FrictionCheck => &[Params, Partials, Solve],
-            Kernel::Jacobi => &[Params, Diagonal, Residual, Partials, Solve, Preconditioned],
-            Kernel::MgCoarsenFine | Kernel::MgCoarsenRest => &[Params, Weight, Drag, Diagonal, Hierarchy],
-            Kernel::MgRestrict => &[Params, Weight, Diagonal, Residual, Partials, Solve, MgWork],
+            Kernel::Jacobi => &[Params, Diagonal, CgVectors, Partials, Solve],
+            Kernel::MgSetUpFine => &[Params, Weight, Drag, Diagonal, CgVectors, Solve, Hierarchy, MgWork],
+            Kernel::MgSetUpCoarse => &[Params, Weight, Drag, Diagonal, Partials, Solve, Hierarchy, MgWork],
             Kernel::MgCoarseCycle => &[Params, Weight, Diagonal, Partials, Solve, Hierarchy, MgWork],
-            Kernel::MgSmooth => &[Params, Weight, Diagonal, Residual, Partials, Solve, Preconditioned, MgWork],
-            Kernel::PatchBounds => &[Params, Patches, Phi, NextPatches, PatchFault],
-            Kernel::Relayout => &[Params, Patches, Phi, Phi0, NextPatches],
-            Kernel::CommitPatches => &[Patches, Phi, Phi0, NextPatches],
+            Kernel::MgSmooth => &[Params, Weight, Diagonal, CgVectors, Partials, Solve, MgWork],
+            Kernel::MovePatch => &[Params, Patches, Phi, Phi0, PatchFault],
         }
     }
 
     fn grid(self) -> Grid {
         match self {
             Kernel::LatticeSums | Kernel::FrictionSums => Grid::Lattice,
-            Kernel::CellArea | Kernel::ShapeTensor | Kernel::PatchBounds => Grid::Cells,
+            Kernel::AreaAndShape | Kernel::MovePatch => Grid::Cells,
             Kernel::ChemicalPotential
             | Kernel::ForceDensity
             | Kernel::VelocityAndRate
             | Kernel::Predict
-            | Kernel::Correct
-            | Kernel::Relayout
-            | Kernel::CommitPatches => Grid::Sites,
+            | Kernel::Correct => Grid::Sites,
             Kernel::CgStart
             | Kernel::CgProduct
             | Kernel::CgUpdate
+            | Kernel::CgUpdateRestrict
             | Kernel::FrictionPull
             | Kernel::Jacobi
             | Kernel::MgSmooth => Grid::LatticeRows,
-            Kernel::MgCoarsenFine | Kernel::MgRestrict => Grid::LevelOne,
-            Kernel::FrictionCheck | Kernel::MgCoarsenRest | Kernel::MgCoarseCycle => Grid::Single,
+            Kernel::MgSetUpFine => Grid::LevelOne,
+            Kernel::FrictionCheck | Kernel::MgSetUpCoarse | Kernel::MgCoarseCycle => Grid::Single,
         }
     }
 
@@ -373,12 +355,10 @@ impl Kernel {
         let values = match self {
             // φ at every covered site; Σφ and Σφ² written.
             Kernel::LatticeSums => interior + 2 * l2,
-            // φ; A_i written.
-            Kernel::CellArea => padded + n,
             // φ and Σφ² at each interior site; μ written, halo included.
             Kernel::ChemicalPotential => padded + interior + padded,
-            // φ; Q_i and Q̂_i written.
-            Kernel::ShapeTensor => padded + 4 * n,
+            // φ; A_i, Q_i and Q̂_i written.
+            Kernel::AreaAndShape => padded + 5 * n,
             // φ and μ; f_x and f_y written.
             Kernel::ForceDensity => 2 * padded + 2 * padded,
             // φ, f_x and f_y at every covered site; n and F written.
@@ -391,31 +371,30 @@ impl Kernel {
             Kernel::Correct => 3 * padded + padded + n,
             // n, the drag, F and u read; the drag, the diagonal and r written.
             Kernel::CgStart => l2 + 4 * l2 + 2 * l2 + 2 * l2 + 4 * l2 + l2 + 2 * l2,
-            // z, p, n and the diagonal read; p′ and q written.
-            Kernel::CgProduct => 4 * l2 + 2 * l2 + 4 * l2,
-            // u, p′, r, q and F read; u, p and r written.
-            Kernel::CgUpdate => 10 * l2 + 6 * l2,
+            // z, p, r, q, n and the diagonal read; r, p′ and q written.
+            Kernel::CgProduct => 10 * l2 + 6 * l2,
+            // u, p′, r, q and F read; u and p written.
+            Kernel::CgUpdate => 10 * l2 + 4 * l2,
+            // CgUpdate's, n and the diagonal read, level 1's b written.
+            Kernel::CgUpdateRestrict => 14 * l2 + 2 * l2 + 2 * level1,
             // n, u, F and the diagonal read; the pull written.
             Kernel::FrictionPull => l2 + 2 * l2 + 2 * l2 + 2 * l2 + l2,
             // The partial sums, one workgroup.
             Kernel::FrictionCheck => 4 * l2.div_ceil(LATTICE_GROUP as u64),
-            // r and the diagonal read; z written.
-            Kernel::Jacobi => 2 * l2 + l2 + 2 * l2,
-            // n, ξ_s and the diagonal read; level 1 written.
-            Kernel::MgCoarsenFine => 3 * l2 + coarse_floats.min(6 * level1),
-            // The levels read and written once each.
-            Kernel::MgCoarsenRest => 2 * coarse_floats,
-            // n, the diagonal and r read; level 1's b written.
-            Kernel::MgRestrict => 4 * l2 + 2 * level1,
+            // r, q and the diagonal read; z written.
+            Kernel::Jacobi => 4 * l2 + l2 + 2 * l2,
+            // n, ξ_s, the diagonal and r read; level 1 and its b written.
+            Kernel::MgSetUpFine => 5 * l2 + coarse_floats.min(6 * level1) + 2 * level1,
+            // The levels read and written once each, then a cycle's reads.
+            Kernel::MgSetUpCoarse => 3 * coarse_floats + 2 * coarse_work,
             // Every coarse level's coefficients and vectors, once (the W-cycle reads them again
             // from cache).
             Kernel::MgCoarseCycle => coarse_floats + 2 * coarse_work,
-            // n, the diagonal, r and level 1's x read; z written.
-            Kernel::MgSmooth => 4 * l2 + 2 * level1 + 2 * l2,
+            // n, the diagonal, r, q and level 1's x read; z written.
+            Kernel::MgSmooth => 6 * l2 + 2 * level1 + 2 * l2,
             // φ read; the next patches and their codes written.
-            Kernel::PatchBounds => interior + 10 * n,
-            // φ read and written twice (into φ_n, then back).
-            Kernel::Relayout | Kernel::CommitPatches => 2 * padded,
+            // φ read, the next patch and its code written, φ laid out into φ_n and back.
+            Kernel::MovePatch => interior + 10 * n + 4 * padded,
         };
         4 * values
     }
@@ -442,21 +421,23 @@ impl Kernel {
             Kernel::LatticeSums | Kernel::FrictionSums => {
                 2 * ceil(layout.n_cells(), GATHER_CHUNK) * GATHER_CHUNK as u64
             }
-            Kernel::CellArea | Kernel::ShapeTensor | Kernel::PatchBounds => per_cell,
+            // Two passes (the padded sites, then the interior ones) and the tree.
+            Kernel::AreaAndShape => 2 * ceil(layout.max_padded, SITES_PER_GROUP) + tree64,
+            // The sums and their tree, then two passes over the next patch's padded sites.
+            Kernel::MovePatch => per_cell + 2 * ceil(layout.max_padded, SITES_PER_GROUP),
             Kernel::ChemicalPotential
             | Kernel::ForceDensity
             | Kernel::VelocityAndRate
             | Kernel::Predict
-            | Kernel::Correct
-            | Kernel::Relayout
-            | Kernel::CommitPatches
-            | Kernel::MgCoarsenFine => 1,
+            | Kernel::Correct => 1,
+            // Level 1's site, then its aggregate's restriction.
+            Kernel::MgSetUpFine => 2,
             Kernel::CgStart => 2 * tree256 + 1,
             Kernel::CgProduct | Kernel::CgUpdate | Kernel::FrictionPull => done + tree256 + 1,
+            Kernel::CgUpdateRestrict => done + tree256 + 2,
             Kernel::Jacobi | Kernel::MgSmooth => done + tree256 + 1,
-            Kernel::MgRestrict => done + 1,
             Kernel::FrictionCheck => total,
-            Kernel::MgCoarsenRest => {
+            Kernel::MgSetUpCoarse => {
                 let levels: u64 = hierarchy.sides.iter().skip(1).map(|m| ceil(m * m, LATTICE_GROUP)).sum();
                 let n = hierarchy.sides.last().map_or(0, |m| m * m);
                 // The inverse: zeroing, the rows, then two phases per pivot.
@@ -465,7 +446,7 @@ impl Kernel {
                 } else {
                     ceil(n * n, LATTICE_GROUP) + ceil(n, LATTICE_GROUP) + 2 * n as u64 * ceil(n * n, LATTICE_GROUP)
                 };
-                levels + inverse
+                levels + inverse + done + coarse_cycle_steps(&hierarchy.sides)
             }
             Kernel::MgCoarseCycle => done + coarse_cycle_steps(&hierarchy.sides),
         }

@@ -6,15 +6,15 @@
 //! | kernel (`shaders/`)                  | CPU                                   | paper           |
 //! |--------------------------------------|---------------------------------------|-----------------|
 //! | `gather.wgsl` `lattice_sums`         | `model::monolayer` `gather` (Σφ, Σφ²) | Eq. S2, S4      |
-//! | `free_energy.wgsl` `cell_area`       | `model::free_energy::area`            | Eq. S3 (A_i)    |
+//! | `shape.wgsl` `area_and_shape`        | `model::shape` (Q_i, Q̂_i), `free_energy::area` (A_i) | Eq. 5, S3 |
 //! | `free_energy.wgsl` `chemical_potential` | `FreeEnergy::chemical_potential`   | Eqs. S1–S3 (μ_i)|
-//! | `shape.wgsl` `shape_tensor`          | `model::shape` (Q_i, Q̂_i)            | Eq. 5           |
 //! | `forces.wgsl` `force_density`        | `model::forces::force_density`        | Eqs. 3, 4       |
 //! | `gather.wgsl` `friction_sums`        | `model::monolayer` gathers of n and F | Eq. 2 (Σ_j)     |
 //! | `friction.wgsl` `cg_*`, `friction_pull`, `friction_check` | `model::friction` (`FrictionSolver`) | Eq. 2 |
-//! | `multigrid.wgsl` `mg_*`                | `model::multigrid` (the preconditioner) | —             |
+//! | `multigrid.wgsl` `mg_*`, `cg_update_restrict` | `model::multigrid` (the preconditioner) | —      |
 //! | `motion.wgsl` `velocity_and_rate`    | `model::motion::velocity_and_rate`    | Eq. 1           |
 //! | `monolayer.wgsl` `predict`, `correct`| `model::monolayer` `Then` (Heun)      | —               |
+//! | `cell.wgsl` `move_patch`             | `Monolayer::update_patches`, `Cell::relayout` | Sec. A  |
 //!
 //! Every sum runs in a fixed order (no float atomics), so two runs on the same adapter and
 //! driver give the same bits. Nothing is read back inside a step: [`GpuMonolayer::read`] is for

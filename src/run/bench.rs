@@ -348,7 +348,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let ms = time(&gpu, &step);
     let solve = gpu.read_solve(&ctx);
     let taken = solve.iterations[0].max(solve.iterations[1]) as usize;
-    let per_iteration = Kernel::cg_iteration(gpu.preconditioner).len();
+    let per_iteration = gpu.preconditioner.iteration().len();
     let working = step.len() - 2 * (gpu.solve_iterations - taken) * per_iteration;
     let mut working_kernels = Kernel::step(Some((gpu.preconditioner, taken)));
     working_kernels.extend(Kernel::MOVE_PATCHES);
@@ -391,7 +391,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let needed = [Kernel::step(Some((gpu.preconditioner, taken))), Kernel::MOVE_PATCHES.to_vec()].concat();
     let coarse: u64 = recorded_list
         .iter()
-        .filter(|&&k| matches!(k, Kernel::MgCoarseCycle | Kernel::MgCoarsenRest))
+        .filter(|&&k| matches!(k, Kernel::MgCoarseCycle | Kernel::MgSetUpCoarse))
         .map(|k| k.serial_steps(run.gpu().state()))
         .sum();
     println!(
