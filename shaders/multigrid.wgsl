@@ -362,19 +362,46 @@ fn smooth_level(lv: Level, t: u32) {
     barrier();
 }
 
-// x = A⁻¹ b on the coarsest level, both components: invocation r forms row r of the stored
-// inverse times b (n ≤ 36 products), every row at once.
+// x = A⁻¹ b on the coarsest level, both components: row r of the stored inverse times b, split
+// over `row_lanes(n)` invocations per row, each adding every lanes-th product in order, then a
+// halving tree over the row's lanes (a fixed order): about n/lanes + log₂ lanes dependent steps
+// per visit where one invocation per row took n.
 fn coarsest_solve(lv: Level, t: u32) {
     let n = lv.m * lv.m;
     let a = factor_offset(lv);
-    for (var r = t; r < n; r += GROUP) {
-        var s = vec2<f32>(0.0, 0.0);
-        for (var q = 0u; q < n; q++) {
+    let lanes = row_lanes(n);
+    let r = t / lanes;
+    let j = t % lanes;
+    var s = vec2<f32>(0.0, 0.0);
+    if r < n {
+        for (var q = j; q < n; q += lanes) {
             s += hierarchy[a + r * n + q] * mg_work[lv.b + q];
         }
-        mg_work[lv.x + r] = s;
+    }
+    tree[t] = vec4<f32>(s, 0.0, 0.0);
+    for (var half = lanes / 2u; half > 0u; half = half / 2u) {
+        workgroupBarrier();
+        if j < half {
+            tree[t] = tree[t] + tree[t + half];
+        }
+    }
+    workgroupBarrier();
+    if j == 0u && r < n {
+        mg_work[lv.x + r] = tree[t].xy;
     }
     barrier();
+}
+
+// Invocations per row of the coarsest level's inverse: the most, a power of two up to
+// `MAX_ROW_LANES`, that lets every row have its own (`row_lanes` in src/gpu/kernels.rs).
+const MAX_ROW_LANES: u32 = 16u;
+
+fn row_lanes(n: u32) -> u32 {
+    var lanes = 1u;
+    while lanes < MAX_ROW_LANES && 2u * lanes * n <= GROUP {
+        lanes = 2u * lanes;
+    }
+    return lanes;
 }
 
 // Level 0's part of the cycle before the coarse levels (`Multigrid::cycle` at k = 0), at site c of

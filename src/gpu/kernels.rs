@@ -480,9 +480,21 @@ const TOTAL_LANES: usize = 16;
 /// Cells listed per pass over a lattice tile (`CHUNK` in `shaders/gather.wgsl`).
 const GATHER_CHUNK: usize = 64;
 
+/// Invocations per row when the coarsest level's inverse is applied (`row_lanes` in
+/// `shaders/multigrid.wgsl`): the most, a power of two up to 16, that gives every one of the n
+/// rows its own within a workgroup.
+fn row_lanes(n: usize) -> usize {
+    let mut lanes = 1;
+    while lanes < 16 && 2 * lanes * n <= LATTICE_GROUP {
+        lanes *= 2;
+    }
+    lanes
+}
+
 /// The serial steps of `mg_coarse_cycle`'s walk (`shaders/multigrid.wgsl`) over levels of these
 /// sides (level 1 first): each loop over a level's sites is its share per invocation, each
-/// visit of the coarsest level n products into one sum.
+/// visit of the coarsest level its share of a row's n products and the tree over the row's
+/// lanes ([`row_lanes`]).
 fn coarse_cycle_steps(sides: &[usize]) -> u64 {
     use crate::model::COARSE_CORRECTIONS;
     let share = |k: usize| sides[k - 1].pow(2).div_ceil(LATTICE_GROUP) as u64;
@@ -497,7 +509,9 @@ fn coarse_cycle_steps(sides: &[usize]) -> u64 {
     loop {
         if down {
             if k == last {
-                steps += sides[k - 1].pow(2) as u64;
+                let n = sides[k - 1].pow(2);
+                let lanes = row_lanes(n);
+                steps += n.div_ceil(lanes) as u64 + u64::from(lanes.ilog2());
                 if k == 1 {
                     return steps;
                 }
@@ -838,17 +852,19 @@ mod tests {
     }
 
     /// The walk visits the coarsest level 2^(levels − 1) times (two corrections below level 1),
-    /// as the W-cycle does: sides 70, 35, 18, 9, 5 (the paper's 140²) give 16 visits of 25
-    /// products, and each finer level's loops in proportion.
+    /// as the W-cycle does: sides 70, 35, 18, 9, 5 (the paper's 140²) give 16 visits of a
+    /// 25-row inverse applied 8 lanes to a row (4 products, then 3 tree steps), and each finer
+    /// level's loops in proportion.
     #[test]
     fn the_coarse_cycles_serial_steps_follow_the_w_cycle() {
+        assert_eq!((row_lanes(25), row_lanes(36), row_lanes(16), row_lanes(1)), (8, 4, 16, 16));
         assert_eq!(coarse_cycle_steps(&[]), 0);
-        assert_eq!(coarse_cycle_steps(&[5]), 25);
+        assert_eq!(coarse_cycle_steps(&[5]), 4 + 3);
         // One level above the coarsest: down (3 loops), coarsest, up (prolong), down again
         // (restrict: 2 loops), coarsest, up (prolong, then the final sweep's 2 loops).
-        assert_eq!(coarse_cycle_steps(&[9, 5]), (1 + 1 + 1) + 25 + 1 + (1 + 1) + 25 + 1 + 2);
+        assert_eq!(coarse_cycle_steps(&[9, 5]), (1 + 1 + 1) + 7 + 1 + (1 + 1) + 7 + 1 + 2);
         let full = coarse_cycle_steps(&[70, 35, 18, 9, 5]);
-        assert!(full > 16 * 25, "{full}");
+        assert!(full > 16 * 7, "{full}");
     }
 
     /// Every binding a kernel lists is declared in the WGSL it is compiled from with that number.
