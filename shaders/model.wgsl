@@ -4,7 +4,7 @@
 //
 // Layouts are written by src/gpu/buffers.rs (`GpuParams`, `GpuPatch`: the same fields in the
 // same order). Every stage binds its buffers at the same binding numbers (`Slot` in
-// src/gpu/kernels.rs), so a buffer has one number in every file.
+// src/gpu/buffers.rs), so a buffer has one number in every file.
 
 // The coefficients of src/model/free_energy.rs (`FreeEnergy`), the knobs of shape.rs,
 // forces.rs and motion.rs, and Heun's Δt and range check (monolayer.rs), in f32.

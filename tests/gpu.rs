@@ -741,9 +741,7 @@ fn stages_match_the_cpu_at_full_size() {
     compare_stages(&ctx, &m);
     assert_repeats(&ctx, &m);
     let (iterations, _) = check_friction_solve(&ctx, &m, Preconditioner::Multigrid);
-    let mut state = m.state();
-    state.warm_start.iter_mut().for_each(|u| *u = Default::default());
-    let cold = Monolayer::from_state(m.params().clone(), m.seed(), state).expect("the state loads");
+    let cold = cold_start(&m);
     let (cold_iterations, cpu_iterations) = check_friction_solve(&ctx, &cold, Preconditioner::Multigrid);
     assert!(cold_iterations <= cpu_iterations + 3, "{cold_iterations} iterations against the CPU's {cpu_iterations}");
     let (jacobi_iterations, _) = check_friction_solve(&ctx, &cold, Preconditioner::Jacobi);
@@ -890,6 +888,13 @@ fn pairs(v: &[f32]) -> Vec<[f64; 2]> {
 /// computed here in f64 from the GPU's own n and F; it is as close to an exact solve (the CPU's
 /// at 10⁻¹⁰) as the CPU's own solve at the same tolerance; the mobility is 1/[ξ_s + ξ_c N]
 /// within f32 rounding; and the pull is ξ_c Σ_{N8} n u of the GPU's u within f32 rounding.
+/// The tissue with the friction solve's warm start cleared: u = 0, so CG has to iterate.
+fn cold_start(m: &Monolayer) -> Monolayer {
+    let mut state = m.state();
+    state.warm_start.iter_mut().for_each(|u| *u = Default::default());
+    Monolayer::from_state(m.params().clone(), m.seed(), state).expect("the state loads")
+}
+
 /// One multigrid application on the GPU (the set-up of level 1 with the first restriction, the
 /// coarser levels with the coarsest inverse and the first cycle, the last sweep) against the
 /// CPU's cycle (`Multigrid::precondition`) on the same n and r: z within f32 rounding of the
@@ -899,9 +904,7 @@ fn pairs(v: &[f32]) -> Vec<[f64; 2]> {
 fn a_multigrid_application_matches_the_cpus_cycle() {
     let Some(ctx) = context() else { return };
     let warm = reduced_tissue();
-    let mut state = warm.state();
-    state.warm_start.iter_mut().for_each(|u| *u = Default::default());
-    let cold = Monolayer::from_state(warm.params().clone(), warm.seed(), state).expect("the state loads");
+    let cold = cold_start(warm);
     let p = cold.params().clone();
     let l = p.box_size;
     let gpu = GpuMonolayer::new(&ctx, &cold).expect("the monolayer fits the device");
@@ -944,9 +947,7 @@ fn a_multigrid_application_matches_the_cpus_cycle() {
 fn the_friction_solve_meets_the_cpus_tolerance() {
     let Some(ctx) = context() else { return };
     let warm = reduced_tissue();
-    let mut state = warm.state();
-    state.warm_start.iter_mut().for_each(|u| *u = Default::default());
-    let cold = Monolayer::from_state(warm.params().clone(), warm.seed(), state).expect("the state loads");
+    let cold = cold_start(warm);
     for pc in [Preconditioner::Multigrid, Preconditioner::Jacobi] {
         let (warm_iterations, _) = check_friction_solve(&ctx, warm, pc);
         let (cold_iterations, cpu_iterations) = check_friction_solve(&ctx, &cold, pc);
@@ -1082,9 +1083,7 @@ fn max_phi_difference(layout: &monolayer::gpu::Layout, gpu: &[f32], cpu: &Monola
 fn one_active_step_with_friction_matches_the_cpu() {
     let Some(ctx) = context() else { return };
     let warm = reduced_tissue();
-    let mut state = warm.state();
-    state.warm_start.iter_mut().for_each(|u| *u = Default::default());
-    let cold = Monolayer::from_state(warm.params().clone(), warm.seed(), state).expect("the state loads");
+    let cold = cold_start(warm);
     for (what, m) in [("warm start", warm), ("cold start", &cold)] {
         let step_cpu = |tolerance: f64| {
             let mut c = m.clone();

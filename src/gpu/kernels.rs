@@ -55,7 +55,8 @@ pub enum Kernel {
     /// `FrictionSolver::prepare`), r = F − C u from the warm start, and the partial sums of ‖r‖²
     /// and ‖F‖².
     CgStart,
-    /// The stop test and β, p′ = z + β p, q = C p′ and partial sums of p′·q.
+    /// The previous update's r stored, then the stop test and β, p′ = z + β p, q = C p′ and partial
+    /// sums of p′·q.
     CgProduct,
     /// α, u += α p′, p = p′, and partial sums of the new r's ‖r‖² (r − α q, stored by the next
     /// `CgProduct`): with the Jacobi preconditioner.
