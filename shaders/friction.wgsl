@@ -41,7 +41,7 @@
 @group(0) @binding(22) var<storage, read_write> partials: array<vec4<f32>>;
 @group(0) @binding(23) var<storage, read_write> solve: Solve;
 
-// The sections of `vectors` (`CgVector` in src/gpu/buffers.rs): r (stored one update behind),
+// The sections of `vectors` (`CG_VECTORS` in src/gpu/buffers.rs): r (stored one update behind),
 // p, p′ = z + β p, q = C p′ and z = M r.
 const RESIDUAL: u32 = 0u;
 const DIRECTION: u32 = 1u;

@@ -34,7 +34,7 @@
 @group(0) @binding(25) var<storage, read_write> mg_work: array<vec2<f32>>;
 // COARSEST_SIDE, OMEGA, OVER_CORRECTION and COARSE_CORRECTIONS are `model::multigrid`'s own,
 // written in front of this file by src/gpu/kernels.rs (`Kernel::wgsl`), so the two cycles
-// cannot drift apart.
+// cannot drift apart; MAX_ROW_LANES too, so that `Kernel::serial_steps` counts what runs.
 // Values per site of a level in `hierarchy`: the diagonal, four forward bonds, the mass.
 const PER_SITE: u32 = 6u;
 const DIAG: u32 = 0u;
@@ -394,8 +394,6 @@ fn coarsest_solve(lv: Level, t: u32) {
 
 // Invocations per row of the coarsest level's inverse: the most, a power of two up to
 // `MAX_ROW_LANES`, that lets every row have its own (`row_lanes` in src/gpu/kernels.rs).
-const MAX_ROW_LANES: u32 = 16u;
-
 fn row_lanes(n: u32) -> u32 {
     var lanes = 1u;
     while lanes < MAX_ROW_LANES && 2u * lanes * n <= GROUP {
@@ -526,9 +524,10 @@ fn coarse_cycle(t: u32) {
     }
 }
 
-// Level 0's part after the coarse levels (r as the latest update left it: `residual_now`): the prolongation x₀′ = x₀ + P x₁ (over-corrected) and
-// the last sweep z = x₀′ + ω D⁻¹ (r − C x₀′), x₀′ formed wherever it is needed; z into
-// `preconditioned`, and the partial sums of r·z with the stop flags (`RZ` of `partials`).
+// Level 0's part after the coarse levels, r as the latest update left it (`residual_after`):
+// the prolongation x₀′ = x₀ + P x₁ (over-corrected) and the last sweep
+// z = x₀′ + ω D⁻¹ (r − C x₀′), x₀′ formed wherever it is needed; z into its section of
+// `vectors`, and the partial sums of r·z with the stop flags (`RZ` of `partials`).
 @compute @workgroup_size(256)
 fn mg_smooth(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32,
              @builtin(workgroup_id) wg: vec3<u32>) {

@@ -841,11 +841,7 @@ fn the_range_check_flags_the_cpus_sites() {
 /// C u = n (ξ_s + ξ_c N) u − ξ_c n Σ_{N8} n u in f64 (an independent reading of Eq. 2's
 /// operator, `model::friction`), 0 where n = 0; n, u as (x, y) pairs per site.
 fn friction_operator(n: &[f64], u: &[[f64; 2]], xi_s: &[f64], xi_c: f64, l: usize) -> Vec<[f64; 2]> {
-    let at = |x: usize, dx: isize, dy: isize| {
-        let (i, j) = ((x % l) as isize, (x / l) as isize);
-        let (i, j) = ((i + dx).rem_euclid(l as isize) as usize, (j + dy).rem_euclid(l as isize) as usize);
-        j * l + i
-    };
+    let at = |x: usize, dx: isize, dy: isize| periodic_neighbour(x, dx, dy, l);
     (0..l * l)
         .map(|x| {
             if n[x] <= 0.0 {
@@ -868,6 +864,13 @@ fn friction_operator(n: &[f64], u: &[[f64; 2]], xi_s: &[f64], xi_c: f64, l: usiz
         .collect()
 }
 
+/// Site x + (dx, dy) of the periodic L × L lattice.
+fn periodic_neighbour(x: usize, dx: isize, dy: isize, l: usize) -> usize {
+    let (i, j) = ((x % l) as isize, (x / l) as isize);
+    let (i, j) = ((i + dx).rem_euclid(l as isize) as usize, (j + dy).rem_euclid(l as isize) as usize);
+    j * l + i
+}
+
 /// ‖F − C u‖/‖F‖ in f64.
 fn true_residual(n: &[f64], f: &[[f64; 2]], u: &[[f64; 2]], xi_s: &[f64], xi_c: f64, l: usize) -> f64 {
     let cu = friction_operator(n, u, xi_s, xi_c, l);
@@ -883,11 +886,6 @@ fn pairs(v: &[f32]) -> Vec<[f64; 2]> {
     v.chunks_exact(2).map(|p| [p[0] as f64, p[1] as f64]).collect()
 }
 
-/// The friction solve of Eq. 2 on the GPU (shaders/friction.wgsl), from the CPU's warm start
-/// and from a cold start (u = 0, so that CG iterates): its solution u meets the CPU's relative tolerance on the true residual ‖F − C u‖/‖F‖,
-/// computed here in f64 from the GPU's own n and F; it is as close to an exact solve (the CPU's
-/// at 10⁻¹⁰) as the CPU's own solve at the same tolerance; the mobility is 1/[ξ_s + ξ_c N]
-/// within f32 rounding; and the pull is ξ_c Σ_{N8} n u of the GPU's u within f32 rounding.
 /// The tissue with the friction solve's warm start cleared: u = 0, so CG has to iterate.
 fn cold_start(m: &Monolayer) -> Monolayer {
     let mut state = m.state();
@@ -903,8 +901,7 @@ fn cold_start(m: &Monolayer) -> Monolayer {
 #[test]
 fn a_multigrid_application_matches_the_cpus_cycle() {
     let Some(ctx) = context() else { return };
-    let warm = reduced_tissue();
-    let cold = cold_start(warm);
+    let cold = cold_start(reduced_tissue());
     let p = cold.params().clone();
     let l = p.box_size;
     let gpu = GpuMonolayer::new(&ctx, &cold).expect("the monolayer fits the device");
@@ -916,13 +913,12 @@ fn a_multigrid_application_matches_the_cpus_cycle() {
     let section = |k: usize| &vectors[2 * k * l * l..2 * (k + 1) * l * l];
     let (r, z_gpu) = (section(0), section(4));
 
-    let mut n_nb = vec![0.0; l * l];
-    for (x, nb) in n_nb.iter_mut().enumerate() {
-        let (gx, gy) = (x % l, x / l);
-        for (dx, dy) in [(1, 0), (l - 1, 0), (0, 1), (0, l - 1), (1, 1), (l - 1, 1), (1, l - 1), (l - 1, l - 1)] {
-            *nb += n[(gy + dy) % l * l + (gx + dx) % l];
-        }
-    }
+    let n_nb: Vec<f64> = (0..l * l)
+        .map(|x| {
+            let ring = (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))).filter(|&d| d != (0, 0));
+            ring.map(|(dx, dy)| n[periodic_neighbour(x, dx, dy, l)]).sum()
+        })
+        .collect();
     let mut mg = Multigrid::new(l);
     mg.setup(&n, &n_nb, &cold.lattice().xi_s, p.xi_cell);
     let mut worst: f64 = 0.0;
@@ -943,6 +939,11 @@ fn a_multigrid_application_matches_the_cpus_cycle() {
     assert!(worst <= 1e-4 * scale, "the GPU's cycle differs from the CPU's: {worst:e} of {scale:e}");
 }
 
+/// The friction solve of Eq. 2 on the GPU (shaders/friction.wgsl), from the CPU's warm start
+/// and from a cold start (u = 0, so that CG iterates): its solution u meets the CPU's relative tolerance on the true residual ‖F − C u‖/‖F‖,
+/// computed here in f64 from the GPU's own n and F; it is as close to an exact solve (the CPU's
+/// at 10⁻¹⁰) as the CPU's own solve at the same tolerance; the mobility is 1/[ξ_s + ξ_c N]
+/// within f32 rounding; and the pull is ξ_c Σ_{N8} n u of the GPU's u within f32 rounding.
 #[test]
 fn the_friction_solve_meets_the_cpus_tolerance() {
     let Some(ctx) = context() else { return };

@@ -348,7 +348,11 @@ impl Layout {
                 "max_compute_workgroups_per_dimension",
             ),
             too_large(
-                "the largest buffer in bytes (2 f32 per padded patch site, or the CG's vectors: 10 f32 per lattice site)".into(),
+                format!(
+                    "the largest buffer in bytes (2 f32 per padded patch site, or the CG's vectors: {} f32 per \
+                     lattice site)",
+                    2 * CG_VECTORS
+                ),
                 largest,
                 binding,
                 "max_storage_buffer_binding_size",

@@ -116,7 +116,7 @@ impl Preconditioner {
         }
     }
 
-    /// One CG iteration with it: the stop test, β, p and q = C p; α, u and r; z = M r.
+    /// One CG iteration with it: r stored, the stop test, β, p and q = C p; α, u and p; z = M r.
     pub fn iteration(self) -> &'static [Kernel] {
         match self {
             Preconditioner::Multigrid => {
@@ -170,9 +170,6 @@ impl Kernel {
         Kernel::MgSmooth,
         Kernel::MovePatch,
     ];
-
-    /// The patches following the cells after a step (`Monolayer::update_patches`).
-    pub const MOVE_PATCHES: [Kernel; 1] = [Kernel::MovePatch];
 
     /// One evaluation of the rate R(φ) where there is no friction solve: Σφ², A_i with Q̂_i, μ_i,
     /// f_i, then v_i and ∂_t φ_i. (In relaxation ζ = 0 and Q̂_i is not needed; it is summed
@@ -229,6 +226,14 @@ impl Kernel {
         out
     }
 
+    /// One step as the CPU's `Monolayer::step` takes it within a phase: [`Self::step`], then the
+    /// patches following the cells ([`Kernel::MovePatch`], `Monolayer::update_patches`).
+    pub fn whole_step(solve: Option<(Preconditioner, usize)>) -> Vec<Kernel> {
+        let mut out = Kernel::step(solve);
+        out.push(Kernel::MovePatch);
+        out
+    }
+
     /// The file of `shaders/` the kernel is in: its stage, named like the CPU module.
     pub fn shader_file(self) -> &'static str {
         let files = [
@@ -281,7 +286,8 @@ impl Kernel {
             use crate::model::{COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
             let cycle = format!(
                 "const COARSEST_SIDE: u32 = {COARSEST_SIDE}u;\nconst OMEGA: f32 = {:?};\n\
-                 const OVER_CORRECTION: f32 = {:?};\nconst COARSE_CORRECTIONS: u32 = {COARSE_CORRECTIONS}u;\n",
+                 const OVER_CORRECTION: f32 = {:?};\nconst COARSE_CORRECTIONS: u32 = {COARSE_CORRECTIONS}u;\n\
+                 const MAX_ROW_LANES: u32 = {MAX_ROW_LANES}u;\n",
                 OMEGA as f32, OVER_CORRECTION as f32
             );
             format!("{MODEL_WGSL}\n{FRICTION_WGSL}\n{cycle}{stage}")
@@ -481,12 +487,16 @@ const TOTAL_LANES: usize = 16;
 /// Cells listed per pass over a lattice tile (`CHUNK` in `shaders/gather.wgsl`).
 const GATHER_CHUNK: usize = 64;
 
+/// The most invocations that apply one row of the coarsest level's inverse (written into
+/// `shaders/multigrid.wgsl` by [`Kernel::wgsl`]).
+const MAX_ROW_LANES: usize = 16;
+
 /// Invocations per row when the coarsest level's inverse is applied (`row_lanes` in
-/// `shaders/multigrid.wgsl`): the most, a power of two up to 16, that gives every one of the n
-/// rows its own within a workgroup.
+/// `shaders/multigrid.wgsl`): the most, a power of two up to [`MAX_ROW_LANES`], that gives every
+/// one of the n rows its own within a workgroup.
 fn row_lanes(n: usize) -> usize {
     let mut lanes = 1;
-    while lanes < 16 && 2 * lanes * n <= LATTICE_GROUP {
+    while lanes < MAX_ROW_LANES && 2 * lanes * n <= LATTICE_GROUP {
         lanes *= 2;
     }
     lanes
@@ -728,9 +738,10 @@ impl GpuMonolayer {
         self.solve_iterations = pc.default_iterations();
     }
 
-    /// The kernels of one Heun step in the uploaded phase ([`Kernel::step`]).
+    /// The kernels of one whole step in the uploaded phase ([`Kernel::whole_step`]: the Heun
+    /// step and the patches following the cells).
     pub fn step_kernels(&self) -> Vec<Kernel> {
-        Kernel::step(self.solve())
+        Kernel::whole_step(self.solve())
     }
 
     /// One Heun step on the patches as they are, with the friction solve where the phase has
@@ -738,14 +749,14 @@ impl GpuMonolayer {
     /// `Monolayer::step_on_fixed_patches`). Whether φ left its range is in [`Slot::Fault`], per
     /// cell; whether the last solve converged, in [`Self::read_solve`].
     pub fn step_on_fixed_patches(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
-        self.run(ctx, &self.step_kernels())
+        self.run(ctx, &Kernel::step(self.solve()))
     }
 
     /// One step as the CPU's `Monolayer::step` takes it within a phase: the Heun step, then the
-    /// patches following the cells ([`Kernel::MOVE_PATCHES`]), in one submission. A cell whose
+    /// patches following the cells ([`Kernel::whole_step`]), in one submission. A cell whose
     /// patch could not follow is in [`Slot::PatchFault`].
     pub fn step(&self, ctx: &GpuContext) -> wgpu::SubmissionIndex {
-        self.run(ctx, &[self.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat())
+        self.run(ctx, &self.step_kernels())
     }
 
     /// The patches as they are on the device now (they move with every [`Self::step`]).

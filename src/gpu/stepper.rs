@@ -11,7 +11,7 @@
 use crate::gpu::buffers::{patch_storage, GpuPatch, Layout, PatchFault, Slot, SolveScalars, NO_FAULT};
 use crate::gpu::context::{GpuContext, GpuError};
 use crate::gpu::iterations::{steps_per_submission, AfterFailure, IterationRule};
-use crate::gpu::kernels::{GpuMonolayer, Kernel};
+use crate::gpu::kernels::GpuMonolayer;
 use crate::gpu::readback::read_words;
 use crate::model::{Monolayer, Params, Patch, Phase, State};
 use num_complex::Complex64 as C64;
@@ -197,7 +197,7 @@ impl GpuRun {
         if self.gpu.state().params.active != (phase == Phase::Active) as u32 {
             self.gpu.state_mut().set_phase(ctx, &self.params, phase, &self.xi_s);
         }
-        let one = [self.gpu.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat();
+        let one = self.gpu.step_kernels();
         let mut steps = steps_per_submission(self.check_every.max(1).min(n), one.len());
         if phase == Phase::Relaxation {
             steps = steps.min(self.params.relax_steps - self.step);

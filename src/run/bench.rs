@@ -344,15 +344,14 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     // from the uploaded state on (each timed step is a step of the same run); the iterations the
     // solves took decide the dispatches that work, the rest return at once.
     gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
-    let step = [gpu.step_kernels(), Kernel::MOVE_PATCHES.to_vec()].concat();
+    let step = gpu.step_kernels();
     let ms = time(&gpu, &step);
     let solve = gpu.read_solve(&ctx);
     let taken = solve.iterations[0].max(solve.iterations[1]) as usize;
-    let per_iteration = gpu.preconditioner.iteration().len();
-    let working = step.len() - 2 * (gpu.solve_iterations - taken) * per_iteration;
-    let mut working_kernels = Kernel::step(Some((gpu.preconditioner, taken)));
-    working_kernels.extend(Kernel::MOVE_PATCHES);
-    working_kernels.truncate(working);
+    // The dispatches that work: the step with only the iterations the solve took recorded (the
+    // recorded ones after them return at once), which is also what the recorded count tends to.
+    let working_kernels = Kernel::whole_step(Some((gpu.preconditioner, taken)));
+    let working = working_kernels.len();
     println!(
         "one step with the friction solve and the patches following: {} dispatches recorded ({} CG iterations per solve), {ms:.3} ms in one submission; \
          the last solve took {taken} iterations (residual {:.2e}{}), so about {working} dispatches worked, {:.2} MB at the least",
@@ -377,7 +376,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     run.advance(&ctx, steps).map_err(RunError::gpu)?;
     let per_step = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
     let adapted = run.gpu().solve_iterations;
-    let recorded_list = [Kernel::step(run.gpu().solve()), Kernel::MOVE_PATCHES.to_vec()].concat();
+    let recorded_list = run.gpu().step_kernels();
     let recorded_now = recorded_list.len();
     println!(
         "a GPU run (GpuRun, checked every {} steps): {per_step:.3} ms per step over {steps} steps; \
@@ -387,8 +386,6 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let stages: Vec<String> =
         by_stage(&recorded_list, &vec![1.0; recorded_now]).iter().map(|(f, n)| format!("{f} {n}")).collect();
     println!("dispatches recorded per step by stage (shaders/): {}", stages.join(", "));
-    // At the iterations the solve took: what the recorded count tends to when it fits them.
-    let needed = [Kernel::step(Some((gpu.preconditioner, taken))), Kernel::MOVE_PATCHES.to_vec()].concat();
     let coarse: u64 = recorded_list
         .iter()
         .filter(|&&k| matches!(k, Kernel::MgCoarseCycle | Kernel::MgSetUpCoarse))
@@ -398,7 +395,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
         "at the {taken} iterations the solve took: {} dispatches per step; longest serial chain per step (loop \
          iterations one after another on one invocation, Kernel::serial_steps): {} as recorded, {coarse} of them in \
          the coarse levels",
-        needed.len(),
+        working,
         crate::gpu::serial_chain(&recorded_list, run.gpu().state())
     );
     // Each dispatch timed on the device, in its own pass between two timestamps: one step from
