@@ -27,8 +27,8 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use monolayer::gpu::{
-    patch_storage, GpuContext, GpuMonolayer, GpuRun, GpuRunError, Kernel, Layout, PatchFault, Preconditioner, Slot,
-    NO_FAULT,
+    patch_storage, GpuContext, GpuMonolayer, GpuRun, GpuRunError, Kernel, Layout, PatchFault, Pipelines,
+    Preconditioner, Slot, NO_FAULT,
 };
 use monolayer::model::{
     friction_weight, Advection, FreeEnergy, FrictionProblem, FrictionSolver, FrictionWeights, Laplacian, Multigrid,
@@ -1523,4 +1523,30 @@ fn a_run_on_the_gpu_engine_writes_the_cpus_frames() {
     let out = common::monolayer(&["run", "--resume", common::arg(&gpu_dir), "--engine", "cpu"]);
     assert!(!out.status.success());
     assert!(common::stderr(&out).contains("stepped by the gpu-f32 engine"), "{}", common::stderr(&out));
+}
+
+/// The kernels compiled one at a time, each awaited (as the page does, to show progress), make
+/// the same run as the kernels compiled together: the same pipelines in the same order.
+#[test]
+fn kernels_compiled_one_at_a_time_make_the_same_run() {
+    let Some(ctx) = context() else { return };
+    let m = reduced_tissue();
+    let compiled: Vec<_> = Kernel::ALL
+        .iter()
+        .map(|&k| pollster::block_on(monolayer::gpu::compile(&ctx, k)).expect("every kernel compiles"))
+        .collect();
+    let mut one_by_one = GpuRun::with_pipelines(&ctx, Pipelines::from_compiled(compiled), m).expect("it fits");
+    let mut together = GpuRun::new(&ctx, m).expect("it fits");
+    for run in [&mut one_by_one, &mut together] {
+        run.check_every = 5;
+        run.advance(&ctx, 10).expect("the GPU steps");
+    }
+    let bits = |run: &GpuRun| {
+        let m = run.download_now(&ctx);
+        m.cells()
+            .iter()
+            .flat_map(|c| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+            .collect::<Vec<_>>()
+    };
+    assert!(bits(&one_by_one) == bits(&together), "the kernels compiled one at a time stepped otherwise");
 }

@@ -14,6 +14,8 @@ pub enum GpuError {
     NoDevice { adapter: String, reason: String },
     #[error("{what} is {value}, beyond this device's limit {limit} (wgpu `Limits::{limit_name}`)")]
     TooLarge { what: String, value: u64, limit: u64, limit_name: &'static str },
+    #[error("the kernel {kernel} did not compile on this device: {reason}")]
+    Kernel { kernel: &'static str, reason: String },
     #[error("the GPU device failed: {0}")]
     Failed(String),
 }

@@ -14,6 +14,7 @@ use crate::gpu::context::{GpuContext, GpuError};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::readback::read_now;
 use crate::model::Monolayer;
+use std::future::Future;
 
 const MODEL_WGSL: &str = include_str!("../../shaders/model.wgsl");
 const GATHER_WGSL: &str = include_str!("../../shaders/gather.wgsl");
@@ -563,8 +564,19 @@ pub struct Pipelines {
 }
 
 impl Pipelines {
+    /// Every kernel at once, without waiting for the device to take them (a browser then
+    /// compiles them before the first submission runs).
     pub fn new(ctx: &GpuContext) -> Self {
         let pipelines = Kernel::ALL.iter().map(|&k| pipeline(ctx, k)).collect();
+        Pipelines { pipelines }
+    }
+
+    /// The pipelines [`compile`] made, one per kernel in the order of [`Kernel::ALL`].
+    ///
+    /// # Panics
+    /// If there are not as many as kernels.
+    pub fn from_compiled(pipelines: Vec<wgpu::ComputePipeline>) -> Self {
+        assert_eq!(pipelines.len(), Kernel::ALL.len(), "one pipeline per kernel, in the order of Kernel::ALL");
         Pipelines { pipelines }
     }
 
@@ -573,8 +585,45 @@ impl Pipelines {
     }
 }
 
+/// One kernel's pipeline, resolved once the device has taken it: a browser compiles in its GPU
+/// process, so awaiting each kernel in turn lets a page show the compilation's progress (about
+/// 7 s for all of them on SwiftShader). An error names the kernel.
+pub fn compile(
+    ctx: &GpuContext,
+    kernel: Kernel,
+) -> impl Future<Output = Result<wgpu::ComputePipeline, GpuError>> + 'static {
+    compile_wgsl(ctx, &kernel.wgsl(), kernel.source().1)
+}
+
+/// [`compile`] of WGSL source and its entry point.
+fn compile_wgsl(
+    ctx: &GpuContext,
+    source: &str,
+    entry: &'static str,
+) -> impl Future<Output = Result<wgpu::ComputePipeline, GpuError>> + 'static {
+    let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let made = pipeline_from(ctx, source, entry);
+    checked(entry, made, scope.pop())
+}
+
+/// The pipeline once its error scope resolved without an error.
+async fn checked(
+    name: &'static str,
+    pipeline: wgpu::ComputePipeline,
+    errors: impl Future<Output = Option<wgpu::Error>>,
+) -> Result<wgpu::ComputePipeline, GpuError> {
+    match errors.await {
+        None => Ok(pipeline),
+        Some(e) => Err(GpuError::Kernel { kernel: name, reason: e.to_string() }),
+    }
+}
+
 fn pipeline(ctx: &GpuContext, kernel: Kernel) -> wgpu::ComputePipeline {
     let (source, entry) = (kernel.wgsl(), kernel.source().1);
+    pipeline_from(ctx, &source, entry)
+}
+
+fn pipeline_from(ctx: &GpuContext, source: &str, entry: &str) -> wgpu::ComputePipeline {
     let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(entry),
         source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -614,7 +663,11 @@ impl GpuMonolayer {
     /// Compiles the kernels and uploads the monolayer's current state; refuses a monolayer
     /// beyond the device's limits, naming the limit.
     pub fn new(ctx: &GpuContext, m: &Monolayer) -> Result<Self, GpuError> {
-        let pipelines = Pipelines::new(ctx);
+        Self::with_pipelines(ctx, Pipelines::new(ctx), m)
+    }
+
+    /// [`Self::new`] with pipelines compiled beforehand ([`compile`]).
+    pub fn with_pipelines(ctx: &GpuContext, pipelines: Pipelines, m: &Monolayer) -> Result<Self, GpuError> {
         let state = DeviceState::upload(ctx, m)?;
         let bind_groups = bind_groups(ctx, &pipelines, &state);
         Ok(GpuMonolayer {
@@ -809,6 +862,22 @@ fn bind_groups(ctx: &GpuContext, pipelines: &Pipelines, state: &DeviceState) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A kernel the device refuses is named in the error, not left to the device's panic
+    /// handler or a blank page (the page compiles each kernel with [`compile`]).
+    #[cfg(not(target_arch = "wasm32"))]
+    #[test]
+    fn a_kernel_that_does_not_compile_is_named() {
+        let ctx = match GpuContext::new() {
+            Ok(ctx) => ctx,
+            Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!("CI=true: no adapter: {e}"),
+            Err(_) => return,
+        };
+        let broken = "@compute @workgroup_size(1) fn broken() { let x: f32 = 1u; }";
+        let error = pollster::block_on(compile_wgsl(&ctx, broken, "broken")).expect_err("refused");
+        assert!(matches!(&error, GpuError::Kernel { kernel: "broken", .. }), "{error}");
+        assert!(pollster::block_on(compile(&ctx, Kernel::LatticeSums)).is_ok());
+    }
 
     /// Pipelines and bind groups are stored in the order of `Kernel::ALL` and found by
     /// `kernel as usize`; buffers likewise by `slot as usize`.

@@ -40,5 +40,7 @@ pub use buffers::{
 };
 pub use context::{GpuContext, GpuError};
 pub use iterations::LOWER_AFTER;
-pub use kernels::{serial_chain, GpuMonolayer, Kernel, Preconditioner, JACOBI_ITERATIONS, SOLVE_ITERATIONS};
+pub use kernels::{
+    compile, serial_chain, GpuMonolayer, Kernel, Pipelines, Preconditioner, JACOBI_ITERATIONS, SOLVE_ITERATIONS,
+};
 pub use stepper::{Faults, GpuRun, GpuRunError};

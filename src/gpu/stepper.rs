@@ -11,7 +11,7 @@
 use crate::gpu::buffers::{patch_storage, GpuPatch, Layout, PatchFault, Slot, SolveScalars, NO_FAULT};
 use crate::gpu::context::{GpuContext, GpuError};
 use crate::gpu::iterations::{steps_per_submission, AfterFailure, IterationRule};
-use crate::gpu::kernels::GpuMonolayer;
+use crate::gpu::kernels::{GpuMonolayer, Pipelines};
 use crate::gpu::readback::read_words;
 use crate::model::{Monolayer, Params, Patch, Phase, State};
 use num_complex::Complex64 as C64;
@@ -124,7 +124,12 @@ fn kept_buffers(ctx: &GpuContext, gpu: &GpuMonolayer) -> Vec<wgpu::Buffer> {
 impl GpuRun {
     /// Uploads the monolayer's state, in its current phase.
     pub fn new(ctx: &GpuContext, m: &Monolayer) -> Result<Self, GpuError> {
-        let gpu = GpuMonolayer::new(ctx, m)?;
+        Self::with_pipelines(ctx, Pipelines::new(ctx), m)
+    }
+
+    /// [`Self::new`] with pipelines compiled beforehand ([`crate::gpu::compile`]).
+    pub fn with_pipelines(ctx: &GpuContext, pipelines: Pipelines, m: &Monolayer) -> Result<Self, GpuError> {
+        let gpu = GpuMonolayer::with_pipelines(ctx, pipelines, m)?;
         let kept = kept_buffers(ctx, &gpu);
         Ok(GpuRun {
             gpu,

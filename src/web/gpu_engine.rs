@@ -18,11 +18,14 @@ use wasm_bindgen::prelude::*;
 use super::binding::js_err;
 
 use super::sim::{GpuState, WebSim};
-use crate::gpu::{GpuContext, GpuRun, GpuRunError};
+use crate::gpu::{compile, GpuContext, GpuRun, GpuRunError, Kernel, Pipelines};
 
 struct Engine {
     ctx: GpuContext,
     run: RefCell<Option<GpuRun>>,
+    /// The kernels compiled so far by `compile_next`, in the order of `Kernel::ALL`, until the
+    /// first upload takes them.
+    compiled: RefCell<Vec<wgpu::ComputePipeline>>,
 }
 
 impl Engine {
@@ -44,7 +47,7 @@ impl WebGpuEngine {
     /// is missing or refuses a device (the page then steps on the CPU engine).
     pub async fn create() -> Result<WebGpuEngine, JsError> {
         let ctx = GpuContext::request().await.map_err(js_err)?;
-        Ok(WebGpuEngine(Rc::new(Engine { ctx, run: RefCell::new(None) })))
+        Ok(WebGpuEngine(Rc::new(Engine { ctx, run: RefCell::new(None), compiled: RefCell::new(Vec::new()) })))
     }
 
     /// The adapter's name, backend, device type and driver.
@@ -57,15 +60,45 @@ impl WebGpuEngine {
         self.0.ctx.runs_on_cpu()
     }
 
-    /// Uploads the simulation's tissue (its parameters, substrate and cells), compiling the
-    /// kernels the first time. Throws, naming the device limit, for a tissue too large for it.
+    /// The kernels: how many there are, and how many are still to compile (`compile_next`).
+    pub fn kernels(&self) -> u32 {
+        Kernel::ALL.len() as u32
+    }
+
+    pub fn kernels_left(&self) -> u32 {
+        let done = if self.0.run.borrow().is_some() { Kernel::ALL.len() } else { self.0.compiled.borrow().len() };
+        (Kernel::ALL.len() - done) as u32
+    }
+
+    /// Compiles the next kernel and resolves, to the kernels left, once the device has taken
+    /// it (the browser compiles in its GPU process): the page shows the progress between calls.
+    /// Rejects naming a kernel the device refuses.
+    pub async fn compile_next(&self) -> Result<u32, JsError> {
+        let engine = self.0.clone();
+        let Some(&kernel) = Kernel::ALL.get(Kernel::ALL.len() - self.kernels_left() as usize) else {
+            return Ok(0);
+        };
+        let pipeline = compile(&engine.ctx, kernel).await.map_err(js_err)?;
+        engine.compiled.borrow_mut().push(pipeline);
+        Ok(self.kernels_left())
+    }
+
+    /// Uploads the simulation's tissue (its parameters, substrate and cells), the first time
+    /// with the kernels `compile_next` compiled, or compiling them all at once where it did
+    /// not finish. Throws, naming the device limit, for a tissue too large for it.
     pub fn upload(&self, sim: &WebSim) -> Result<(), JsError> {
         let m = sim.monolayer();
         let mut run = self.0.run.borrow_mut();
         match run.as_mut() {
             Some(r) => r.upload(&self.0.ctx, m).map_err(js_err),
             None => {
-                *run = Some(GpuRun::new(&self.0.ctx, m).map_err(js_err)?);
+                let compiled = std::mem::take(&mut *self.0.compiled.borrow_mut());
+                let pipelines = if compiled.len() == Kernel::ALL.len() {
+                    Pipelines::from_compiled(compiled)
+                } else {
+                    Pipelines::new(&self.0.ctx)
+                };
+                *run = Some(GpuRun::with_pipelines(&self.0.ctx, pipelines, m).map_err(js_err)?);
                 Ok(())
             }
         }

@@ -601,6 +601,15 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       }
       assert.equal(s.engine, 'gpu', `?engine=gpu with WebGPU: ${label}`);
       assert(label.startsWith('Engine: GPU (WebGPU compute, f32') && label.includes('33 cells on 80²'), `engine label: ${label}`);
+      // The kernels were compiled one at a time before the engine was chosen, the page told
+      // each step ("… 0 of N" to "… N−1 of N", shown over the view), the message gone after.
+      const progress = await p.evaluate(() => window.demo.progress);
+      const total = Number(/of (\d+)$/.exec(progress[0]?.text ?? '')?.[1]);
+      assert(total > 10, `the kernels' progress: ${JSON.stringify(progress)}`);
+      assert.deepEqual(progress.map((e) => e.text), [...Array(total).keys()].map((k) => `compiling the GPU engine's kernels: ${k} of ${total}`));
+      assert(await p.isHidden('#message'), 'the progress message stays after the engine was chosen');
+      const compileMs = progress.at(-1).at - progress[0].at;
+      console.log(`       the GPU engine's kernels on SwiftShader: ${total - 1} of ${total} compiled in ${compileMs.toFixed(0)} ms`);
       const stepped = (q, n) => q.evaluate(async (n) => {
         const ms = await window.demo.call('step', n);
         const st = await window.demo.call('stats');
@@ -657,7 +666,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       assert.equal(gpu.rows, cpu.rows, `readout rows: GPU ${gpu.rows}, CPU ${cpu.rows}`);
       assert.equal(gpu.rows, 2, 'rows at steps 1500 and 1510');
       const worst = Math.max(...gpu.phiSum.map((v, i) => Math.abs(v - cpu.phiSum[i])));
-      Object.assign(m.gpuEngine, { steps: GPU_STEPS, msPerStep: gpu.ms / GPU_STEPS, cpuMsPerStep: cpu.ms / GPU_STEPS, maxPhiSumDifference: worst });
+      Object.assign(m.gpuEngine, { kernels: total, compileMs, steps: GPU_STEPS, msPerStep: gpu.ms / GPU_STEPS, cpuMsPerStep: cpu.ms / GPU_STEPS, maxPhiSumDifference: worst });
       console.log(`       GPU engine on SwiftShader: ${(gpu.ms / GPU_STEPS).toFixed(0)} ms/step (CPU engine ${(cpu.ms / GPU_STEPS).toFixed(1)}); max |ΣφGPU − ΣφCPU| after ${GPU_STEPS} steps = ${worst.toExponential(2)}`);
       assert(worst <= 1e-4, `the GPU engine's Σφ is ${worst} from the CPU engine's after ${GPU_STEPS} steps`);
       assert(Math.abs(gpu.packing - cpu.packing) <= 1e-3, `packing ${gpu.packing} vs ${cpu.packing}`);

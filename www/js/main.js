@@ -16,7 +16,7 @@ const canvas = $('view');
 const message = $('message');
 
 // Everything the tests read lives here too (window.demo); `demo.call` reaches the simulation.
-const demo = { ready: false, error: null, notices: [], firstHole: null, loadedAt: performance.now(), worker: true };
+const demo = { ready: false, error: null, notices: [], progress: [], firstHole: null, loadedAt: performance.now(), worker: true };
 window.demo = demo;
 
 // The renderer, the state (what the URL carries), the pending screenshot, and the last stats
@@ -73,6 +73,13 @@ function call(method, ...args) {
 }
 demo.call = call;
 
+// Whether the message over the view is the worker's progress (hidden once it is done).
+let progressShown = false;
+function hideProgress() {
+  if (progressShown) message.hidden = true;
+  progressShown = false;
+}
+
 worker.onerror = (e) => fatal('The simulation worker failed', e.message ?? e);
 worker.onmessage = (e) => {
   const m = e.data;
@@ -85,12 +92,20 @@ worker.onmessage = (e) => {
     calls.delete(m.id);
     if ('error' in m) c.reject(new Error(m.error));
     else c.resolve(m.value);
+  } else if (m.type === 'progress') {
+    // The GPU engine's kernels compiling (once per device): shown over the view until the
+    // engine is chosen.
+    demo.progress.push({ text: m.text, at: performance.now() });
+    showMessage(`${m.text[0].toUpperCase()}${m.text.slice(1)}…`);
+    progressShown = true;
   } else if (m.type === 'engine') {
+    hideProgress();
     page.stats = m.stats;
     showEngine(m.stats);
     if (m.lost) notify([`${m.lost[0].toUpperCase()}${m.lost.slice(1)}.`]);
     onEngine?.();
   } else if (m.type === 'ready') {
+    hideProgress();
     page.stats = m.stats;
     showEngine(m.stats);
     showOrigin(m.stats);

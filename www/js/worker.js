@@ -11,7 +11,7 @@
 // Messages in: { type: 'new', size, params, seed, shipped (a shipped state's URL, or null),
 // engine ('auto' | 'cpu' | 'gpu') }, { type: 'engine', engine }, { type: 'play', on }, { type: 'spf', n },
 // { type: 'frame', field, dpr }, { type: 'call', id, method, args }.
-// Messages out: { type: 'ready', info }, { type: 'engine', stats }, { type: 'frame', parts, stats }, { type: 'stopped', why,
+// Messages out: { type: 'ready', info }, { type: 'progress', text }, { type: 'engine', stats }, { type: 'frame', parts, stats }, { type: 'stopped', why,
 // active }, { type: 'result', id, value | error }, { type: 'fatal', message }.
 
 import init, { WebSim, WebPlayback, WebGpuEngine } from '../pkg/monolayer.js';
@@ -186,6 +186,17 @@ function gpuDeviceOnce(found) {
   return gpuDevice;
 }
 
+// The GPU engine's kernels, compiled one at a time (once per device), the page told the
+// progress before each: the browser compiles them in its GPU process before their first use,
+// which would otherwise hold the first step (about 7 s on SwiftShader) with nothing shown.
+async function compileKernels(engine) {
+  const total = engine.kernels();
+  for (let left = engine.kernels_left(); left > 0; ) {
+    postMessage({ type: 'progress', text: `compiling the GPU engine's kernels: ${total - left} of ${total}` });
+    left = await engine.compile_next();
+  }
+}
+
 // Chooses the engine for a new tissue: 'gpu' wherever WebGPU compute works, 'cpu' always, and
 // 'auto' the GPU on a hardware adapter and the CPU on a software one, where it is faster.
 async function chooseEngine(wanted) {
@@ -207,6 +218,12 @@ async function chooseEngine(wanted) {
   const d = await gpuDeviceOnce(found);
   if (d.error) {
     gpuNote = `${d.error}: stepping on the CPU engine`;
+    return;
+  }
+  try {
+    await compileKernels(d.engine);
+  } catch (e) {
+    gpuNote = `the GPU engine's kernels did not compile (${e.message ?? e}): stepping on the CPU engine`;
     return;
   }
   try {
