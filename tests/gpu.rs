@@ -778,7 +778,8 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
         "{text}"
     );
     assert!(text.contains("PROJECTION for a laptop GPU, not a measurement"), "{text}");
-    assert!(text.contains("a GPU run (GpuRun, checked every 50 steps)"), "{text}");
+    assert!(text.contains("a GPU run (GpuRun, checked every 50 steps, 2 submissions under way)"), "{text}");
+    assert!(text.contains("one submission at a time"), "{text}");
     let stages = text.lines().find(|l| l.starts_with("dispatches recorded per step by stage")).expect("the stages");
     assert!(stages.contains("gather.wgsl") && !stages.contains('?'), "a kernel without its shader file: {stages}");
     assert!(text.contains("longest serial chain per step"), "{text}");
@@ -1549,4 +1550,27 @@ fn kernels_compiled_one_at_a_time_make_the_same_run() {
             .collect::<Vec<_>>()
     };
     assert!(bits(&one_by_one) == bits(&together), "the kernels compiled one at a time stepped otherwise");
+}
+
+/// Submissions kept under way while the last one's faults are read give the run of one
+/// submission at a time, bit for bit, through the switch to activity and the solves' adapting
+/// iterations (the next submission is recorded before the last one's count was settled).
+#[test]
+fn submissions_under_way_together_make_the_run_of_one_at_a_time() {
+    let Some(ctx) = context() else { return };
+    let r = relaxing_tissue();
+    let run = |in_flight: usize| {
+        let mut run = GpuRun::new(&ctx, r).expect("the monolayer fits the device");
+        run.check_every = 3;
+        run.max_in_flight = in_flight;
+        let steps = r.params().relax_steps - r.step_count() + 20;
+        run.advance(&ctx, steps).expect("the GPU steps");
+        assert_eq!(run.step_count(), r.step_count() + steps);
+        let m = run.download_now(&ctx);
+        m.cells()
+            .iter()
+            .flat_map(|c| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+            .collect::<Vec<_>>()
+    };
+    assert!(run(monolayer::gpu::IN_FLIGHT) == run(1), "submissions under way together changed the run");
 }

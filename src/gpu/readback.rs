@@ -29,7 +29,7 @@ pub fn read_words(
         encoder.copy_buffer_to_buffer(b, 0, &staging, offset, size);
         offset += size;
     }
-    ctx.queue.submit([encoder.finish()]);
+    let submission = ctx.queue.submit([encoder.finish()]);
     let (tx, rx) = futures_channel::oneshot::channel();
     staging.map_async(wgpu::MapMode::Read, .., move |r| {
         // The receiver is gone only if the future was dropped: nobody wants the words then.
@@ -42,10 +42,14 @@ pub fn read_words(
             record(&fault, why.clone());
             GpuError::Failed(why)
         };
+        // This copy's own submission, not the latest: a submission queued behind it (the next
+        // steps, submitted ahead) goes on running while its words are read.
         #[cfg(not(target_arch = "wasm32"))]
-        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| fail(format!("waiting for the device: {e}")))?;
+        device
+            .poll(wgpu::PollType::Wait { submission_index: Some(submission), timeout: None })
+            .map_err(|e| fail(format!("waiting for the device: {e}")))?;
         #[cfg(target_arch = "wasm32")]
-        let _ = device;
+        let _ = (device, submission);
         let mapped = rx.await.map_err(|_| fail("the readback's map was dropped".into()))?;
         mapped.map_err(|e| fail(format!("a readback did not map: {e}")))?;
         let data = staging.get_mapped_range(..).map_err(|e| fail(format!("a readback's range: {e}")))?;

@@ -5,8 +5,10 @@
 //! good state).
 //!
 //! The same code on both targets: a submission is recorded at once ([`GpuRun::submit`]), its
-//! faults arrive as a future ([`GpuRun::read_faults`]) that a browser awaits from its event
-//! loop and a native caller blocks on ([`GpuRun::advance`]), and [`GpuRun::settle`] decides.
+//! faults arrive as a future ([`Submitted::faults`]) that a browser awaits from its event loop
+//! and a native caller blocks on ([`GpuRun::advance`]), and [`GpuRun::settle`] decides. Up to
+//! [`IN_FLIGHT`] submissions are under way at once, so that the device steps the next while
+//! the host reads the last one's faults; a submission put back takes the ones after it along.
 
 use crate::gpu::buffers::{patch_storage, GpuPatch, Layout, PatchFault, Slot, SolveScalars, NO_FAULT};
 use crate::gpu::context::{GpuContext, GpuError};
@@ -15,7 +17,9 @@ use crate::gpu::kernels::{GpuMonolayer, Pipelines};
 use crate::gpu::readback::read_words;
 use crate::model::{Monolayer, Params, Patch, Phase, State};
 use num_complex::Complex64 as C64;
+use std::collections::VecDeque;
 use std::future::Future;
+use std::pin::Pin;
 
 /// Why a GPU run stopped; the state is back at the start of the steps named.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -39,6 +43,8 @@ pub enum GpuRunError {
 /// The sticky faults of one submission, read back together.
 #[derive(Clone, Debug)]
 pub struct Faults {
+    /// The submission they are of ([`Submitted::id`]).
+    pub submission: u64,
     /// Per cell, the first padded index where φ left its range, or [`NO_FAULT`].
     pub range: Vec<u32>,
     /// Per cell, a [`PatchFault`] code.
@@ -74,6 +80,30 @@ impl Faults {
 /// start of each submission.
 const KEPT: [Slot; 3] = [Slot::Phi, Slot::Patches, Slot::MeanVelocity];
 
+/// Submissions under way at most: the one whose faults are being read, and the next, which
+/// the device steps meanwhile. Each keeps its own copy of the state at its start.
+pub const IN_FLIGHT: usize = 2;
+
+/// The faults of a submission, on their way back.
+pub type FaultsReadback = Pin<Box<dyn Future<Output = Result<Faults, GpuError>>>>;
+
+/// A submission under way: its steps, and the readback of its faults, queued right behind it.
+pub struct Submitted {
+    /// Which submission (increasing); [`Faults::submission`] names it.
+    pub id: u64,
+    pub steps: u64,
+    pub faults: FaultsReadback,
+}
+
+/// A submission not settled yet: its steps and the copy of the state kept at their start.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    id: u64,
+    from: u64,
+    to: u64,
+    kept: usize,
+}
+
 /// Which way [`GpuRun::copy_kept`] copies.
 #[derive(Clone, Copy)]
 enum Keep {
@@ -88,13 +118,19 @@ pub struct GpuRun {
     seed: u64,
     /// Steps taken and checked.
     step: u64,
-    /// The steps submitted and not yet settled, as (from, to).
-    pending: Option<(u64, u64)>,
+    /// The submissions not yet settled, oldest first.
+    pending: VecDeque<Pending>,
+    /// The id of the next submission.
+    next_id: u64,
     substrate: Vec<f64>,
     xi_s: Vec<f64>,
-    kept: Vec<wgpu::Buffer>,
+    /// Per submission in flight, the state at its start ([`KEPT`]).
+    kept: Vec<Vec<wgpu::Buffer>>,
     /// Steps between fault checks (each check one readback of a few hundred bytes).
     pub check_every: u64,
+    /// Submissions [`Self::advance`] keeps under way, 1 to [`IN_FLIGHT`] (default
+    /// [`IN_FLIGHT`]; the same steps either way).
+    pub max_in_flight: usize,
     /// Whether the recorded solve iterations follow what the solves need ([`Self::settle`]).
     pub adapt_iterations: bool,
     /// How they follow it; made from the recorded count when first needed, and again when the
@@ -108,17 +144,20 @@ pub struct GpuRun {
 const FEWEST_ITERATIONS: f64 = 0.25;
 const MOST_ITERATIONS: usize = 8;
 
-fn kept_buffers(ctx: &GpuContext, gpu: &GpuMonolayer) -> Vec<wgpu::Buffer> {
-    KEPT.iter()
-        .map(|&s| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("kept"),
-                size: gpu.state().buffer(s).size(),
-                usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
+fn kept_buffers(ctx: &GpuContext, gpu: &GpuMonolayer) -> Vec<Vec<wgpu::Buffer>> {
+    let one = || {
+        KEPT.iter()
+            .map(|&s| {
+                ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("kept"),
+                    size: gpu.state().buffer(s).size(),
+                    usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
             })
-        })
-        .collect()
+            .collect()
+    };
+    (0..IN_FLIGHT).map(|_| one()).collect()
 }
 
 impl GpuRun {
@@ -136,11 +175,13 @@ impl GpuRun {
             params: m.params().clone(),
             seed: m.seed(),
             step: m.step_count(),
-            pending: None,
+            pending: VecDeque::new(),
+            next_id: 0,
             substrate: m.lattice().substrate.clone(),
             xi_s: m.lattice().xi_s.clone(),
             kept,
             check_every: 50,
+            max_in_flight: IN_FLIGHT,
             adapt_iterations: true,
             rule: None,
         })
@@ -159,7 +200,8 @@ impl GpuRun {
         self.params = m.params().clone();
         self.seed = m.seed();
         self.step = m.step_count();
-        self.pending = None;
+        // Whatever was under way ran on the buffers replaced: its faults settle nothing.
+        self.pending.clear();
         self.substrate = m.lattice().substrate.clone();
         self.xi_s = m.lattice().xi_s.clone();
         Ok(())
@@ -167,6 +209,16 @@ impl GpuRun {
 
     pub fn step_count(&self) -> u64 {
         self.step
+    }
+
+    /// The step the submissions under way end at (the steps taken, if none is).
+    pub fn submitted_to(&self) -> u64 {
+        self.pending.back().map_or(self.step, |p| p.to)
+    }
+
+    /// Submissions under way, not yet settled (at most [`IN_FLIGHT`]).
+    pub fn in_flight(&self) -> usize {
+        self.pending.len()
     }
 
     pub fn params(&self) -> &Params {
@@ -190,34 +242,42 @@ impl GpuRun {
         }
     }
 
-    /// Keeps the state, then records up to `n` steps in one submission: at most
-    /// `check_every`, and none across the switch to activity. Returns the steps submitted,
-    /// which [`Self::settle`] then accepts or puts back.
+    /// Keeps the state, then records up to `n` steps in one submission after those under way:
+    /// at most `check_every`, and none across the switch to activity. Returns the steps
+    /// submitted with the readback of their faults, queued right behind them, which
+    /// [`Self::settle`] then takes; `None` if there is nothing to submit (`n` = 0).
     ///
     /// # Panics
-    /// If a submission is still pending (submit, read the faults, settle, in that order).
-    pub fn submit(&mut self, ctx: &GpuContext, n: u64) -> u64 {
-        assert!(self.pending.is_none(), "the last submission must be settled before the next");
-        let phase = self.phase_at(self.step);
+    /// If [`IN_FLIGHT`] submissions are under way already (settle the oldest first).
+    pub fn submit(&mut self, ctx: &GpuContext, n: u64) -> Option<Submitted> {
+        assert!(self.pending.len() < IN_FLIGHT, "at most {IN_FLIGHT} submissions under way: settle the oldest first");
+        let from = self.submitted_to();
+        let phase = self.phase_at(from);
         if self.gpu.state().params.active != (phase == Phase::Active) as u32 {
             self.gpu.state_mut().set_phase(ctx, &self.params, phase, &self.xi_s);
         }
         let one = self.gpu.step_kernels();
         let mut steps = steps_per_submission(self.check_every.max(1).min(n), one.len());
         if phase == Phase::Relaxation {
-            steps = steps.min(self.params.relax_steps - self.step);
+            steps = steps.min(self.params.relax_steps - from);
         }
         if steps == 0 {
-            return 0;
+            return None;
         }
+        let id = self.next_id;
+        self.next_id += 1;
+        let kept = (id % IN_FLIGHT as u64) as usize;
+        // Queue writes land after the submissions before and before this one: each submission
+        // starts with no faults, and its readback, queued next, sees its own.
+        self.gpu.state().reset_faults(ctx);
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
-        self.copy_kept(&mut encoder, Keep::Store);
+        self.copy_kept(&mut encoder, kept, Keep::Store);
         for _ in 0..steps {
             self.gpu.encode(&mut encoder, &one);
         }
         ctx.queue.submit([encoder.finish()]);
-        self.pending = Some((self.step, self.step + steps));
-        steps
+        self.pending.push_back(Pending { id, from, to: from + steps, kept });
+        Some(Submitted { id, steps, faults: Box::pin(self.read_faults(ctx, id)) })
     }
 
     /// The iteration rule, in step with the recorded count (made anew if it was set from
@@ -233,9 +293,10 @@ impl GpuRun {
         self.rule.as_mut().expect("made above")
     }
 
-    /// Copies the state aside (before a submission) or back (after a fault).
-    fn copy_kept(&self, encoder: &mut wgpu::CommandEncoder, keep: Keep) {
-        for (&slot, kept) in KEPT.iter().zip(&self.kept) {
+    /// Copies the state aside into copy `index` (before a submission) or back from it (after a
+    /// fault).
+    fn copy_kept(&self, encoder: &mut wgpu::CommandEncoder, index: usize, keep: Keep) {
+        for (&slot, kept) in KEPT.iter().zip(&self.kept[index]) {
             let live = self.gpu.state().buffer(slot);
             let (from, to) = match keep {
                 Keep::Store => (live, kept),
@@ -245,27 +306,35 @@ impl GpuRun {
         }
     }
 
-    /// The sticky faults once every submitted step has finished: one readback. An error if the
+    /// The sticky faults as they are after the last submission: one readback. An error if the
     /// device failed (lost, or the readback did not map): nothing it computed is used then.
-    pub fn read_faults(&self, ctx: &GpuContext) -> impl Future<Output = Result<Faults, GpuError>> + 'static {
+    fn read_faults(
+        &self,
+        ctx: &GpuContext,
+        submission: u64,
+    ) -> impl Future<Output = Result<Faults, GpuError>> + 'static {
         let s = self.gpu.state();
         let words = read_words(ctx, &[s.buffer(Slot::Fault), s.buffer(Slot::PatchFault), s.buffer(Slot::Solve)]);
         async move {
             let [range, patch, solve]: [Vec<u32>; 3] = words.await?.try_into().expect("three buffers read");
-            Ok(Faults { range, patch, solve: *bytemuck::from_bytes(bytemuck::cast_slice(&solve)) })
+            Ok(Faults { submission, range, patch, solve: *bytemuck::from_bytes(bytemuck::cast_slice(&solve)) })
         }
     }
 
-    /// Accepts the pending steps (`Ok(true)`), or on a fault puts the state kept at their start
-    /// back and clears the faults. A solve that missed its tolerance within the recorded
+    /// Takes the faults of the oldest submission under way: accepts its steps (`Ok(true)`), or
+    /// on a fault puts the state kept at their start back, and the submissions after it with
+    /// it (they stepped from a state not taken). Faults of a submission already put back so
+    /// settle nothing (`Ok(false)`). A solve that missed its tolerance within the recorded
     /// iterations, while they may still grow (`adapt_iterations`), grows them and asks for the
     /// same steps again (`Ok(false)`): a solve that converges gives the same bits whatever the
     /// iterations recorded after it, so the run is the one a larger count would have made.
     /// Otherwise the error says what happened. After accepted steps the count follows what the
     /// solves took (`IterationRule`: lowered slowly, never back to a count that failed lately).
     pub fn settle(&mut self, ctx: &GpuContext, faults: &Faults) -> Result<bool, GpuRunError> {
-        let Some((from, to)) = self.pending.take() else { return Ok(true) };
-        self.gpu.state().reset_faults(ctx);
+        if self.pending.front().is_none_or(|p| p.id != faults.submission) {
+            return Ok(false);
+        }
+        let Pending { from, to, kept, .. } = self.pending.pop_front().expect("checked above");
         let adapts = self.adapt_iterations && self.gpu.solve().is_some();
         let error = match faults.error(from, to) {
             None => {
@@ -286,20 +355,23 @@ impl GpuRun {
             },
             Some(e) => Some(e),
         };
+        // Queued behind the submissions put back with this one, so it is their end it replaces.
+        self.pending.clear();
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("restore") });
-        self.copy_kept(&mut encoder, Keep::Restore);
+        self.copy_kept(&mut encoder, kept, Keep::Restore);
         ctx.queue.submit([encoder.finish()]);
         error.map_or(Ok(false), Err)
     }
 
-    /// The state on the device as a CPU monolayer (φ rounded from f32), once every submitted
-    /// step has finished: one readback. Ask for it with nothing pending, so that its step
-    /// count is the state's. An error if the device failed.
+    /// The state on the device after every step submitted so far, as a CPU monolayer (φ
+    /// rounded from f32), at [`Self::submitted_to`]: one readback, queued now. With
+    /// submissions under way it is their end, to be used once they are accepted. An error if
+    /// the device failed.
     pub fn download(&self, ctx: &GpuContext) -> impl Future<Output = Result<Monolayer, GpuError>> + 'static {
-        assert!(self.pending.is_none(), "download a settled state");
         let s = self.gpu.state();
         let words = read_words(ctx, &[s.buffer(Slot::Patches), s.buffer(Slot::Phi), s.buffer(Slot::MeanVelocity)]);
-        let (params, seed, step, substrate) = (self.params.clone(), self.seed, self.step, self.substrate.clone());
+        let (params, seed, step, substrate) =
+            (self.params.clone(), self.seed, self.submitted_to(), self.substrate.clone());
         async move {
             let [patches, phi, u]: [Vec<u32>; 3] = words.await?.try_into().expect("three buffers read");
             let patches: &[GpuPatch] = bytemuck::cast_slice(&patches);
@@ -316,18 +388,25 @@ impl GpuRun {
         }
     }
 
-    /// `n` steps, blocking (native): submissions of at most `check_every` steps, each checked.
-    /// A cell that outgrows its storage is met as the CPU would never meet it: the state of
-    /// the start of that submission is uploaded again with room for the patches it has then,
-    /// and the steps are taken again. On any other fault the state is back at the start of the
-    /// submission and the error names its steps and the cell.
+    /// `n` steps, blocking (native): submissions of at most `check_every` steps, each checked,
+    /// [`IN_FLIGHT`] under way at once. A cell that outgrows its storage is met as the CPU would
+    /// never meet it: the state of the start of that submission is uploaded again with room for
+    /// the patches it has then, and the steps are taken again. On any other fault the state is
+    /// back at the start of the submission and the error names its steps and the cell.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn advance(&mut self, ctx: &GpuContext, n: u64) -> Result<(), GpuRunError> {
-        let end = self.step + n;
+        let end = self.submitted_to() + n;
+        let mut readbacks = VecDeque::new();
         let mut regrown_at = None;
         while self.step < end {
-            self.submit(ctx, end - self.step);
-            let faults = pollster::block_on(self.read_faults(ctx))
+            while self.in_flight() < self.max_in_flight.clamp(1, IN_FLIGHT) {
+                match self.submit(ctx, end - self.submitted_to()) {
+                    Some(s) => readbacks.push_back(s.faults),
+                    None => break,
+                }
+            }
+            let readback = readbacks.pop_front().expect("a submission is under way while steps are left");
+            let faults = pollster::block_on(readback)
                 .map_err(|e| GpuRunError::Device { from: self.step, reason: e.to_string() })?;
             match self.settle(ctx, &faults) {
                 Err(GpuRunError::BeyondCapacity { from, .. }) if regrown_at != Some(from) => {
@@ -338,6 +417,8 @@ impl GpuRun {
                     result?;
                 }
             }
+            // Put back with a failed submission, the ones after it settle nothing.
+            readbacks.truncate(self.in_flight());
         }
         Ok(())
     }

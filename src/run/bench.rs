@@ -375,13 +375,20 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     let steps = 2 * run.check_every;
     run.advance(&ctx, steps).map_err(RunError::gpu)?;
     let per_step = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
+    // The same steps on, one submission at a time: what keeping the next under way saves.
+    run.max_in_flight = 1;
+    let t = Instant::now();
+    run.advance(&ctx, steps).map_err(RunError::gpu)?;
+    let one_at_a_time = 1e3 * t.elapsed().as_secs_f64() / steps as f64;
     let adapted = run.gpu().solve_iterations;
     let recorded_list = run.gpu().step_kernels();
     let recorded_now = recorded_list.len();
     println!(
-        "a GPU run (GpuRun, checked every {} steps): {per_step:.3} ms per step over {steps} steps; \
-         the recorded CG iterations went from {recorded} to {adapted} per solve, {recorded_now} dispatches recorded per step",
-        run.check_every
+        "a GPU run (GpuRun, checked every {} steps, {} submissions under way): {per_step:.3} ms per step over {steps} \
+         steps ({one_at_a_time:.3} ms the next {steps}, one submission at a time); the recorded CG iterations went \
+         from {recorded} to {adapted} per solve, {recorded_now} dispatches recorded per step",
+        run.check_every,
+        crate::gpu::IN_FLIGHT
     );
     let stages: Vec<String> =
         by_stage(&recorded_list, &vec![1.0; recorded_now]).iter().map(|(f, n)| format!("{f} {n}")).collect();

@@ -5,12 +5,16 @@
 //! drawn and read out comes from the same `analysis` code as on the CPU engine.
 //!
 //! The worker's loop: `submit(n)` records up to n steps in one submission (at most
-//! `check_every`, none across the switch to activity); `check()` resolves once they ran and
-//! their faults were read (one small readback, awaited from the event loop: a browser cannot
-//! block); `download()` resolves to the state, which `WebSim::adopt` takes. An edit of the
-//! tissue (a slider, a brush, a removed cell) is made on the `WebSim` and uploaded again.
+//! `check_every`, none across the switch to activity) after those under way, up to
+//! `in_flight_max` of them, so the device steps the next while the last is checked; `check()`
+//! resolves once the oldest ran and its faults were read (one small readback, queued behind it
+//! and awaited from the event loop: a browser cannot block); `download()` queues the readback
+//! of the state the submissions under way end at and resolves to it, which `WebSim::adopt`
+//! takes once they are accepted. An edit of the tissue (a slider, a brush, a removed cell) is
+//! made on the `WebSim` and uploaded again.
 
 use std::cell::RefCell;
+use std::collections::VecDeque;
 use std::rc::Rc;
 
 use wasm_bindgen::prelude::*;
@@ -18,7 +22,7 @@ use wasm_bindgen::prelude::*;
 use super::binding::js_err;
 
 use super::sim::{GpuState, WebSim};
-use crate::gpu::{compile, GpuContext, GpuRun, GpuRunError, Kernel, Pipelines};
+use crate::gpu::{compile, FaultsReadback, GpuContext, GpuRun, GpuRunError, Kernel, Pipelines, IN_FLIGHT};
 
 struct Engine {
     ctx: GpuContext,
@@ -26,6 +30,8 @@ struct Engine {
     /// The kernels compiled so far by `compile_next`, in the order of `Kernel::ALL`, until the
     /// first upload takes them.
     compiled: RefCell<Vec<wgpu::ComputePipeline>>,
+    /// The faults of the submissions under way, oldest first, on their way back.
+    readbacks: RefCell<VecDeque<FaultsReadback>>,
 }
 
 impl Engine {
@@ -47,7 +53,8 @@ impl WebGpuEngine {
     /// is missing or refuses a device (the page then steps on the CPU engine).
     pub async fn create() -> Result<WebGpuEngine, JsError> {
         let ctx = GpuContext::request().await.map_err(js_err)?;
-        Ok(WebGpuEngine(Rc::new(Engine { ctx, run: RefCell::new(None), compiled: RefCell::new(Vec::new()) })))
+        let (run, compiled, readbacks) = (RefCell::new(None), RefCell::default(), RefCell::default());
+        Ok(WebGpuEngine(Rc::new(Engine { ctx, run, compiled, readbacks })))
     }
 
     /// The adapter's name, backend, device type and driver.
@@ -88,6 +95,8 @@ impl WebGpuEngine {
     /// not finish. Throws, naming the device limit, for a tissue too large for it.
     pub fn upload(&self, sim: &WebSim) -> Result<(), JsError> {
         let m = sim.monolayer();
+        // Whatever was under way stepped the state replaced: its faults settle nothing.
+        self.0.readbacks.borrow_mut().clear();
         let mut run = self.0.run.borrow_mut();
         match run.as_mut() {
             Some(r) => r.upload(&self.0.ctx, m).map_err(js_err),
@@ -104,10 +113,37 @@ impl WebGpuEngine {
         }
     }
 
-    /// Records up to `n` steps in one submission and returns how many (at most `check_every`,
-    /// none across the switch to activity); `check` must settle them before the next.
+    /// Records up to `n` steps in one submission after those under way and returns how many
+    /// (at most `check_every`, none across the switch to activity; 0 with `n` = 0); `check`
+    /// settles them in turn. Throws with `in_flight_max` submissions under way.
     pub fn submit(&self, n: u32) -> Result<u32, JsError> {
-        self.0.with_run(|r| r.submit(&self.0.ctx, n as u64) as u32)
+        let engine = &self.0;
+        let submitted = engine.with_run(|r| {
+            if r.in_flight() >= IN_FLIGHT {
+                return Err(JsError::new(
+                    "submit: as many submissions as may be are under way: check the oldest first",
+                ));
+            }
+            Ok(r.submit(&engine.ctx, n as u64))
+        })??;
+        let Some(s) = submitted else { return Ok(0) };
+        engine.readbacks.borrow_mut().push_back(s.faults);
+        Ok(s.steps as u32)
+    }
+
+    /// Submissions under way at most.
+    pub fn in_flight_max(&self) -> u32 {
+        IN_FLIGHT as u32
+    }
+
+    /// Submissions under way, not yet checked.
+    pub fn in_flight(&self) -> Result<u32, JsError> {
+        self.0.with_run(|r| r.in_flight() as u32)
+    }
+
+    /// The step the submissions under way end at.
+    pub fn submitted_to(&self) -> Result<f64, JsError> {
+        self.0.with_run(|r| r.submitted_to() as f64)
     }
 
     /// Steps between checks: the most one submission takes.
@@ -115,19 +151,24 @@ impl WebGpuEngine {
         self.0.with_run(|r| r.check_every = n.max(1) as u64)
     }
 
-    /// Resolves once the submitted steps ran and their faults were read: to true if they were
-    /// taken, false if they were put back to be taken again (a solve needed more recorded
-    /// iterations, or a cell more storage: both are then given). Rejects on a fault of the model
-    /// (φ out of range, a cell lost), the state back at the start of the submission, naming
-    /// the steps and the cell.
+    /// Resolves once the oldest submission under way ran and its faults were read: to true if
+    /// its steps were taken, false if they were put back to be taken again (a solve needed more
+    /// recorded iterations, or a cell more storage: both are then given), with the submissions
+    /// after it. Rejects on a fault of the model (φ out of range, a cell lost), the state back
+    /// at the start of the submission, naming the steps and the cell.
     ///
     /// A failure of the device itself (lost, a GPU error, a readback that did not map) also
     /// rejects; [`WebGpuEngine::device_fault`] then says what happened, and the page goes on on
     /// the CPU engine from the last state it holds.
     pub async fn check(&self) -> Result<bool, JsError> {
         let engine = self.0.clone();
-        let faults = engine.with_run(|r| r.read_faults(&engine.ctx))?.await.map_err(js_err)?;
+        let readback = engine.readbacks.borrow_mut().pop_front();
+        let Some(readback) = readback else { return Ok(true) };
+        let faults = readback.await.map_err(js_err)?;
         let settled = engine.with_run(|r| r.settle(&engine.ctx, &faults))?;
+        // Put back with a failed submission, the ones after it settle nothing.
+        let left = engine.with_run(|r| r.in_flight())?;
+        engine.readbacks.borrow_mut().truncate(left);
         match settled {
             Ok(taken) => Ok(taken),
             Err(GpuRunError::BeyondCapacity { .. }) => {
@@ -141,12 +182,15 @@ impl WebGpuEngine {
         }
     }
 
-    /// Resolves to the state on the device (φ rounded from f32), for `WebSim::adopt`: one
-    /// readback. Only between a `check` and the next `submit`.
-    pub async fn download(&self) -> Result<GpuState, JsError> {
-        let engine = self.0.clone();
-        let pending = engine.with_run(|r| r.download(&engine.ctx))?;
-        Ok(GpuState(pending.await.map_err(js_err)?))
+    /// Queues the readback of the state the submissions under way end at (`submitted_to`;
+    /// the state itself with none under way) and resolves to it, for `WebSim::adopt` once
+    /// those submissions are accepted.
+    pub fn download(&self) -> Result<js_sys::Promise, JsError> {
+        let pending = self.0.with_run(|r| r.download(&self.0.ctx))?;
+        Ok(wasm_bindgen_futures::future_to_promise(async move {
+            let m = pending.await.map_err(|e| JsValue::from(js_err(e)))?;
+            Ok(JsValue::from(GpuState(m)))
+        }))
     }
 
     /// Why the device can no longer be trusted (lost, an uncaptured GPU error, a readback that

@@ -173,6 +173,14 @@ const loop = new FrameLoop(canvas, {
   fatal: (e) => fatal('The page stopped', e),
 });
 
+// Stops or restarts asking the worker for frames, as a hidden tab does (no animation frames)
+// while the worker steps on: the browser tests check that the readouts miss no row then.
+demo.drawing = (on) => {
+  if (loop.stopped === !on) return;
+  loop.stopped = !on;
+  if (on) loop.start();
+};
+
 function draw(frame, dpr) {
   const p = frame.parts;
   const view = new WebView(p.l, p.kind, p.tissue, p.field, p.segments, p.range);

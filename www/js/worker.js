@@ -27,6 +27,11 @@ let gpuDevice = null;
 // since the last upload (upload before stepping).
 let gpuAhead = false;
 let gpuEdited = false;
+// The GPU submissions under way, oldest first (the engine keeps up to `in_flight_max`, so that
+// it steps the next while the last is checked): { k (steps), down (a Promise of the state they
+// end at, queued behind them where it is due a row of readouts or a frame, else null) }.
+let flight = [];
+const queued = () => flight.reduce((n, f) => n + f.k, 0);
 // Everything that may touch the GPU engine or replace `sim` runs in turn, one after the other
 // (a submission must be checked before the next, a download must not meet a submission):
 // `exclusive(fn)` queues fn behind the last one. `turnQueued`: a GPU turn is in the queue.
@@ -201,6 +206,7 @@ async function compileKernels(engine) {
 // 'auto' the GPU on a hardware adapter and the CPU on a software one, where it is faster.
 async function chooseEngine(wanted) {
   gpu = null;
+  flight = [];
   gpuAhead = gpuEdited = false;
   if (wanted === 'cpu') {
     gpuNote = 'chosen';
@@ -282,9 +288,13 @@ async function engineTrial(d, steps) {
   return { cpu, gpu: gpuMs };
 }
 
-// Brings `sim` level with the GPU (one readback), so that it can be drawn, measured or edited.
+// Brings `sim` level with the GPU (the submissions under way settled, then one readback), so
+// that it can be drawn, measured or edited.
 async function gpuDown() {
-  if (!gpuAhead) return;
+  while (gpu && flight.length) {
+    if ((await gpuSettle()) === null) return;
+  }
+  if (!gpu || !gpuAhead) return;
   try {
     sim.adopt(await gpu.engine.download());
   } catch (e) {
@@ -312,6 +322,7 @@ function gpuLost(why) {
   gpu = null;
   gpuAdapter = null;
   gpuDevice = null;
+  flight = [];
   gpuAhead = gpuEdited = false;
   try {
     lost.engine.free();
@@ -324,22 +335,40 @@ function gpuLost(why) {
   postMessage({ type: 'engine', stats: stats(), lost: gpuNote });
 }
 
-// Up to n steps on the GPU, checked; returns the steps taken (0 if they were put back to be
-// taken again with more solve iterations or storage). On a fault of the model the state is
-// the one before the submission, in `sim` too, and the page is told.
-async function gpuSteps(n) {
+// Submits GPU steps while fewer than the engine's limit are under way, up to `limit` steps
+// under way in all, `batch` at most in one (each ends at the next row of readouts at the
+// latest; one that ends on a row, or follows a request for a frame, queues the download of the
+// state it ends at), then settles the oldest. Returns its steps, 0 if they were put back to be
+// taken again (with more solve iterations or storage, and the submissions after it with them),
+// or null if the model failed (the state before the submission, in `sim` too; the page told).
+async function gpuAdvance(limit, batch) {
   if (gpuEdited) {
     await gpuDown();
     if (!gpu) return 0;
     gpu.engine.upload(sim);
     gpuEdited = false;
   }
-  const k = gpu.engine.submit(n);
+  while (flight.length < gpu.engine.in_flight_max()) {
+    const want = Math.min(limit - queued(), batch);
+    if (want < 1) break;
+    const toRow = sim.steps_to_next_row(gpu.engine.submitted_to());
+    const k = gpu.engine.submit(Math.min(want, toRow));
+    if (k === 0) break;
+    flight.push({ k, down: k === toRow || frameRequest ? gpu.engine.download() : null });
+  }
+  return gpuSettle();
+}
+
+// Settles the oldest GPU submission under way (gpuAdvance); a download queued behind it is
+// taken by `sim` (a row of readouts, a frame sent if one is asked for).
+async function gpuSettle() {
+  const f = flight.shift();
+  if (!f) return 0;
+  let taken;
   try {
-    const taken = await gpu.engine.check();
-    gpuAhead = true;
-    return taken ? k : 0;
+    taken = await gpu.engine.check();
   } catch (e) {
+    flight = [];
     if (gpuFailed()) return 0;
     playing = false;
     gpuAhead = true;
@@ -347,15 +376,23 @@ async function gpuSteps(n) {
     postMessage({ type: 'stopped', why: String(e.message ?? e), active: sim.active() });
     return null;
   }
-}
-
-// gpuSteps, ending the submission where the readouts are due a row (every 10 active steps)
-// and handing that state to `sim`, which records the row, as the CPU engine's steps do.
-async function gpuStepsToRow(n) {
-  const toRow = sim.steps_to_next_row(gpu.engine.step_count());
-  const k = await gpuSteps(Math.min(n, toRow));
-  if (gpu && k === toRow) await gpuDown();
-  return k;
+  if (!taken) {
+    flight = [];
+    return 0;
+  }
+  gpuAhead = true;
+  if (f.down) {
+    try {
+      sim.adopt(await f.down);
+    } catch (e) {
+      if (gpuFailed()) return 0;
+      throw e;
+    }
+    gpuAhead = flight.length > 0;
+    changed = true;
+    if (frameRequest) sendFrame();
+  }
+  return f.k;
 }
 
 // One turn of the GPU engine: a submission while playing, then a frame if one is asked for.
@@ -364,10 +401,10 @@ async function gpuTurn() {
   try {
     if (playing) {
       refill();
-      const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(GPU_BATCH_MS / msPerStep)));
-      if (n >= 1) {
+      if (budget >= 1 || flight.length) {
         const t0 = performance.now();
-        const k = await gpuStepsToRow(n);
+        const k = await gpuAdvance(Math.floor(budget), Math.max(1, Math.floor(GPU_BATCH_MS / msPerStep)));
+        if (k === null || !gpu) return;
         if (k) {
           const ms = performance.now() - t0;
           msPerStep = 0.8 * msPerStep + 0.2 * (ms / k);
@@ -379,10 +416,10 @@ async function gpuTurn() {
         await new Promise((r) => setTimeout(r, 1000 / (30 * spf)));
       }
     }
-    if (frameRequest) {
-      await gpuDown();
-      sendFrame();
-    }
+    // Paused, or a frame asked for with nothing under way: level with the GPU, then draw
+    // (while playing, a frame comes with the next download).
+    if (!playing || (frameRequest && !flight.length)) await gpuDown();
+    if (frameRequest && !gpuAhead) sendFrame();
   } catch (e) {
     if (!gpuFailed()) fatal(e);
   }
@@ -450,7 +487,7 @@ const CALLS = {
     const t0 = performance.now();
     let left = n;
     while (gpu && left > 0) {
-      const k = await gpuStepsToRow(left);
+      const k = await gpuAdvance(left, left);
       if (k === null) return null;
       left -= k;
     }
