@@ -354,7 +354,10 @@ async function gpuAdvance(limit, batch) {
     const toRow = sim.steps_to_next_row(gpu.engine.submitted_to());
     const k = gpu.engine.submit(Math.min(want, toRow));
     if (k === 0) break;
-    flight.push({ k, down: k === toRow || frameRequest ? gpu.engine.download() : null });
+    const down = k === toRow || frameRequest ? gpu.engine.download() : null;
+    // A download dropped with its submission (put back, or the device lost) is never awaited.
+    down?.catch(() => {});
+    flight.push({ k, down });
   }
   return gpuSettle();
 }
