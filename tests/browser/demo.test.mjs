@@ -686,7 +686,7 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       // submission that ends on a row queues its own download.
       await p.evaluate(() => window.demo.drawing(false));
       await stepped(p, 1); // answers a frame asked for before
-      const hidden = await stepped(p, 12);
+      const hidden = await stepped(p, 9); // across the row at 1520
       const hiddenStats = await workerStats(p);
       assert.equal(hidden.rows, Math.floor((hidden.step - hiddenStats.relaxSteps) / 10) + 1, `rows after stepping unseen to step ${hidden.step}`);
       await p.evaluate(() => window.demo.drawing(true));
@@ -697,7 +697,8 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       const atPlay = await workerStats(p);
       const drawnAtPlay = await p.evaluate(() => window.demo.drawn);
       await p.click('#play');
-      await until(p, 'frames of the GPU engine playing past a row', (s0) => window.demo.stats?.step >= s0 + 12, atPlay.step);
+      const nextRow = atPlay.relaxSteps + 10 * (Math.floor((atPlay.step - atPlay.relaxSteps) / 10) + 1);
+      await until(p, 'frames of the GPU engine playing past a row', (row) => window.demo.stats?.step > row, nextRow);
       await p.click('#play');
       const played = await workerStats(p);
       const rowsPlayed = await p.evaluate(() => window.demo.call('readout_rows'));
