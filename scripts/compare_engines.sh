@@ -29,12 +29,15 @@ for cpu_run in "$OUT"/cpu/runs/*; do
   name="$(basename "$cpu_run")"
   seed="${name##*_seed}"
   dir="$OUT/gpu/runs/$name"
-  if [ -f "$dir/run.json" ] && grep -q '"status": "finished"' "$dir/run.json"; then
-    echo "seed $seed: done"
+  # A run that stopped on a fault of the model (a cell lost, φ out of range) has ended as the
+  # CPU's sweep counts it: its measures are those up to the stop, and the others go on.
+  if [ -f "$dir/run.json" ] && grep -q '"status": "\(finished\|failed\)' "$dir/run.json"; then
+    echo "seed $seed: ended"
   elif [ -f "$dir/run.json" ]; then
-    "$BIN" run --resume "$dir" --quiet
+    "$BIN" run --resume "$dir" --quiet || echo "seed $seed: stopped (its run.json says why)"
   else
-    "$BIN" run --engine gpu --out "$dir" --seed "$seed" --chi 0.001 --zeta 2.5 --frame-interval "$FRAMES" "${SET[@]}" --quiet
+    "$BIN" run --engine gpu --out "$dir" --seed "$seed" --chi 0.001 --zeta 2.5 --frame-interval "$FRAMES" "${SET[@]}" --quiet \
+      || echo "seed $seed: stopped (its run.json says why)"
   fi
 done
 # The GPU runs become a sweep directory: tables-only checks each run's parameters and seed
