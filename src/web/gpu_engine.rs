@@ -67,11 +67,12 @@ impl WebGpuEngine {
         self.0.ctx.runs_on_cpu()
     }
 
-    /// The kernels: how many there are, and how many are still to compile (`compile_next`).
+    /// The kernels there are.
     pub fn kernels(&self) -> u32 {
         Kernel::ALL.len() as u32
     }
 
+    /// The kernels still to compile (`compile_next`).
     pub fn kernels_left(&self) -> u32 {
         let done = if self.0.run.borrow().is_some() { Kernel::ALL.len() } else { self.0.compiled.borrow().len() };
         (Kernel::ALL.len() - done) as u32
