@@ -1389,14 +1389,13 @@ fn the_recorded_iterations_adapt_without_changing_a_bit() {
     eprintln!("recorded iterations: fixed {fixed}; from 1 → {grown}; from 60 → {shrunk}");
     assert!(grown > 1, "too few iterations were never raised");
     assert!(shrunk < 60, "ample iterations were never lowered");
-    let bits = |m: &Monolayer| {
-        m.cells()
-            .iter()
-            .flat_map(|c| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>())
-            .collect::<Vec<_>>()
-    };
-    assert!(bits(&from_few) == bits(&reference), "raising the iterations changed the run");
-    assert!(bits(&from_many) == bits(&reference), "lowering the iterations changed the run");
+    assert!(phi_bits(&from_few) == phi_bits(&reference), "raising the iterations changed the run");
+    assert!(phi_bits(&from_many) == phi_bits(&reference), "lowering the iterations changed the run");
+}
+
+/// Every cell's φ, padded, as bits, cell after cell: two runs that agree here made the same run.
+fn phi_bits(m: &Monolayer) -> Vec<u64> {
+    m.cells().iter().flat_map(|c| c.phi().padded().into_iter().map(f64::to_bits)).collect()
 }
 
 /// A fault stops a GPU run: φ pushed out of its range in one cell makes `advance` fail naming
@@ -1422,9 +1421,8 @@ fn a_gpu_run_stops_on_a_fault_and_keeps_the_last_good_state() {
     let after = run.download_now(&ctx);
     for (a, b) in after.cells().iter().zip(before.cells()) {
         assert_eq!(a.patch(), b.patch());
-        let bits = |c: &monolayer::model::Cell| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(a), bits(b), "the state after the fault must be the one before it");
     }
+    assert!(phi_bits(&after) == phi_bits(&before), "the state after the fault must be the one before it");
 }
 
 /// A NaN in φ stops a GPU run as a value out of range does: the range check reads a value's
@@ -1542,13 +1540,7 @@ fn kernels_compiled_one_at_a_time_make_the_same_run() {
         run.check_every = 5;
         run.advance(&ctx, 10).expect("the GPU steps");
     }
-    let bits = |run: &GpuRun| {
-        let m = run.download_now(&ctx);
-        m.cells()
-            .iter()
-            .flat_map(|c| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>())
-            .collect::<Vec<_>>()
-    };
+    let bits = |run: &GpuRun| phi_bits(&run.download_now(&ctx));
     assert!(bits(&one_by_one) == bits(&together), "the kernels compiled one at a time stepped otherwise");
 }
 
@@ -1566,11 +1558,7 @@ fn submissions_under_way_together_make_the_run_of_one_at_a_time() {
         let steps = r.params().relax_steps - r.step_count() + 20;
         run.advance(&ctx, steps).expect("the GPU steps");
         assert_eq!(run.step_count(), r.step_count() + steps);
-        let m = run.download_now(&ctx);
-        m.cells()
-            .iter()
-            .flat_map(|c| c.phi().padded().iter().map(|v| v.to_bits()).collect::<Vec<_>>())
-            .collect::<Vec<_>>()
+        phi_bits(&run.download_now(&ctx))
     };
     assert!(run(monolayer::gpu::IN_FLIGHT) == run(1), "submissions under way together changed the run");
 }

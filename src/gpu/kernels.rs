@@ -400,7 +400,6 @@ impl Kernel {
             Kernel::MgCoarseCycle => coarse_floats + 2 * coarse_work,
             // n, the diagonal, r, q and level 1's x read; z written.
             Kernel::MgSmooth => 6 * l2 + 2 * level1 + 2 * l2,
-            // φ read; the next patches and their codes written.
             // φ read, the next patch and its code written, φ laid out into φ_n and back.
             Kernel::MovePatch => interior + 10 * n + 4 * padded,
         };
@@ -587,7 +586,7 @@ impl Pipelines {
 
 /// One kernel's pipeline, resolved once the device has taken it: a browser compiles in its GPU
 /// process, so awaiting each kernel in turn lets a page show the compilation's progress (about
-/// 7 s for all of them on SwiftShader). An error names the kernel.
+/// 5 s for all of them on SwiftShader). An error names the kernel.
 pub fn compile(
     ctx: &GpuContext,
     kernel: Kernel,

@@ -95,13 +95,21 @@ pub struct Submitted {
     pub faults: FaultsReadback,
 }
 
-/// A submission not settled yet: its steps and the copy of the state kept at their start.
+/// A submission not settled yet: its steps, the state at their start kept in copy
+/// [`Pending::kept`].
 #[derive(Clone, Copy, Debug)]
 struct Pending {
     id: u64,
     from: u64,
     to: u64,
-    kept: usize,
+}
+
+impl Pending {
+    /// Which copy of the state it keeps: consecutive submissions, the ones under way together,
+    /// take different copies.
+    fn kept(&self) -> usize {
+        (self.id % IN_FLIGHT as u64) as usize
+    }
 }
 
 /// Which way [`GpuRun::copy_kept`] copies.
@@ -266,17 +274,17 @@ impl GpuRun {
         }
         let id = self.next_id;
         self.next_id += 1;
-        let kept = (id % IN_FLIGHT as u64) as usize;
+        let pending = Pending { id, from, to: from + steps };
         // Queue writes land after the submissions before and before this one: each submission
         // starts with no faults, and its readback, queued next, sees its own.
         self.gpu.state().reset_faults(ctx);
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
-        self.copy_kept(&mut encoder, kept, Keep::Store);
+        self.copy_kept(&mut encoder, pending.kept(), Keep::Store);
         for _ in 0..steps {
             self.gpu.encode(&mut encoder, &one);
         }
         ctx.queue.submit([encoder.finish()]);
-        self.pending.push_back(Pending { id, from, to: from + steps, kept });
+        self.pending.push_back(pending);
         Some(Submitted { id, steps, faults: Box::pin(self.read_faults(ctx, id)) })
     }
 
@@ -334,7 +342,8 @@ impl GpuRun {
         if self.pending.front().is_none_or(|p| p.id != faults.submission) {
             return Ok(false);
         }
-        let Pending { from, to, kept, .. } = self.pending.pop_front().expect("checked above");
+        let settling = self.pending.pop_front().expect("checked above");
+        let (from, to) = (settling.from, settling.to);
         let adapts = self.adapt_iterations && self.gpu.solve().is_some();
         let error = match faults.error(from, to) {
             None => {
@@ -358,7 +367,7 @@ impl GpuRun {
         // Queued behind the submissions put back with this one, so it is their end it replaces.
         self.pending.clear();
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("restore") });
-        self.copy_kept(&mut encoder, kept, Keep::Restore);
+        self.copy_kept(&mut encoder, settling.kept(), Keep::Restore);
         ctx.queue.submit([encoder.finish()]);
         error.map_or(Ok(false), Err)
     }
