@@ -352,9 +352,10 @@ struct BenchArgs {
     /// the file's key); the relaxation is then not timed.
     #[arg(long, value_name = "FILE")]
     from_relaxed: Option<std::path::PathBuf>,
-    /// Time the GPU kernels instead (those that exist so far, on the adapter found; needs a
-    /// build with --features gpu). Uses --relax-steps, --seed, --set and ζ; --steps is the
-    /// number of timed dispatches per kernel.
+    /// Time the GPU engine instead, on the adapter found (a build with --features gpu): its
+    /// kernels, steps and runs, the laptop projection and the page's hand-off per row of
+    /// readouts. Uses --relax-steps, --seed, --set and ζ; --steps is the number of timed
+    /// dispatches per kernel.
     #[arg(long)]
     gpu: bool,
 }
@@ -746,7 +747,7 @@ fn bench(a: &BenchArgs) -> Result<(), RunError> {
 
 #[cfg(feature = "gpu")]
 fn bench_gpu(params: &Params, a: &BenchArgs) -> Result<(), RunError> {
-    monolayer::run::bench_gpu(params, a.relax_steps, a.seed, a.steps as usize)
+    monolayer::run::bench_gpu(params, a.relax_steps, a.seed, a.steps as usize, monolayer::web::ROW_EVERY)
 }
 
 #[cfg(not(feature = "gpu"))]

@@ -759,7 +759,7 @@ fn stages_match_the_cpu_at_full_size() {
 }
 
 /// `monolayer bench --gpu` names the adapter, says when its times are CPU figures, and times
-/// every kernel with its bytes.
+/// every kernel with its bytes and the page's hand-off.
 #[test]
 fn bench_gpu_names_the_adapter_and_times_every_kernel() {
     let Some(ctx) = context() else { return };
@@ -795,6 +795,11 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
     } else {
         assert!(timed.contains("timestamps unsupported"), "{timed}");
     }
+    // The page's hand-off, a row of readouts every ROW_EVERY active steps.
+    let hand_off = text.lines().find(|l| l.starts_with("the page's hand-off")).expect("the hand-off");
+    assert!(hand_off.contains(&format!("every {} active steps", monolayer::web::ROW_EVERY)), "{hand_off}");
+    let pace: f64 = hand_off.rsplit("up to ").next().unwrap().trim_end_matches(" steps/s").parse().unwrap();
+    assert!(pace > 0.0 && pace.is_finite(), "{hand_off}");
 }
 
 /// The median wall time of submitting `kernels` and waiting for them, after one warm-up.

@@ -287,9 +287,10 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), R
 /// a relaxed tissue a few active steps on: the adapter, ms per dispatch (the median of `repeats`
 /// submissions, each waited for) and the bytes each must move at the least; then the stages up
 /// to the friction solve's right-hand side, a Heun step without a friction solve (relaxation)
-/// and one with it (the active phase, on fixed patches), each in one submission.
+/// and one with it (the active phase, on fixed patches), each in one submission; last, the
+/// page's hand-off to the CPU for a row of readouts, one every `row_every` active steps.
 #[cfg(feature = "gpu")]
-pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -> Result<(), RunError> {
+pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, row_every: u64) -> Result<(), RunError> {
     use crate::gpu::{GpuContext, GpuMonolayer, Kernel};
     let ctx = GpuContext::new().map_err(RunError::gpu)?;
     println!("adapter: {}", ctx.describe());
@@ -426,7 +427,55 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize) -
     // serial steps are those of the dispatches that work.
     let working_chain = crate::gpu::serial_chain(&working_kernels, gpu.state());
     println!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, working_chain)));
+    println!("{}", hand_off_line(&time_hand_off(&ctx, &run, repeats)?, row_every));
     Ok(())
+}
+
+/// What the page's worker does on the CPU for each row of readouts of its GPU engine
+/// (`web::WebSim::adopt`), ms, each the median of its repeats.
+#[cfg(feature = "gpu")]
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct HandOff {
+    /// The state read back and rebuilt as a CPU monolayer (`GpuRun::download`).
+    download: f64,
+    /// Its velocities and Q̂ evaluated (`Monolayer::evaluate_now`): the download carries φ only.
+    evaluate: f64,
+    /// The row's measures (`Analysis::measure_in`, `Detail::Tissue`).
+    measure: f64,
+}
+
+#[cfg(feature = "gpu")]
+fn time_hand_off(ctx: &crate::gpu::GpuContext, run: &crate::gpu::GpuRun, repeats: usize) -> Result<HandOff, RunError> {
+    let mut times = [vec![], vec![], vec![]];
+    let mut analysis = Analysis::new(run.params());
+    for _ in 0..repeats.max(1) {
+        let t = Instant::now();
+        let mut m = run.download_now(ctx);
+        times[0].push(1e3 * t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        m.evaluate_now()?;
+        times[1].push(1e3 * t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        analysis.measure_in(&m, crate::analysis::Detail::Tissue);
+        times[2].push(1e3 * t.elapsed().as_secs_f64());
+    }
+    Ok(HandOff { download: median(&times[0]), evaluate: median(&times[1]), measure: median(&times[2]) })
+}
+
+/// The hand-off's cost and the pace it allows the page's GPU engine: one hand-off every
+/// `row_every` active steps, while the submissions already under way keep the device busy.
+#[cfg(feature = "gpu")]
+fn hand_off_line(h: &HandOff, row_every: u64) -> String {
+    let ms = h.download + h.evaluate + h.measure;
+    format!(
+        "the page's hand-off per row of readouts (every {row_every} active steps; web::WebSim::adopt): download {:.2} ms, \
+         evaluation {:.2}, measures {:.2}: {ms:.2} ms on this host's CPU, which keeps up with the GPU engine up to \
+         {:.0} steps/s",
+        h.download,
+        h.evaluate,
+        h.measure,
+        1e3 * row_every as f64 / ms
+    )
 }
 
 /// Each kernel's value added up by its stage (its file in `shaders/`), in the order the stages
@@ -535,6 +584,15 @@ mod tests {
         // Where encoding takes longer than the device, it sets the pace.
         let host_bound = LaptopProjection::of(10_000, 0.0, 0);
         assert!((host_bound.ms.1 - 100.0).abs() < 1e-9, "{host_bound:?}");
+    }
+
+    #[cfg(feature = "gpu")]
+    #[test]
+    fn the_hand_off_keeps_up_with_a_row_every_so_many_steps() {
+        // 1 + 2.5 + 1.5 = 5 ms per row, a row every 10 steps: 2,000 steps/s.
+        let line = hand_off_line(&HandOff { download: 1.0, evaluate: 2.5, measure: 1.5 }, 10);
+        assert!(line.contains("download 1.00 ms, evaluation 2.50, measures 1.50: 5.00 ms"), "{line}");
+        assert!(line.ends_with("up to 2000 steps/s"), "{line}");
     }
 
     #[test]
