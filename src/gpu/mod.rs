@@ -43,4 +43,4 @@ pub use iterations::LOWER_AFTER;
 pub use kernels::{
     compile, serial_chain, GpuMonolayer, Kernel, Pipelines, Preconditioner, JACOBI_ITERATIONS, SOLVE_ITERATIONS,
 };
-pub use stepper::{Faults, FaultsReadback, GpuRun, GpuRunError, Submitted, IN_FLIGHT};
+pub use stepper::{Faults, FaultsReadback, GpuRun, GpuRunError, IN_FLIGHT};

@@ -5,10 +5,11 @@
 //! good state).
 //!
 //! The same code on both targets: a submission is recorded at once ([`GpuRun::submit`]), its
-//! faults arrive as a future ([`Submitted::faults`]) that a browser awaits from its event loop
-//! and a native caller blocks on ([`GpuRun::advance`]), and [`GpuRun::settle`] decides. Up to
-//! [`IN_FLIGHT`] submissions are under way at once, so that the device steps the next while
-//! the host reads the last one's faults; a submission put back takes the ones after it along.
+//! faults arrive as a future ([`GpuRun::next_faults`]) that a browser awaits from its event
+//! loop and a native caller blocks on ([`GpuRun::advance`]), and [`GpuRun::settle`] decides. Up
+//! to [`IN_FLIGHT`] submissions are under way at once, so that the device steps the next while
+//! the host reads the last one's faults; a submission put back takes the ones after it along,
+//! their readbacks with them.
 
 use crate::gpu::buffers::{patch_storage, GpuPatch, Layout, PatchFault, Slot, SolveScalars, NO_FAULT};
 use crate::gpu::context::{GpuContext, GpuError};
@@ -87,29 +88,21 @@ pub const IN_FLIGHT: usize = 2;
 /// The faults of a submission, on their way back.
 pub type FaultsReadback = Pin<Box<dyn Future<Output = Result<Faults, GpuError>>>>;
 
-/// A submission under way: its steps, and the readback of its faults, queued right behind it.
-pub struct Submitted {
-    /// Which submission (increasing); [`Faults::submission`] names it.
-    pub id: u64,
-    pub steps: u64,
-    pub faults: FaultsReadback,
-}
-
 /// A submission not settled yet: its steps, the state at their start kept in copy
-/// [`Pending::kept`].
-#[derive(Clone, Copy, Debug)]
+/// [`kept_copy`], and the readback of its faults, queued right behind it, until
+/// [`GpuRun::next_faults`] hands it out.
 struct Pending {
+    /// Which submission (increasing); [`Faults::submission`] names it.
     id: u64,
     from: u64,
     to: u64,
+    faults: Option<FaultsReadback>,
 }
 
-impl Pending {
-    /// Which copy of the state it keeps: consecutive submissions, the ones under way together,
-    /// take different copies.
-    fn kept(&self) -> usize {
-        (self.id % IN_FLIGHT as u64) as usize
-    }
+/// Which copy of the state a submission keeps: consecutive submissions, the ones under way
+/// together, take different copies.
+fn kept_copy(submission: u64) -> usize {
+    (submission % IN_FLIGHT as u64) as usize
 }
 
 /// Which way [`GpuRun::copy_kept`] copies.
@@ -251,13 +244,13 @@ impl GpuRun {
     }
 
     /// Keeps the state, then records up to `n` steps in one submission after those under way:
-    /// at most `check_every`, and none across the switch to activity. Returns the steps
-    /// submitted with the readback of their faults, queued right behind them, which
-    /// [`Self::settle`] then takes; `None` if there is nothing to submit (`n` = 0).
+    /// at most `check_every`, and none across the switch to activity, with the readback of
+    /// their faults right behind them ([`Self::next_faults`]). Returns the steps submitted, 0
+    /// if there is nothing to submit (`n` = 0).
     ///
     /// # Panics
     /// If [`IN_FLIGHT`] submissions are under way already (settle the oldest first).
-    pub fn submit(&mut self, ctx: &GpuContext, n: u64) -> Option<Submitted> {
+    pub fn submit(&mut self, ctx: &GpuContext, n: u64) -> u64 {
         assert!(self.pending.len() < IN_FLIGHT, "at most {IN_FLIGHT} submissions under way: settle the oldest first");
         let from = self.submitted_to();
         let phase = self.phase_at(from);
@@ -270,22 +263,28 @@ impl GpuRun {
             steps = steps.min(self.params.relax_steps - from);
         }
         if steps == 0 {
-            return None;
+            return 0;
         }
         let id = self.next_id;
         self.next_id += 1;
-        let pending = Pending { id, from, to: from + steps };
         // Queue writes land after the submissions before and before this one: each submission
         // starts with no faults, and its readback, queued next, sees its own.
         self.gpu.state().reset_faults(ctx);
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("steps") });
-        self.copy_kept(&mut encoder, pending.kept(), Keep::Store);
+        self.copy_kept(&mut encoder, kept_copy(id), Keep::Store);
         for _ in 0..steps {
             self.gpu.encode(&mut encoder, &one);
         }
         ctx.queue.submit([encoder.finish()]);
-        self.pending.push_back(pending);
-        Some(Submitted { id, steps, faults: Box::pin(self.read_faults(ctx, id)) })
+        let faults = Some(Box::pin(self.read_faults(ctx, id)) as FaultsReadback);
+        self.pending.push_back(Pending { id, from, to: from + steps, faults });
+        steps
+    }
+
+    /// The readback of the faults of the oldest submission under way not handed out yet, for
+    /// [`Self::settle`] once it resolves; `None` if there is none.
+    pub fn next_faults(&mut self) -> Option<FaultsReadback> {
+        self.pending.iter_mut().find_map(|p| p.faults.take())
     }
 
     /// The iteration rule, in step with the recorded count (made anew if it was set from
@@ -367,7 +366,7 @@ impl GpuRun {
         // Queued behind the submissions put back with this one, so it is their end it replaces.
         self.pending.clear();
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("restore") });
-        self.copy_kept(&mut encoder, settling.kept(), Keep::Restore);
+        self.copy_kept(&mut encoder, kept_copy(settling.id), Keep::Restore);
         ctx.queue.submit([encoder.finish()]);
         error.map_or(Ok(false), Err)
     }
@@ -405,16 +404,14 @@ impl GpuRun {
     #[cfg(not(target_arch = "wasm32"))]
     pub fn advance(&mut self, ctx: &GpuContext, n: u64) -> Result<(), GpuRunError> {
         let end = self.submitted_to() + n;
-        let mut readbacks = VecDeque::new();
         let mut regrown_at = None;
         while self.step < end {
             while self.in_flight() < self.max_in_flight.clamp(1, IN_FLIGHT) {
-                match self.submit(ctx, end - self.submitted_to()) {
-                    Some(s) => readbacks.push_back(s.faults),
-                    None => break,
+                if self.submit(ctx, end - self.submitted_to()) == 0 {
+                    break;
                 }
             }
-            let readback = readbacks.pop_front().expect("a submission is under way while steps are left");
+            let readback = self.next_faults().expect("a submission is under way while steps are left");
             let faults = pollster::block_on(readback)
                 .map_err(|e| GpuRunError::Device { from: self.step, reason: e.to_string() })?;
             match self.settle(ctx, &faults) {
@@ -426,8 +423,6 @@ impl GpuRun {
                     result?;
                 }
             }
-            // Put back with a failed submission, the ones after it settle nothing.
-            readbacks.truncate(self.in_flight());
         }
         Ok(())
     }

@@ -14,7 +14,6 @@
 //! made on the `WebSim` and uploaded again.
 
 use std::cell::RefCell;
-use std::collections::VecDeque;
 use std::rc::Rc;
 
 use wasm_bindgen::prelude::*;
@@ -22,7 +21,7 @@ use wasm_bindgen::prelude::*;
 use super::binding::js_err;
 
 use super::sim::{GpuState, WebSim};
-use crate::gpu::{compile, FaultsReadback, GpuContext, GpuRun, GpuRunError, Kernel, Pipelines, IN_FLIGHT};
+use crate::gpu::{compile, GpuContext, GpuRun, GpuRunError, Kernel, Pipelines, IN_FLIGHT};
 
 struct Engine {
     ctx: GpuContext,
@@ -30,8 +29,6 @@ struct Engine {
     /// The kernels compiled so far by `compile_next`, in the order of `Kernel::ALL`, until the
     /// first upload takes them.
     compiled: RefCell<Vec<wgpu::ComputePipeline>>,
-    /// The faults of the submissions under way, oldest first, on their way back.
-    readbacks: RefCell<VecDeque<FaultsReadback>>,
 }
 
 impl Engine {
@@ -53,8 +50,7 @@ impl WebGpuEngine {
     /// is missing or refuses a device (the page then steps on the CPU engine).
     pub async fn create() -> Result<WebGpuEngine, JsError> {
         let ctx = GpuContext::request().await.map_err(js_err)?;
-        let (run, compiled, readbacks) = (RefCell::new(None), RefCell::default(), RefCell::default());
-        Ok(WebGpuEngine(Rc::new(Engine { ctx, run, compiled, readbacks })))
+        Ok(WebGpuEngine(Rc::new(Engine { ctx, run: RefCell::new(None), compiled: RefCell::default() })))
     }
 
     /// The adapter's name, backend, device type and driver.
@@ -96,8 +92,6 @@ impl WebGpuEngine {
     /// not finish. Throws, naming the device limit, for a tissue too large for it.
     pub fn upload(&self, sim: &WebSim) -> Result<(), JsError> {
         let m = sim.monolayer();
-        // Whatever was under way stepped the state replaced: its faults settle nothing.
-        self.0.readbacks.borrow_mut().clear();
         let mut run = self.0.run.borrow_mut();
         match run.as_mut() {
             Some(r) => r.upload(&self.0.ctx, m).map_err(js_err),
@@ -118,18 +112,14 @@ impl WebGpuEngine {
     /// (at most `check_every`, none across the switch to activity; 0 with `n` = 0); `check`
     /// settles them in turn. Throws with `in_flight_max` submissions under way.
     pub fn submit(&self, n: u32) -> Result<u32, JsError> {
-        let engine = &self.0;
-        let submitted = engine.with_run(|r| {
+        self.0.with_run(|r| {
             if r.in_flight() >= IN_FLIGHT {
                 return Err(JsError::new(
                     "submit: as many submissions as may be are under way: check the oldest first",
                 ));
             }
-            Ok(r.submit(&engine.ctx, n as u64))
-        })??;
-        let Some(s) = submitted else { return Ok(0) };
-        engine.readbacks.borrow_mut().push_back(s.faults);
-        Ok(s.steps as u32)
+            Ok(r.submit(&self.0.ctx, n as u64) as u32)
+        })?
     }
 
     /// Submissions under way at most.
@@ -163,13 +153,10 @@ impl WebGpuEngine {
     /// the CPU engine from the last state it holds.
     pub async fn check(&self) -> Result<bool, JsError> {
         let engine = self.0.clone();
-        let readback = engine.readbacks.borrow_mut().pop_front();
+        let readback = engine.run.borrow_mut().as_mut().and_then(|r| r.next_faults());
         let Some(readback) = readback else { return Ok(true) };
         let faults = readback.await.map_err(js_err)?;
         let settled = engine.with_run(|r| r.settle(&engine.ctx, &faults))?;
-        // Put back with a failed submission, the ones after it settle nothing.
-        let left = engine.with_run(|r| r.in_flight())?;
-        engine.readbacks.borrow_mut().truncate(left);
         match settled {
             Ok(taken) => Ok(taken),
             Err(GpuRunError::BeyondCapacity { .. }) => {
