@@ -288,7 +288,8 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), R
 /// submissions, each waited for) and the bytes each must move at the least; then the stages up
 /// to the friction solve's right-hand side, a Heun step without a friction solve (relaxation)
 /// and one with it (the active phase, on fixed patches), each in one submission; last, the
-/// page's hand-off to the CPU for a row of readouts, one every `row_every` active steps.
+/// page's hand-off to the CPU for a row of readouts, one every `row_every` active steps (the
+/// page's `ROW_EVERY`, passed in by the CLI: run/ and web/ are sibling layers, tests/layers.rs).
 #[cfg(feature = "gpu")]
 pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, row_every: u64) -> Result<(), RunError> {
     use crate::gpu::{GpuContext, GpuMonolayer, Kernel};
@@ -440,7 +441,8 @@ struct HandOff {
     download: f64,
     /// Its velocities and Q̂ evaluated (`Monolayer::evaluate_now`): the download carries φ only.
     evaluate: f64,
-    /// The row's measures (`Analysis::measure_in`, `Detail::Tissue`).
+    /// The row's measures (`Analysis::measure_in`, `Detail::Tissue`: what `web::ReadoutLog::measure`
+    /// runs, called here directly as run/ does not use web/).
     measure: f64,
 }
 
