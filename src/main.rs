@@ -14,7 +14,7 @@ use monolayer::run::figures::{FiguresOptions, Scale, Stage};
 use monolayer::run::{
     analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, jobs_of_runs, load_params,
     measure_existing, parse_assignment, replaceable, run_sweep, steps_to_run, stop_gracefully_on_signals, stop_signal,
-    write_atomic, write_tables, Background, BenchOptions, Event, RunDir, RunError, Shard, SweepSpec,
+    write_atomic, write_tables, Background, BenchOptions, Event, Output, RunDir, RunError, Shard, SweepSpec,
 };
 use monolayer::{Monolayer, Params, Phase};
 
@@ -268,6 +268,10 @@ struct RunArgs {
     /// Analyse every frame as it is written (tables and plots in OUT/analysis, as `analyze`).
     #[arg(long)]
     analyze: bool,
+    /// Keep every checkpoint (OUT/checkpoints/, one per frame, about 1 MB each at full size), not
+    /// only the last: the states `monolayer branch` starts from without replaying the run.
+    #[arg(long)]
+    keep_checkpoints: bool,
     /// What steps the run: cpu (the reference, the same bits everywhere) or gpu (the GPU
     /// stepper in f32 on a Vulkan adapter; a build with --features gpu). A resumed run keeps
     /// the engine it started on (default: cpu for a new run).
@@ -307,6 +311,10 @@ struct SweepArgs {
     /// Steps between frames.
     #[arg(long)]
     frame_interval: Option<u64>,
+    /// Every run keeps every checkpoint (as `run --keep-checkpoints`): the states `monolayer
+    /// branch` starts from.
+    #[arg(long)]
+    keep_checkpoints: bool,
     /// Simulations at a time, one per core (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
@@ -441,7 +449,8 @@ fn run(a: &RunArgs) -> Result<(), RunError> {
         Some(e) => Engine::parse(e)?,
         None => Engine::parse(&run.record.engine)?,
     };
-    let mut run = run.with_engine(engine)?;
+    let run = run.with_engine(engine)?;
+    let mut run = if a.keep_checkpoints { run.keep_checkpoints()? } else { run };
     let total = run.monolayer.params().total_steps();
     let bar = progress_bar(total, run.monolayer.step_count(), a.quiet);
     let (start, start_step) = (Instant::now(), run.monolayer.step_count());
@@ -511,6 +520,7 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     if let Some(fi) = a.frame_interval {
         spec.frame_interval = fi;
     }
+    spec.keep_checkpoints |= a.keep_checkpoints;
     let no_sweep = a.file.is_none()
         && a.grid.is_empty()
         && a.point.is_empty()
@@ -574,7 +584,8 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     bar.set_message(format!("runs 0/{mine}"));
     let start = Instant::now();
     let reported = std::sync::atomic::AtomicUsize::new(0);
-    let summaries = run_sweep(&jobs, spec.frame_interval, &a.out, workers, shard, &|steps, done, total| {
+    let output = Output { frame_interval: spec.frame_interval, keep_checkpoints: spec.keep_checkpoints };
+    let summaries = run_sweep(&jobs, output, &a.out, workers, shard, &|steps, done, total| {
         bar.set_position(steps);
         bar.set_message(format!("runs {done}/{total}"));
         if a.quiet && reported.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done {

@@ -153,6 +153,11 @@ pub struct RunRecord {
     pub status: RunStatus,
     /// Last step with a frame (None before the first).
     pub last_frame_step: Option<u64>,
+    /// Every checkpoint kept (`DIR/checkpoints/`, one per frame and the end of the relaxation),
+    /// not only the last: the states `monolayer branch` starts from without replaying the run.
+    /// Absent (false) in records that keep only the last.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub keep_checkpoints: bool,
     pub params: Params,
 }
 
@@ -170,6 +175,7 @@ impl RunRecord {
             frame_interval,
             status: RunStatus::Running,
             last_frame_step: None,
+            keep_checkpoints: false,
             params,
         }
     }

@@ -38,6 +38,34 @@ pub fn checkpoint_path(dir: &Path) -> PathBuf {
     dir.join(CHECKPOINT)
 }
 
+/// The folder of a run's kept checkpoints (`RunRecord::keep_checkpoints`).
+pub const KEPT_CHECKPOINTS: &str = "checkpoints";
+
+/// Where a run that keeps its checkpoints keeps the one of `step`:
+/// `dir/checkpoints/checkpoint_0011000.npz`.
+pub fn kept_checkpoint_path(dir: &Path, step: u64) -> PathBuf {
+    dir.join(KEPT_CHECKPOINTS).join(format!("checkpoint_{step:07}.npz"))
+}
+
+/// Keeps the checkpoint just written at `dir/checkpoint.npz` as the one of `step`: a hard link
+/// (no second write of the same bytes), or a copy where the file system has none, renamed into
+/// place whole either way.
+pub fn keep_checkpoint(dir: &Path, step: u64) -> IoResult<()> {
+    let from = checkpoint_path(dir);
+    let to = kept_checkpoint_path(dir, step);
+    let folder = dir.join(KEPT_CHECKPOINTS);
+    fs::create_dir_all(&folder).map_err(|e| io(&folder, e))?;
+    let tmp = folder.join(format!(".checkpoint_{step:07}.npz.{}.link.tmp", std::process::id()));
+    let _ = fs::remove_file(&tmp);
+    if fs::hard_link(&from, &tmp).is_err() {
+        fs::copy(&from, &tmp).map_err(|e| io(&tmp, e))?;
+    }
+    fs::rename(&tmp, &to).map_err(|e| {
+        let _ = fs::remove_file(&tmp);
+        io(&to, e)
+    })
+}
+
 /// Writes `path` through a temporary file in the same directory and a rename. The temporary
 /// name is this process's and this call's own, so that two writers of one file (`analyze`
 /// beside `run --analyze`) never rename each other's half-written files.

@@ -36,8 +36,8 @@ pub use bench::{bench, bench_analysis, BenchOptions};
 pub use config::{load_params, parse_assignment};
 pub use error::{RunError, RunResult};
 pub use files::{
-    checkpoint_path, frame_path, read_checkpoint, read_frame, replaceable, write_atomic, write_checkpoint, write_frame,
-    Frame, RunFrames, RunLock,
+    checkpoint_path, frame_path, kept_checkpoint_path, read_checkpoint, read_frame, replaceable, write_atomic,
+    write_checkpoint, write_frame, Frame, RunFrames, RunLock,
 };
 pub use forecast::forecast;
 pub use offline::analyze_run;
@@ -47,5 +47,6 @@ pub use runner::{
     stop_gracefully_on_signals, stop_signal, Event, RunDir,
 };
 pub use sweep::{
-    jobs_of_runs, measure_existing, run_sweep, steps_to_run, tables, write_tables, Job, RunSummary, Shard, SweepSpec,
+    jobs_of_runs, measure_existing, run_sweep, steps_to_run, tables, write_tables, Job, Output, RunSummary, Shard,
+    SweepSpec,
 };

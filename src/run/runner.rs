@@ -10,8 +10,8 @@ use crate::formats::{Engine, RunRecord, RunStatus};
 use crate::model::{Monolayer, Params, STORE_NAME};
 use crate::run::error::RunError;
 use crate::run::files::{
-    check_checkpoint_params, checkpoint_path, frame_path, read_checkpoint, remove_stale_temporaries, write_checkpoint,
-    write_frame, RunLock, LAST_GOOD_STATE,
+    check_checkpoint_params, checkpoint_path, frame_path, keep_checkpoint, read_checkpoint, remove_stale_temporaries,
+    write_checkpoint, write_frame, RunLock, KEPT_CHECKPOINTS, LAST_GOOD_STATE,
 };
 use crate::run::offline::LiveRun;
 
@@ -270,6 +270,7 @@ impl RunDir {
         fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
         remove_stale_temporaries(dir);
         remove_stale_temporaries(&dir.join("frames"));
+        remove_stale_temporaries(&dir.join(KEPT_CHECKPOINTS));
         // A checkpoint of the start, before the record: a run killed at any point after its
         // record exists can be resumed.
         write_checkpoint(&monolayer, &checkpoint_path(dir))?;
@@ -345,7 +346,18 @@ impl RunDir {
         fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
         remove_stale_temporaries(dir);
         remove_stale_temporaries(&dir.join("frames"));
+        remove_stale_temporaries(&dir.join(KEPT_CHECKPOINTS));
         Ok(RunDir { dir: dir.to_path_buf(), record, monolayer, _lock: lock })
+    }
+
+    /// Keeps every checkpoint from now on (`DIR/checkpoints/`), recorded in `run.json`; a run
+    /// that keeps them already is left as it is.
+    pub fn keep_checkpoints(mut self) -> Result<Self, RunError> {
+        if !self.record.keep_checkpoints {
+            self.record.keep_checkpoints = true;
+            self.record.save(&self.dir)?;
+        }
+        Ok(self)
     }
 
     /// The engine that steps this run. A new run (no step taken yet) takes `engine`; a resumed
@@ -506,6 +518,9 @@ fn write_scheduled(
     }
     if frame || s == p.relax_steps {
         write_checkpoint(m, &checkpoint_path(dir)).map_err(Stop::Io)?;
+        if record.keep_checkpoints {
+            keep_checkpoint(dir, s).map_err(Stop::Io)?;
+        }
         // The record's last frame advances only once the checkpoint of its step is safely
         // written: a failed checkpoint write (a full disk) leaves the record at the previous
         // checkpoint, which `--resume` continues from.

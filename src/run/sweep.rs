@@ -51,6 +51,10 @@ pub struct SweepSpec {
     pub seeds: Vec<u64>,
     #[serde(default = "default_frame_interval")]
     pub frame_interval: u64,
+    /// Every run keeps every checkpoint (`run --keep-checkpoints`), the states
+    /// `monolayer branch` starts from.
+    #[serde(default)]
+    pub keep_checkpoints: bool,
 }
 
 /// The most runs one sweep takes (the paper's whole plan is 1,002).
@@ -499,10 +503,11 @@ impl From<RunError> for JobError {
 
 /// Runs (or resumes, or skips when done) one job in `OUT/runs/NAME`, single-threaded, holding
 /// the directory's lock from before it looks at the directory.
-fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() + Sync)) -> Result<(), JobError> {
+fn execute_job(job: &Job, dir: &Path, output: Output, on_step: &(dyn Fn() + Sync)) -> Result<(), JobError> {
+    let frame_interval = output.frame_interval;
     fs::create_dir_all(dir).map_err(|e| RunError::io(dir, e))?;
     let lock = RunLock::try_acquire(dir)?.map_err(JobError::Held)?;
-    let mut run = match start_of(job, dir, frame_interval)? {
+    let run = match start_of(job, dir, frame_interval)? {
         Start::Done => return Ok(()),
         Start::Resume => RunDir::resume_locked(lock, dir)?,
         Start::Fresh => {
@@ -512,6 +517,7 @@ fn execute_job(job: &Job, dir: &Path, frame_interval: u64, on_step: &(dyn Fn() +
             RunDir::create_locked(lock, dir, m, frame_interval)?
         }
     };
+    let mut run = if output.keep_checkpoints { run.keep_checkpoints()? } else { run };
     // A failed simulation is a result of the sweep (it blew up), and a stopped one is retried
     // when the sweep runs again: both are in its run.json, and the summary reports them.
     let _ = run.execute(false, &mut |_, e| {
@@ -531,16 +537,33 @@ fn remaining_steps(job: &Job, dir: &Path) -> u64 {
     }
 }
 
+/// What every run of a sweep writes: a frame every `frame_interval` active steps, and with
+/// `keep_checkpoints` every checkpoint kept.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Output {
+    pub frame_interval: u64,
+    pub keep_checkpoints: bool,
+}
+
+impl From<u64> for Output {
+    /// A frame every `frame_interval` steps, only the last checkpoint kept.
+    fn from(frame_interval: u64) -> Self {
+        Output { frame_interval, keep_checkpoints: false }
+    }
+}
+
 /// Runs every job of `shard` (all by default) on `workers` threads, one simulation each, then
 /// summarises every job of the sweep that has output. `progress(steps_done, runs_done)`.
 pub fn run_sweep(
     jobs: &[Job],
-    frame_interval: u64,
+    output: impl Into<Output>,
     out: &Path,
     workers: usize,
     shard: Option<Shard>,
     progress: &(dyn Fn(u64, usize, usize) + Sync),
 ) -> Result<Vec<RunSummary>, RunError> {
+    let output = output.into();
+    let frame_interval = output.frame_interval;
     let runs_dir = out.join("runs");
     fs::create_dir_all(&runs_dir).map_err(|e| RunError::io(&runs_dir, e))?;
     // Check every existing directory against its job before any work starts.
@@ -572,7 +595,7 @@ pub fn run_sweep(
                         }
                     };
                     let t = std::time::Instant::now();
-                    match pool.install(|| execute_job(job, &dir, frame_interval, &on_step)) {
+                    match pool.install(|| execute_job(job, &dir, output, &on_step)) {
                         Ok(()) => {}
                         Err(JobError::Held(pid)) => {
                             held.lock().expect("no panics hold it").push((job.name.clone(), pid))
