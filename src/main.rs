@@ -9,12 +9,14 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use monolayer::formats::{snapshot, Engine, RunStatus};
+use monolayer::model::Perturbation;
 use monolayer::model::MAX_STEPS;
 use monolayer::run::figures::{FiguresOptions, Scale, Stage};
 use monolayer::run::{
-    analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, jobs_of_runs, load_params,
-    measure_existing, parse_assignment, replaceable, run_sweep, steps_to_run, stop_gracefully_on_signals, stop_signal,
-    write_atomic, write_tables, Background, BenchOptions, Event, Output, RunDir, RunError, Shard, SweepSpec,
+    analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, create_branch, jobs_of_runs,
+    load_params, measure_existing, parse_assignment, replaceable, run_sweep, steps_to_run, stop_gracefully_on_signals,
+    stop_signal, write_atomic, write_tables, Background, BenchOptions, BranchOptions, Event, Output, RunDir, RunError,
+    Shard, SweepSpec,
 };
 use monolayer::{Monolayer, Params, Phase};
 
@@ -56,6 +58,46 @@ enum Command {
     /// and their combination) scored on each seed's runs with the combination fitted on the other
     /// seeds. Tables and the ROC figure to --out (docs/figures.md, "Forecast").
     Forecast(ForecastArgs),
+    /// Start a new run from a run's exact state at one of its frames and step it with
+    /// parameters changed (--set) and φ perturbed (--perturb, for replicas). With no change it
+    /// continues the parent's trajectory bit for bit. See docs/cli.md, "branch".
+    Branch(BranchArgs),
+}
+
+#[derive(Args)]
+struct BranchArgs {
+    /// The parent run's directory (finished, on the CPU engine).
+    #[arg(value_name = "RUN_DIR")]
+    parent: PathBuf,
+    /// The parent's step to start from: one at which it wrote a frame. Its state there is its
+    /// kept checkpoint (`run --keep-checkpoints`) or is replayed from the latest state before it.
+    #[arg(long, value_name = "STEP")]
+    at: u64,
+    /// A parameter changed from the parent's value, TOML syntax: --set zeta=0 (repeatable; `chi`
+    /// sets xi_substrate = χ·xi_cell).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Steps to run from --at (default: to the parent's end).
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Steps between frames (default: the parent's).
+    #[arg(long)]
+    frame_interval: Option<u64>,
+    /// Add seeded uniform noise to φ at the start (a replica): the generator's seed.
+    #[arg(long, value_name = "SEED")]
+    perturb: Option<u64>,
+    /// The noise's amplitude (with --perturb).
+    #[arg(long, default_value_t = 1e-6, requires = "perturb", value_name = "A")]
+    perturb_amplitude: f64,
+    /// The branch's directory (new or empty); `run --resume DIR` continues it like any run.
+    #[arg(long)]
+    out: PathBuf,
+    /// Worker threads (results do not depend on it); default: all cores.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bar; a line per frame instead.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -371,7 +413,7 @@ struct BenchArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // The commands that run simulations stop gracefully on SIGTERM and SIGINT.
-    if matches!(cli.command, Command::Run(_) | Command::Sweep(_) | Command::Figures(_)) {
+    if matches!(cli.command, Command::Run(_) | Command::Sweep(_) | Command::Figures(_) | Command::Branch(_)) {
         if let Err(e) = stop_gracefully_on_signals() {
             eprintln!("error: {e}");
             return ExitCode::from(2);
@@ -391,6 +433,11 @@ fn main() -> ExitCode {
         Command::Analyze(a) => with_threads(Some(1), || analyze(&a)),
         Command::Figures(a) => figures(a),
         Command::Forecast(a) => with_threads(Some(1), || forecast(&a)),
+        Command::Branch(a) => a
+            .threads
+            .map(|n| check_threads("--threads", n))
+            .transpose()
+            .and_then(|threads| with_threads(threads, || branch(&a))),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -451,10 +498,15 @@ fn run(a: &RunArgs) -> Result<(), RunError> {
     };
     let run = run.with_engine(engine)?;
     let mut run = if a.keep_checkpoints { run.keep_checkpoints()? } else { run };
+    execute(&mut run, a.analyze, a.quiet)
+}
+
+/// Steps `run` to its end with a progress bar (or, `quiet`, a line per frame).
+fn execute(run: &mut RunDir, analyze: bool, quiet: bool) -> Result<(), RunError> {
     let total = run.monolayer.params().total_steps();
-    let bar = progress_bar(total, run.monolayer.step_count(), a.quiet);
+    let bar = progress_bar(total, run.monolayer.step_count(), quiet);
     let (start, start_step) = (Instant::now(), run.monolayer.step_count());
-    let outcome = run.execute(a.analyze, &mut |m, event| match event {
+    let outcome = run.execute(analyze, &mut |m, event| match event {
         Event::Step => {
             bar.set_message(match m.phase() {
                 Phase::Relaxation => "relaxing",
@@ -463,7 +515,7 @@ fn run(a: &RunArgs) -> Result<(), RunError> {
             // The GPU engine reports once per submission, the CPU once per step.
             bar.set_position(m.step_count());
         }
-        Event::Frame if a.quiet => {
+        Event::Frame if quiet => {
             let s = m.step_count();
             let rate = (s - start_step) as f64 / start.elapsed().as_secs_f64();
             eprintln!("step {s}/{total}: frame written ({rate:.0} steps/s)");
@@ -482,6 +534,44 @@ fn run(a: &RunArgs) -> Result<(), RunError> {
             Err(e)
         }
     }
+}
+
+/// `branch RUN_DIR --at STEP …`: the branch made (its parent's state replayed if need be), then
+/// run to its end.
+fn branch(a: &BranchArgs) -> Result<(), RunError> {
+    let options = BranchOptions {
+        parent: a.parent.clone(),
+        at: a.at,
+        sets: a.set.clone(),
+        steps: a.steps,
+        frame_interval: a.frame_interval,
+        perturbation: a.perturb.map(|seed| Perturbation { seed, amplitude: a.perturb_amplitude }),
+        out: a.out.clone(),
+    };
+    let replay = progress_bar(0, 0, a.quiet);
+    replay.set_message("replaying");
+    let mut run = create_branch(&options, &mut |done, of| {
+        replay.set_length(of);
+        replay.set_position(done);
+    })?;
+    replay.finish_and_clear();
+    let origin = run.record.branch.as_ref().expect("a branch records its origin");
+    let changes: Vec<String> =
+        origin.changes.iter().map(|c| format!("{} {} -> {}", c.key, c.parent, c.branch)).collect();
+    eprintln!(
+        "branch of {} at step {} ({}); {}{}; to step {} in {}",
+        origin.parent,
+        origin.step,
+        origin.source,
+        if changes.is_empty() { "no change".to_string() } else { changes.join(", ") },
+        origin
+            .perturbation
+            .map(|p| format!(", φ perturbed (seed {}, amplitude {:e})", p.seed, p.amplitude))
+            .unwrap_or_default(),
+        run.monolayer.params().total_steps(),
+        run.dir.display()
+    );
+    execute(&mut run, false, a.quiet)
 }
 
 fn progress_bar(total: u64, done: u64, quiet: bool) -> ProgressBar {

@@ -26,5 +26,5 @@ pub use frame_file::{
     check_finite, check_npz_headers, decode_frame, decode_frame_of_box, encode_frame, frame_bytes, frame_file_name,
     max_array_values, FrameData,
 };
-pub use run_record::{Engine, RunRecord, RunStatus, FORMAT, FORMAT_VERSION};
+pub use run_record::{BranchOrigin, Engine, ParamChange, RunRecord, RunStatus, FORMAT, FORMAT_VERSION};
 pub use version::{code_version, CRATE_VERSION, GIT_COMMIT};

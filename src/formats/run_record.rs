@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::FormatError;
 use super::version::code_version;
-use crate::model::{Params, STORE_NAME};
+use crate::model::{Params, Perturbation, STORE_NAME};
 
 /// The status of the page's downloads: `stopped: …` with this reason.
 pub const PAGE_DOWNLOAD: &str = "the state of the browser page, downloaded";
@@ -158,7 +158,41 @@ pub struct RunRecord {
     /// Absent (false) in records that keep only the last.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub keep_checkpoints: bool,
+    /// Where the run was branched from (`monolayer branch`); absent for a run from the random
+    /// disks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub branch: Option<BranchOrigin>,
     pub params: Params,
+}
+
+/// Where a branched run comes from: its parent's state at a step, with parameters changed and φ
+/// perturbed as recorded here. The branch's own steps continue the parent's count (its first
+/// frame is the parent's `step`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BranchOrigin {
+    /// The parent run's directory, as resolved when the branch was made.
+    pub parent: String,
+    /// The `version` of the parent's run.json.
+    pub parent_version: String,
+    /// The parent's step the branch starts from: one at which the parent wrote a frame.
+    pub step: u64,
+    /// Every parameter given a value, with the parent's value and the branch's.
+    pub changes: Vec<ParamChange>,
+    /// The noise added to φ at the start, if any.
+    pub perturbation: Option<Perturbation>,
+    /// Where the parent's state at `step` came from: a kept checkpoint, or the steps replayed
+    /// from an earlier state (checked bit for bit against the parent's frame at `step`).
+    pub source: String,
+}
+
+/// One parameter of a branch: its name, the parent's value and the branch's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParamChange {
+    pub key: String,
+    pub parent: serde_json::Value,
+    pub branch: serde_json::Value,
 }
 
 impl RunRecord {
@@ -176,6 +210,7 @@ impl RunRecord {
             status: RunStatus::Running,
             last_frame_step: None,
             keep_checkpoints: false,
+            branch: None,
             params,
         }
     }
@@ -191,6 +226,11 @@ impl RunRecord {
             last_frame_step: Some(step),
             ..RunRecord::new(params, seed, 1)
         }
+    }
+
+    /// The step of the run's first frame: the end of the relaxation, or where a branch starts.
+    pub fn first_frame_step(&self) -> u64 {
+        self.branch.as_ref().map_or(self.params.relax_steps, |b| b.step)
     }
 
     /// `run.json` as `monolayer run` writes it: pretty-printed in the fields' order, a newline

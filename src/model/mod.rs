@@ -10,7 +10,7 @@
 //! deterministic parallel loops, `error` what can go wrong, `hash` the one hash (FNV-1a) of
 //! fingerprints and of the relaxed states' keys and checksums (`formats::snapshot`),
 //! `precision` the type the cells' per-site fields are stored in, `sum` the order of every sum
-//! over sites. Nothing here touches files, clocks or threads directly (threads only through
+//! over sites, `perturb` the seeded noise a branched run's replicas start with. Nothing here touches files, clocks or threads directly (threads only through
 //! `par`, behind the `parallel` feature), so the core compiles for `wasm32-unknown-unknown`
 //! with the same bits. It imports nothing from `analysis`, `formats`, `gpu`, `run` or `web`
 //! (tested by `tests/layers.rs`).
@@ -32,6 +32,7 @@ mod motion;
 mod multigrid;
 mod par;
 mod params;
+mod perturb;
 mod precision;
 mod shape;
 mod sum;
@@ -48,5 +49,6 @@ pub use monolayer::{LatticeFields, Monolayer, Phase, State};
 pub use motion::friction_weight;
 pub use multigrid::{level_sides, CycleWork, Multigrid, COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
 pub use params::{Advection, FrictionWeights, Laplacian, ParamError, Params, PassiveForce, MAX_STEPS};
+pub use perturb::{Perturbation, MAX_PERTURBATION};
 pub use precision::{load, Real, Store, STORE_NAME};
 pub use shape::{axis_angle, gradient, shape_tensor};

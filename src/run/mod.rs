@@ -5,6 +5,8 @@
 //!   ([`load_params`]);
 //! - `error`: the errors of this layer, by cause ([`RunError`]);
 //! - `files`: frames, checkpoints and `run.json`, the writer and the reader of each together;
+//! - `branch`: `monolayer branch`, a new run from a run's state at a frame with parameters
+//!   changed ([`create_branch`]);
 //! - `runner`: one run's protocol on disk (relaxation, activity, frames, checkpoints, resume;
 //!   [`RunDir`]);
 //! - `sweep`: a grid of runs, one per core, resumable, its summary and regime map
@@ -20,6 +22,7 @@
 //! re-exported here.
 
 mod bench;
+mod branch;
 mod config;
 mod error;
 pub mod figures;
@@ -33,6 +36,7 @@ mod sweep;
 #[cfg(feature = "gpu")]
 pub use bench::bench_gpu;
 pub use bench::{bench, bench_analysis, BenchOptions};
+pub use branch::{branch_params, create_branch, BranchOptions};
 pub use config::{load_params, parse_assignment};
 pub use error::{RunError, RunResult};
 pub use files::{

@@ -263,6 +263,19 @@ impl RunDir {
         monolayer: Monolayer,
         frame_interval: u64,
     ) -> Result<Self, RunError> {
+        let record = RunRecord::new(monolayer.params().clone(), monolayer.seed(), frame_interval);
+        Self::create_from(lock, dir, monolayer, record)
+    }
+
+    /// A new run in `dir` (whose lock the caller holds) from `monolayer` at any step and the
+    /// record it is to keep. A branch ([`RunRecord::branch`]) starts on a frame: that frame is
+    /// written first, measured under the branch's parameters.
+    pub fn create_from(
+        lock: RunLock,
+        dir: &Path,
+        mut monolayer: Monolayer,
+        mut record: RunRecord,
+    ) -> Result<Self, RunError> {
         // Checked again under the lock: another writer may have started here meanwhile.
         if RunRecord::path(dir).exists() {
             return Err(already_a_run(dir));
@@ -271,10 +284,18 @@ impl RunDir {
         remove_stale_temporaries(dir);
         remove_stale_temporaries(&dir.join("frames"));
         remove_stale_temporaries(&dir.join(KEPT_CHECKPOINTS));
+        let step = monolayer.step_count();
+        if record.branch.is_some() {
+            monolayer.evaluate_now()?;
+            write_frame(&mut monolayer, &frame_path(dir, step))?;
+            record.last_frame_step = Some(step);
+        }
         // A checkpoint of the start, before the record: a run killed at any point after its
         // record exists can be resumed.
         write_checkpoint(&monolayer, &checkpoint_path(dir))?;
-        let record = RunRecord::new(monolayer.params().clone(), monolayer.seed(), frame_interval);
+        if record.keep_checkpoints {
+            keep_checkpoint(dir, step)?;
+        }
         record.save(dir)?;
         Ok(RunDir { dir: dir.to_path_buf(), record, monolayer, _lock: lock })
     }
