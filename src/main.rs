@@ -15,8 +15,8 @@ use monolayer::run::figures::{FiguresOptions, Scale, Stage};
 use monolayer::run::{
     analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, create_branch, jobs_of_runs,
     load_params, measure_existing, parse_assignment, replaceable, run_sweep, steps_to_run, stop_gracefully_on_signals,
-    stop_signal, write_atomic, write_tables, Background, BenchOptions, BranchOptions, Event, Output, RunDir, RunError,
-    Shard, SweepSpec,
+    stop_signal, write_atomic, write_tables, Arm, Background, BenchOptions, BranchOptions, Event, InterveneOptions,
+    Output, Report, RunDir, RunError, Shard, SweepSpec,
 };
 use monolayer::{Monolayer, Params, Phase};
 
@@ -62,6 +62,51 @@ enum Command {
     /// parameters changed (--set) and φ perturbed (--perturb, for replicas). With no change it
     /// continues the parent's trajectory bit for bit. See docs/cli.md, "branch".
     Branch(BranchArgs),
+    /// Does a tissue still tear with its motion switched off? For every nucleation of the runs
+    /// and each lead k, the parent's state k frames before is branched with activity off,
+    /// halved, substrate friction ×10, flows made local (χ = 1), and into perturbed replicas;
+    /// the share of branches that tear within R of the site (and of matched sites that thinned
+    /// as much) with bootstrap intervals, tables and a figure to --out. Resumable. See
+    /// docs/figures.md, "Intervention".
+    Intervene(InterveneArgs),
+}
+
+#[derive(Args)]
+struct InterveneArgs {
+    /// Finished runs (CPU engine, ideally made with --keep-checkpoints), e.g. a sweep's OUT/runs/*.
+    #[arg(required = true, value_name = "RUN_DIR")]
+    runs: Vec<PathBuf>,
+    /// Where the branches (OUT/branches/) and the tables and figure go.
+    #[arg(long)]
+    out: PathBuf,
+    /// Frames before each nucleation at which branches start.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,5")]
+    leads: Vec<usize>,
+    /// Frames after the nucleation within which a branch's tear counts.
+    #[arg(long, default_value_t = monolayer::analysis::AFTER)]
+    after: usize,
+    /// Perturbed replicas (the control) per branch point.
+    #[arg(long, default_value_t = monolayer::analysis::REPLICAS)]
+    replicas: usize,
+    /// The arms: control, activity-off, activity-halved, friction-x10, local-flows.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "control,activity-off,activity-halved,friction-x10,local-flows"
+    )]
+    arms: Vec<String>,
+    /// Simulations at a time, one per core (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Print the plan and its cost in steps and core-hours (timed here); run and write nothing.
+    #[arg(long)]
+    dry_run: bool,
+    /// Run nothing: score the branches that have ended and write the tables.
+    #[arg(long, conflicts_with = "dry_run")]
+    tables_only: bool,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -413,7 +458,10 @@ struct BenchArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // The commands that run simulations stop gracefully on SIGTERM and SIGINT.
-    if matches!(cli.command, Command::Run(_) | Command::Sweep(_) | Command::Figures(_) | Command::Branch(_)) {
+    if matches!(
+        cli.command,
+        Command::Run(_) | Command::Sweep(_) | Command::Figures(_) | Command::Branch(_) | Command::Intervene(_)
+    ) {
         if let Err(e) = stop_gracefully_on_signals() {
             eprintln!("error: {e}");
             return ExitCode::from(2);
@@ -433,6 +481,7 @@ fn main() -> ExitCode {
         Command::Analyze(a) => with_threads(Some(1), || analyze(&a)),
         Command::Figures(a) => figures(a),
         Command::Forecast(a) => with_threads(Some(1), || forecast(&a)),
+        Command::Intervene(a) => intervene(&a),
         Command::Branch(a) => a
             .threads
             .map(|n| check_threads("--threads", n))
@@ -856,6 +905,39 @@ fn bench_gpu(_: &Params, _: &BenchArgs) -> Result<(), RunError> {
     Err(RunError::Gpu(
         "--gpu: this binary was built without the GPU kernels: cargo build --release --features gpu".into(),
     ))
+}
+
+/// `intervene RUN_DIR… --out OUT`.
+fn intervene(a: &InterveneArgs) -> Result<(), RunError> {
+    let options = InterveneOptions {
+        runs: a.runs.clone(),
+        out: a.out.clone(),
+        leads: a.leads.clone(),
+        after: a.after,
+        replicas: a.replicas,
+        arms: a.arms.iter().map(|s| Arm::parse(s)).collect::<Result<_, _>>()?,
+        jobs: match a.jobs {
+            Some(n) => check_threads("--jobs", n)?,
+            None => cores(),
+        },
+        dry_run: a.dry_run,
+        tables_only: a.tables_only,
+    };
+    let bar = progress_bar(0, 0, a.quiet || a.dry_run || a.tables_only);
+    let written = monolayer::run::intervene(&options, &|r| match r {
+        Report::Line(line) if bar.is_hidden() => eprintln!("{line}"),
+        Report::Line(line) => bar.println(line),
+        Report::Progress { steps, of, done, branches } => {
+            bar.set_length(of);
+            bar.set_position(steps);
+            bar.set_message(format!("branches {done}/{branches}"));
+        }
+    });
+    bar.finish_and_clear();
+    for path in written? {
+        println!("{}", path.display());
+    }
+    Ok(())
 }
 
 /// `forecast DIR… --out OUT`.

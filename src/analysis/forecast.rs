@@ -196,17 +196,7 @@ pub fn matched_baseline(h: &RunHistory, depth: usize) -> Vec<BaselineRow> {
         let n = h.nucleations.iter().find(|n| n.hole == t.hole).expect("a nucleation of the run");
         let frame = n.frame - t.frames_before;
         let f = &h.frames[frame];
-        pool.clear();
-        for (i, &s) in h.sites.iter().enumerate() {
-            if (f.least[i] - t.least).abs() > MATCH_TOLERANCE {
-                continue;
-            }
-            let (x, y) = h.site_xy(s);
-            if !h.nucleates_near(x, y, frame + 1, frame + LOOKAHEAD) {
-                pool.push(s);
-            }
-        }
-        let candidates = pool.len();
+        let candidates = matched_pool(h, frame, t.least, &|_| true, &mut pool);
         let matched = draw(&mut rng, &mut pool, BASELINE_SITES)
             .iter()
             .map(|&s| {
@@ -230,6 +220,47 @@ pub fn matched_baseline(h: &RunHistory, depth: usize) -> Vec<BaselineRow> {
         });
     }
     rows
+}
+
+/// The sites of the sub-grid in frame `frame` that thinned as much as a site whose least Σφ
+/// within R is `least` (within ±[`MATCH_TOLERANCE`]) and that do not nucleate within R in the
+/// next [`LOOKAHEAD`] frames, and that `keep` keeps (a lattice index), into `pool` (lattice
+/// indices); returns how many there are.
+fn matched_pool(
+    h: &RunHistory,
+    frame: usize,
+    least: f64,
+    keep: &dyn Fn(usize) -> bool,
+    pool: &mut Vec<usize>,
+) -> usize {
+    let f = &h.frames[frame];
+    pool.clear();
+    for (i, &s) in h.sites.iter().enumerate() {
+        if (f.least[i] - least).abs() > MATCH_TOLERANCE || !keep(s) {
+            continue;
+        }
+        let (x, y) = h.site_xy(s);
+        if !h.nucleates_near(x, y, frame + 1, frame + LOOKAHEAD) {
+            pool.push(s);
+        }
+    }
+    pool.len()
+}
+
+/// Up to `count` matched sites ([`matched_pool`]) of frame `frame` for a site whose least Σφ
+/// within R is `least`, among those `keep` keeps (lattice indices), drawn without replacement
+/// from `rng`, as (x, y): the matched chance the forecast compares a nucleation site with.
+pub fn matched_sites(
+    h: &RunHistory,
+    frame: usize,
+    least: f64,
+    keep: &dyn Fn(usize) -> bool,
+    rng: &mut ChaCha8Rng,
+    count: usize,
+) -> Vec<(f64, f64)> {
+    let mut pool = Vec::new();
+    matched_pool(h, frame, least, keep, &mut pool);
+    draw(rng, &mut pool, count).iter().map(|&s| h.site_xy(s)).collect()
 }
 
 /// Up to `k` entries of `pool` drawn without replacement (a partial Fisher–Yates shuffle).

@@ -183,6 +183,12 @@ impl HoleTracker {
         })
     }
 
+    /// Whether lattice site `site` lies in a void region of the last frame that holds an open
+    /// hole: a site that has torn already.
+    pub fn in_open_hole(&self, site: usize) -> bool {
+        self.prev_labels.get(site).is_some_and(|&r| r != NONE && self.prev_hole[r as usize].is_some())
+    }
+
     /// Per region of the last frame (indexed by its label), whether it holds an open hole.
     pub fn open_regions(&self) -> Vec<bool> {
         self.prev_hole.iter().map(Option::is_some).collect()
@@ -401,6 +407,34 @@ mod tests {
         h[1].merged_into = Some(0);
         h[2].split_from = Some(0);
         h
+    }
+
+    #[test]
+    fn a_site_is_in_an_open_hole_only_while_its_region_holds_one() {
+        // A void disk of radius 4 (above πR²/4 for R = 4) at (10, 10), and a void site alone.
+        let l = 32;
+        let field = |open: bool| {
+            let mut p = vec![1.0; l * l];
+            for y in 0..l {
+                for x in 0..l {
+                    if open && periodic_distance(x as f64, y as f64, 10.0, 10.0, l) <= 4.0 {
+                        p[y * l + x] = 0.0;
+                    }
+                }
+            }
+            p[25 * l + 25] = 0.0;
+            p
+        };
+        let mut t = HoleTracker::new(4.0);
+        let mut v = VoidRegions::default();
+        v.find(&field(true), l);
+        t.update(&v, 0.0);
+        assert!(t.in_open_hole(10 * l + 10) && t.in_open_hole(10 * l + 13));
+        assert!(!t.in_open_hole(25 * l + 25), "a void pocket below the nucleation area is no hole");
+        assert!(!t.in_open_hole(20 * l + 10));
+        v.find(&field(false), l);
+        t.update(&v, 1.0);
+        assert!(!t.in_open_hole(10 * l + 10), "closed");
     }
 
     #[test]

@@ -19,6 +19,8 @@
 //! - `thinning`: the least Σφ and the void share about a site: how thin the tissue is there;
 //! - `forecast`: the precursors against sites of the same thinning, and a forecast of where a
 //!   hole nucleates next, scored on runs it never saw;
+//! - `intervention`: a branched run followed for tears at watched sites, and the experiment's
+//!   statistics (bootstrap intervals, the share of tears an arm prevents);
 //! - `frame`: one frame measured ([`Analysis`], which owns every buffer: after the first call,
 //!   measuring a frame allocates nothing), its scalar readings ([`FrameSummary`]).
 //!
@@ -34,6 +36,7 @@ mod fields;
 mod forecast;
 mod frame;
 mod holes;
+mod intervention;
 mod nucleation;
 mod precursors;
 mod regime;
@@ -46,14 +49,18 @@ pub use correlations::{correlation_length, Correlator};
 pub use defects::{Defect, DefectFinder};
 pub use fields::{divergence, window_mean, CoarseFields};
 pub use forecast::{
-    caught_in_top, forecast_samples, matched_baseline, roc_auc, roc_curve, score_field, thinning_before, BaselineRow,
-    Features, FrameFeatures, Logistic, Nucleation, Predictor, RunHistory, Sample, ThinningRow, BASELINE_SEED,
-    BASELINE_SITES, HORIZONS, LOOKAHEAD, SHIPPED_MODEL, TOP_SHARE,
+    caught_in_top, forecast_samples, matched_baseline, matched_sites, roc_auc, roc_curve, score_field, thinning_before,
+    BaselineRow, Features, FrameFeatures, Logistic, Nucleation, Predictor, RunHistory, Sample, ThinningRow,
+    BASELINE_SEED, BASELINE_SITES, HORIZONS, LOOKAHEAD, SHIPPED_MODEL, TOP_SHARE,
 };
 pub use frame::{Analysis, Detail, FrameSummary};
 pub use holes::{
     counted_holes, nucleation_area, periodic_distance, CountedHole, Hole, HoleCounting, HoleTracker, VoidRegion,
     VoidRegions,
+};
+pub use intervention::{
+    bootstrap_interval, mean_at, prevented_share, SiteReading, TearWatch, WatchedFrame, AFTER, BOOTSTRAP_RESAMPLES,
+    INTERVENTION_SEED, LEADS, REPLICAS, REPLICA_AMPLITUDE,
 };
 pub use nucleation::{
     best_collapse_exponent, binomial_fit, collapse_scatter, least_squares_fit, ExponentialFit, HoleProbability,
@@ -62,3 +69,4 @@ pub use nucleation::{
 pub use precursors::{FramePoints, Precursor, Precursors, CHANCE_SITES, DEPTH};
 pub use regime::{classify, fitted_lifetime, Regime};
 pub use spirals::{PlusOne, SpiralFinder};
+pub use thinning::{covered_about, least_within};

@@ -92,6 +92,35 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
     })
 }
 
+/// Writes a set of files into `out` (created) as one: `write(stage)` writes them into a hidden
+/// directory in `out` and returns their paths; they are moved in only when every one is
+/// complete and every target can be replaced, so that a full disk or a killed process leaves the
+/// previous set whole, never a mix. Returns the files' paths in `out`.
+pub fn write_set(out: &Path, write: impl FnOnce(&Path) -> IoResult<Vec<PathBuf>>) -> IoResult<Vec<PathBuf>> {
+    static CALLS: AtomicU64 = AtomicU64::new(0);
+    let call = CALLS.fetch_add(1, Ordering::Relaxed);
+    fs::create_dir_all(out).map_err(|e| io(out, e))?;
+    remove_dead_temporaries(out);
+    let stage = out.join(format!(".staging.{}.{call}", std::process::id()));
+    let staged = fs::create_dir_all(&stage).map_err(|e| io(&stage, e)).and_then(|_| write(&stage));
+    let moved = staged.and_then(|files| {
+        let targets = files
+            .iter()
+            .map(|f| {
+                let to = out.join(f.file_name().expect("a file"));
+                replaceable(&to).map(|target| (to, target))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        files
+            .iter()
+            .zip(targets)
+            .map(|(f, (to, target))| fs::rename(f, &target).map(|_| to.clone()).map_err(|e| io(&to, e)))
+            .collect::<Result<Vec<_>, _>>()
+    });
+    let _ = fs::remove_dir_all(&stage);
+    moved
+}
+
 /// Writes `text` to `path` atomically ([`write_atomic`]): the tables, reports and scripts.
 pub fn write_text(path: &Path, text: &str) -> IoResult<()> {
     write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| io(path, e)))

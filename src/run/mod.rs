@@ -15,7 +15,9 @@
 //! - `offline`: `monolayer analyze`, the tables of a run's frames ([`analyze_run`]); `plots`: its
 //!   figures;
 //! - `forecast`: `monolayer forecast`, thinning, matched chance and the held-out hole forecast
-//!   ([`forecast()`]).
+//!   ([`forecast()`]);
+//! - `intervene`: `monolayer intervene`, branches before each nucleation with the motion changed,
+//!   and the share that still tear ([`intervene()`]); `pool`: simulations one per core.
 //!
 //! Uses `model`, `analysis`, `formats` and `gpu`; nothing below it uses this layer. The modules
 //! are private but for [`figures`], a pipeline of its own; what the binary and the tests use is
@@ -28,8 +30,10 @@ mod error;
 pub mod figures;
 mod files;
 mod forecast;
+mod intervene;
 mod offline;
 mod plots;
+mod pool;
 mod runner;
 mod sweep;
 
@@ -44,6 +48,7 @@ pub use files::{
     write_checkpoint, write_frame, Frame, RunFrames, RunLock,
 };
 pub use forecast::forecast;
+pub use intervene::{intervene, Arm, InterveneOptions, Report, FRICTION_FACTOR, LOCAL_CHI};
 pub use offline::analyze_run;
 pub use plots::Background;
 pub use runner::{
