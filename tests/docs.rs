@@ -1,8 +1,10 @@
-//! The documentation's links hold: in README.md, CONTRIBUTING.md, CHANGELOG.md and docs/*.md,
-//! every relative link leads to a file or folder of the repository, and every `#anchor` into a
-//! Markdown file names one of its headings (as GitHub makes them: lower case, punctuation other
-//! than `-` and `_` dropped, spaces as `-`, a repeated heading numbered `-1`, `-2`, …).
-//! Links to the web (`https:`, `mailto:`, …) are not followed.
+//! The documentation's links hold: in README.md, CONTRIBUTING.md, CHANGELOG.md and every
+//! Markdown file under docs/ (the generated reports of docs/evidence/ too), every relative link
+//! leads to a file or folder of the repository, and every `#anchor` into a Markdown file names
+//! one of its headings (as GitHub makes them: lower case, punctuation other than `-` and `_`
+//! dropped, spaces as `-`, a repeated heading numbered `-1`, `-2`, …). Links to the web
+//! (`https:`, `mailto:`, …) are not followed. Every file of docs/evidence/ is listed in its
+//! README.md with the build that made it.
 
 use std::collections::BTreeSet;
 use std::fs;
@@ -12,17 +14,52 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// The Markdown files checked: the three at the top and those of docs/.
+/// The Markdown files checked: the three at the top and every one under docs/.
 fn documents(root: &Path) -> Vec<PathBuf> {
     let mut out: Vec<PathBuf> =
         ["README.md", "CONTRIBUTING.md", "CHANGELOG.md"].iter().map(|n| root.join(n)).filter(|p| p.exists()).collect();
-    if let Ok(dir) = fs::read_dir(root.join("docs")) {
-        let mut docs: Vec<PathBuf> =
-            dir.map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == "md")).collect();
-        docs.sort();
-        out.extend(docs);
+    let mut docs: Vec<PathBuf> =
+        files_under(&root.join("docs")).into_iter().filter(|p| p.extension().is_some_and(|x| x == "md")).collect();
+    docs.sort();
+    out.extend(docs);
+    out
+}
+
+/// Every file under `dir`, at any depth.
+fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = e.path();
+        if path.is_dir() {
+            out.extend(files_under(&path));
+        } else {
+            out.push(path);
+        }
     }
     out
+}
+
+/// Every file of docs/evidence/ is listed in its README.md, in a row that names the build (a git
+/// commit) that made it.
+#[test]
+fn every_evidence_file_is_listed_with_its_build() {
+    let evidence = root().join("docs/evidence");
+    let readme = fs::read_to_string(evidence.join("README.md")).unwrap();
+    let mut missing = Vec::new();
+    for file in files_under(&evidence) {
+        let name = file.strip_prefix(&evidence).unwrap().display().to_string();
+        if name == "README.md" {
+            continue;
+        }
+        let row = readme.lines().find(|l| l.starts_with('|') && l.contains(&format!("]({name})")));
+        let built = row.is_some_and(|r| {
+            r.split('`').skip(1).step_by(2).any(|code| code.len() >= 7 && code.chars().all(|c| c.is_ascii_hexdigit()))
+        });
+        if !built {
+            missing.push(name);
+        }
+    }
+    assert!(missing.is_empty(), "not listed with a build in docs/evidence/README.md: {missing:?}");
 }
 
 /// The lines of `text` outside fenced code blocks (``` or ~~~), with their numbers, and inline

@@ -79,7 +79,7 @@ pub fn branch_params(parent: &Params, sets: &[String]) -> Result<(Params, Vec<Pa
     let mut params = params_from_table(&table, "--set")?;
     if let Some((_, v)) = &chi {
         let c = number("chi", v).map_err(|e| e.context("--set"))?;
-        if !(c > 0.0) {
+        if c.is_nan() || c <= 0.0 {
             return Err(RunError::invalid("--set chi =", c, "a finite number > 0 (χ = ξ_s/ξ_cell)"));
         }
         params.set_chi(c);

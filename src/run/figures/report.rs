@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use super::draw::Drawn;
 use super::plan::{Figure, Plan, S1_INITIAL_GAP};
+use crate::model::Params;
 use crate::run::error::RunError;
 use crate::run::files::write_text;
 
@@ -118,13 +119,16 @@ fn markdown(drawn: &Drawn) -> String {
     );
     let _ = writeln!(
         s,
-        "- Parameters not varied are the defaults of `monolayer params` (γ = {}, ζ = {}, ξ_cell = {}, friction weights `{}`, passive force `{}`){}.",
+        "- Parameters not varied are the defaults of `monolayer params` (γ = {}, ξ_cell = {}, friction weights `{}`, \
+         passive force `{}`){}. ζ is each figure's own, given with it below; where the paper states none (Figs. 1c–d, \
+         S1, S2, `mechanism`) it is ζ = {} (`figures::UNSTATED_ZETA`; the default of `run` is {}).",
         b.gamma,
-        b.zeta,
         b.xi_cell,
         name(&b.friction_weights),
         name(&b.passive_force),
-        if plan.sets.is_empty() { String::new() } else { format!(", with --set {}", plan.sets.join(" --set ")) }
+        if plan.sets.is_empty() { String::new() } else { format!(", with --set {}", plan.sets.join(" --set ")) },
+        b.zeta,
+        Params::default().zeta
     );
     if failed.is_empty() {
         let _ = writeln!(s, "- Every run finished.\n");
@@ -145,10 +149,12 @@ fn markdown(drawn: &Drawn) -> String {
             .files
             .iter()
             .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-            .filter(|n| n.ends_with(".csv") || n.ends_with(".svg"))
+            .filter(|n| n.ends_with(".csv"))
             .map(|n| format!("[{n}]({n})"))
             .collect();
-        let _ = writeln!(s, "Files: {}.\n", files.join(", "));
+        // The SVG is written beside the PNG, but not linked: a copy of the report may keep only
+        // the PNGs (docs/evidence/ does), and a link must not lead nowhere.
+        let _ = writeln!(s, "Files: {}, and `{stem}.svg` beside the PNG.\n", files.join(", "));
         let _ = writeln!(s, "**The paper:** {paper}\n");
         let _ = writeln!(s, "**Here:** {here} {}.\n", m.runs);
         let _ = writeln!(s, "**Measured:**\n");
