@@ -599,6 +599,7 @@ fn branch(a: &BranchArgs) -> Result<(), RunError> {
     };
     let replay = progress_bar(0, 0, a.quiet);
     replay.set_message("replaying");
+    let made = Instant::now();
     let mut run = create_branch(&options, &mut |done, of| {
         replay.set_length(of);
         replay.set_position(done);
@@ -608,10 +609,11 @@ fn branch(a: &BranchArgs) -> Result<(), RunError> {
     let changes: Vec<String> =
         origin.changes.iter().map(|c| format!("{} {} -> {}", c.key, c.parent, c.branch)).collect();
     eprintln!(
-        "branch of {} at step {} ({}); {}{}; to step {} in {}",
+        "branch of {} at step {} ({}, made in {:.0} ms); {}{}; to step {} in {}",
         origin.parent,
         origin.step,
         origin.source,
+        made.elapsed().as_secs_f64() * 1e3,
         if changes.is_empty() { "no change".to_string() } else { changes.join(", ") },
         origin
             .perturbation
