@@ -1,4 +1,6 @@
-//! `monolayer`: run the paper's protocol at full size, continue a run, measure speed.
+//! `monolayer`, the command line: parses the arguments and hands each command to the library
+//! (`monolayer::run`): run and resume, branch, sweep, figures, analyze, forecast, intervene, bench,
+//! params, fingerprint, relaxed-state.
 
 use std::io::Write;
 use std::path::PathBuf;

@@ -281,3 +281,31 @@ fn a_broken_link_is_detected() {
         "{broken:?}"
     );
 }
+
+/// CONTRIBUTING.md's code map names every source file: each `src/**/NAME.rs` by NAME (a `mod.rs`
+/// by its folder), as a word of the map.
+#[test]
+fn the_code_map_names_every_source_file() {
+    let text = fs::read_to_string(root().join("CONTRIBUTING.md")).unwrap();
+    let start = text.find("## Code map").expect("a code map");
+    let end = text[start..].find("\n## ").map_or(text.len(), |e| start + e + 1);
+    let map = &text[start..end];
+    let is_word = |c: char| c.is_alphanumeric() || c == '_' || c == '-';
+    let named = |name: &str| {
+        map.match_indices(name).any(|(at, _)| {
+            !map[..at].chars().next_back().is_some_and(is_word)
+                && !map[at + name.len()..].chars().next().is_some_and(is_word)
+        })
+    };
+    let mut missing: Vec<String> = files_under(&root().join("src"))
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|x| x == "rs"))
+        .filter_map(|p| {
+            let stem = p.file_stem()?.to_string_lossy().into_owned();
+            let name = if stem == "mod" { p.parent()?.file_name()?.to_string_lossy().into_owned() } else { stem };
+            (!named(&name)).then(|| p.strip_prefix(root()).unwrap().display().to_string())
+        })
+        .collect();
+    missing.sort();
+    assert!(missing.is_empty(), "CONTRIBUTING.md's code map does not name: {missing:?}");
+}

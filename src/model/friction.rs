@@ -85,7 +85,7 @@ pub struct FrictionSolver {
     /// same (subdomain weights: n follows the patches, which move only between steps) and F
     /// moves smoothly, so the corrector's solution is the predictor's plus nearly this shift:
     /// with it the corrector's initial residual is about 13× smaller (docs/performance.md,
-    /// "The corrector shift").
+    /// "The corrector's guess").
     pub corrector_shift: Vec<C64>,
     /// The predictor's solution of the step under way, from which the shift is measured.
     predictor_solution: Vec<C64>,
