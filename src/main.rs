@@ -90,13 +90,13 @@ struct InterveneArgs {
     /// Perturbed replicas (the control) per branch point.
     #[arg(long, default_value_t = monolayer::analysis::REPLICAS)]
     replicas: usize,
-    /// The arms: control, activity-off, activity-halved, friction-x10, local-flows.
+    /// The arms, as a list (control must be one).
     #[arg(
         long,
         value_delimiter = ',',
         default_value = "control,activity-off,activity-halved,friction-x10,local-flows"
     )]
-    arms: Vec<String>,
+    arms: Vec<Arm>,
     /// Simulations at a time, one per core (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
@@ -168,11 +168,7 @@ struct FiguresArgs {
     /// Output directory: the runs in DIR/runs/, the figures, plan.csv and figures.md in DIR.
     #[arg(long)]
     out: PathBuf,
-    /// smoke (minutes: tiny boxes, proves the pipeline), standard (full size, a few seeds, half
-    /// the paper's length: one machine overnight), evidence (the paper's protocol: 10,000
-    /// relaxation and 100,000 active steps, a frame every 1,000 steps; 4 seeds per point for
-    /// Figs. 2 and 3c, 3 elsewhere, the χ = 0.01 points at ζ = 0.4 and 0.5 included; 75 runs,
-    /// some 20 core-hours) or paper (the paper's counts: a cluster).
+    /// How many runs, how long, how large (`--dry-run` prints the plan and its cost, timed here).
     #[arg(long, default_value = "smoke")]
     scale: Scale,
     /// Only these figures and their runs: --only 1c,3d,S1 (1c, 1d, 2, 3ab, 3c, 3d, S1, S2, S3,
@@ -189,8 +185,7 @@ struct FiguresArgs {
     /// is refused without this; a --shard, as a Slurm array task runs, is not).
     #[arg(long)]
     yes: bool,
-    /// all (runs, then figures), runs (only the runs: a Slurm array task), or figures (only the
-    /// figures, from finished runs: the aggregation job).
+    /// What to do of the plan.
     #[arg(long, default_value = "all")]
     stage: Stage,
     /// Run only every N-th run of the plan starting at K (K/N), as a Slurm array task does.
@@ -227,7 +222,7 @@ struct AnalyzeArgs {
     /// last frame).
     #[arg(long, value_name = "STEP")]
     snapshot: Option<u64>,
-    /// Field coloured under the snapshot: strain-rate, active-force-divergence or speed.
+    /// Field coloured under the snapshot.
     #[arg(long, default_value = "strain-rate")]
     field: Background,
     /// Instead of a run: time the live measurements of one full-size frame, and `analyze` over
@@ -919,7 +914,7 @@ fn intervene(a: &InterveneArgs) -> Result<(), RunError> {
         leads: a.leads.clone(),
         after: a.after,
         replicas: a.replicas,
-        arms: a.arms.iter().map(|s| Arm::parse(s)).collect::<Result<_, _>>()?,
+        arms: a.arms.clone(),
         jobs: match a.jobs {
             Some(n) => check_threads("--jobs", n)?,
             None => cores(),

@@ -176,7 +176,7 @@ fn bad_input_is_refused_by_name_and_runs_nothing() {
     let ps = p.to_str().unwrap();
     for (args, expect) in [
         (vec!["--arms", "activity-off"], "--arms must include control"),
-        (vec!["--arms", "control,magic"], "--arms magic: must be one of control, activity-off"),
+        (vec!["--arms", "control,magic"], "invalid value 'magic' for '--arms <ARMS>'"),
         (vec!["--leads", "0"], "--leads"),
         (vec!["--leads", "1,1"], "listed twice"),
         (vec!["--replicas", "0"], "--replicas 0"),

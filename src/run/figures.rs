@@ -31,7 +31,7 @@ use crate::run::error::RunError;
 use crate::run::sweep::{Job, Shard};
 
 /// What `figures` does.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Stage {
     /// The runs, then the figures.
     All,
@@ -39,18 +39,6 @@ pub enum Stage {
     Runs,
     /// Only the figures, from runs that must all be there (the Slurm aggregation job).
     Figures,
-}
-
-impl std::str::FromStr for Stage {
-    type Err = RunError;
-    fn from_str(s: &str) -> Result<Self, RunError> {
-        match s {
-            "all" => Ok(Stage::All),
-            "runs" => Ok(Stage::Runs),
-            "figures" => Ok(Stage::Figures),
-            _ => Err(RunError::Parse(format!("--stage {s}: the stage is one of all, runs, figures"))),
-        }
-    }
 }
 
 /// What the command line asked for.

@@ -40,17 +40,19 @@ pub const FRICTION_FACTOR: f64 = 10.0;
 pub const LEVEL: f64 = 0.95;
 
 /// What a branch changes: one parameter, or (the replicas) nothing but φ at the 10⁻⁶ level.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, clap::ValueEnum)]
 pub enum Arm {
-    /// The parent's parameters, φ perturbed ([`REPLICAS`] of them): p_same, the ceiling.
+    /// The parent's parameters, φ perturbed at 10⁻⁶ (`--replicas` of them): p_same, the ceiling.
     Control,
     /// ζ = 0: passive forces and friction as they were, no active stress.
     ActivityOff,
     /// ζ/2: the dose response.
     ActivityHalved,
-    /// ξ_s × [`FRICTION_FACTOR`]: the paper's control parameter, towards the no-hole regime.
+    /// ξ_s × 10 (`FRICTION_FACTOR`): the paper's control parameter, towards the no-hole regime.
+    #[value(name = "friction-x10")]
     FrictionTenfold,
-    /// ξ_s = [`LOCAL_CHI`]·ξ_cell: flows screened within a cell, the cells as active as before.
+    /// ξ_s = ξ_cell, χ = 1 (`LOCAL_CHI`): flows screened within a cell, the cells as active as
+    /// before.
     LocalFlows,
 }
 
@@ -66,13 +68,6 @@ impl Arm {
             Arm::FrictionTenfold => "friction-x10",
             Arm::LocalFlows => "local-flows",
         }
-    }
-
-    pub fn parse(s: &str) -> Result<Arm, RunError> {
-        Arm::ALL.into_iter().find(|a| a.name() == s).ok_or_else(|| {
-            let names: Vec<&str> = Arm::ALL.iter().map(|a| a.name()).collect();
-            RunError::invalid("--arms", s, format!("one of {}", names.join(", ")))
-        })
     }
 
     /// The one `--set` this arm gives a branch of a run with parameters `p` (None: the replicas).

@@ -191,7 +191,7 @@ pub fn correlations(
 }
 
 /// The field drawn under a snapshot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Background {
     /// ε̇ = ∇·v/2 of the smoothed velocity, over its largest magnitude (Fig. 1b, velocity).
     StrainRate,
@@ -199,21 +199,6 @@ pub enum Background {
     ActiveForceDivergence,
     /// |v| of the smoothed velocity, over its largest value.
     Speed,
-}
-
-impl std::str::FromStr for Background {
-    type Err = RunError;
-
-    fn from_str(s: &str) -> Result<Self, RunError> {
-        match s {
-            "strain-rate" => Ok(Background::StrainRate),
-            "active-force-divergence" => Ok(Background::ActiveForceDivergence),
-            "speed" => Ok(Background::Speed),
-            _ => {
-                Err(RunError::Parse(format!("`{s}`: the field is one of strain-rate, active-force-divergence, speed")))
-            }
-        }
-    }
 }
 
 /// A diverging colour for t ∈ [−1, 1]: blue, white, red.
