@@ -9,7 +9,8 @@ const FRAME_MS = 1000 / 30;
 const MIN_SCALE = 0.3;
 
 export class FrameLoop {
-  // hooks: draw(frame, dpr); request(dpr) asks the worker for a frame; readouts(); fatal(error).
+  // hooks: check() before each frame (the renderer still has its device); draw(frame, dpr);
+  // request(dpr) asks the worker for a frame; readouts(); fatal(error).
   constructor(canvas, hooks) {
     this.canvas = canvas;
     this.hooks = hooks;
@@ -84,6 +85,7 @@ export class FrameLoop {
     if (this.stopped) return;
     requestAnimationFrame((t) => this.frame(t));
     try {
+      this.hooks.check();
       this.adaptResolution(now);
       const t0 = performance.now();
       const dpr = this.resizeCanvas();
