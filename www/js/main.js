@@ -350,7 +350,10 @@ function showBackend() {
   $('backend').textContent = `Drawing with ${r.backend()}${renderers.why ? ` (${renderers.why})` : ''}.`;
 }
 
-// Called by the frame loop before each frame: a lost renderer is replaced.
+// Called by the frame loop before each frame, and every half second besides (Firefox stops
+// animation frames altogether once a WebGPU canvas's device is destroyed): a lost renderer is
+// replaced.
+setInterval(() => checkRenderer(), 500);
 function checkRenderer() {
   const r = page.renderer;
   if (!r || renderers.recovering) return;

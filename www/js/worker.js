@@ -32,6 +32,7 @@ async function loadCore(m) {
   if (core) return;
   let why;
   if (!self.crossOriginIsolated) why = 'the page is not cross-origin isolated';
+  else if (typeof SharedArrayBuffer === 'undefined') why = 'this browser has no SharedArrayBuffer';
   else if (m.engine === 'gpu') why = 'the GPU engine is in the single-thread build';
   else if (m.engine === 'auto' && !(await gpuAdapterOnce()).software && !(await gpuAdapterOnce()).error) {
     why = 'the GPU engine may step here, and it is in the single-thread build';
