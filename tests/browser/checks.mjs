@@ -69,6 +69,7 @@ export const CHECKS = [
   {
     name: 'the page loads, draws its tissue and steps',
     core: true,
+    chromium: 'demo.test.mjs checks it on WebGPU and on WebGL2',
     async run(b, ctx) {
       const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1');
       const backend = await p.evaluate(() => window.demo.backend);
@@ -86,6 +87,7 @@ export const CHECKS = [
   {
     name: 'a preset and a field change the core, the view and the URL',
     core: true,
+    chromium: "demo.test.mjs checks every field and the presets' values",
     async run(b, ctx) {
       const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1');
       await until(p, 'a frame drawn', () => window.demo.drawn > 0);
@@ -107,6 +109,7 @@ export const CHECKS = [
   {
     name: 'Download gives the readouts and the state',
     core: true,
+    chromium: 'viewer.test.mjs checks the download against monolayer analyze',
     async run(b, ctx) {
       const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1');
       await until(p, 'three rows of readouts', () => window.demo.call('readout_rows').then((n) => n >= 3));
@@ -129,6 +132,7 @@ export const CHECKS = [
   {
     name: "a native run's frames open and play",
     core: true,
+    chromium: "viewer.test.mjs checks them against monolayer analyze, a damaged frame among them",
     async run(b, ctx) {
       const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1&field=director');
       const frames = ctx.nativeRun.frames.map((n) => path.join(ctx.nativeRun.dir, 'frames', n));

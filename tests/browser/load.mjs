@@ -39,8 +39,6 @@ for (let r = 0; r < runs; r++) {
   const cdp = await context.newCDPSession(page);
   await cdp.send('Network.enable');
   await cdp.send('Network.emulateNetworkConditions', FAST_3G);
-  // The worker's requests (the core it loads, the shipped state) throttled alike.
-  cdp.on('Target.attachedToTarget', () => {});
   await page.goto(`${base}/`);
   await page.waitForFunction(() => window.demo?.firstFrameMs !== undefined || window.demo?.error, null, { timeout: 600000, polling: 50 });
   const firstFrameMs = await page.evaluate(() => window.demo.firstFrameMs);

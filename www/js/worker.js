@@ -221,7 +221,6 @@ function gpuAdapterOnce() {
 function gpuDeviceOnce(found) {
   gpuDevice ??= (async () => {
     try {
-      if (!core.WebGpuEngine) throw new Error('the threaded build has no GPU engine: open the page with ?engine=gpu');
       const engine = await core.WebGpuEngine.create();
       return { engine, adapter: found.adapter, software: found.software || engine.runs_on_cpu() };
     } catch (e) {
@@ -259,6 +258,10 @@ async function chooseEngine(wanted) {
   }
   if (wanted === 'auto' && found.software) {
     gpuNote = `WebGPU runs in software here (${found.adapter}), where the CPU engine is faster`;
+    return;
+  }
+  if (!core.WebGpuEngine) {
+    gpuNote = 'the threaded core has no GPU engine (?engine=gpu opens the page on the single-thread core, which has)';
     return;
   }
   const d = await gpuDeviceOnce(found);
