@@ -405,8 +405,9 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await p.evaluate(() => window.demo.call('step', 300));
       await until(p, 'a frame after 300 steps', (d) => window.demo.drawn > d, drawn); // drawn after
       // Where the centre is at the moment of the click: checking a radio low in the panel may
-      // scroll the page.
+      // scroll the page, the canvas's middle out of the window.
       const clickCentre = async () => {
+        await p.evaluate(() => document.getElementById('view').scrollIntoView({ block: 'center' }));
         const { cx, cy } = await centre(p);
         await p.mouse.click(cx, cy);
       };
