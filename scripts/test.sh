@@ -38,13 +38,15 @@ step "lints and unit tests with the cells' fields stored in f32 (feature \`f32-s
 cargo clippy --lib --no-default-features --features f32-storage -- -D warnings
 cargo test --no-default-features --features f32-storage --lib
 
-step "browser demo (headless Chromium: WebGPU on SwiftShader, then the WebGL2 fallback)"
-# Debian's chromium and the npm packages of tests/browser; .ci/run installs both. No browser
-# is ever downloaded (playwright-core drives /usr/bin/chromium).
-if [ ! -x /usr/bin/chromium ]; then
-  echo "error: /usr/bin/chromium is missing: apt-get install -y chromium (.ci/run does)" >&2
-  exit 1
-fi
+step "browser demo (Chromium: WebGPU on SwiftShader, then WebGL2; the shared checks in Chromium, Firefox and WebKit)"
+# Debian's chromium, firefox-esr and webkit2gtk-driver (with xvfb), and the npm packages of
+# tests/browser; .ci/run installs them. No browser is ever downloaded.
+for b in /usr/bin/chromium /usr/bin/firefox-esr /usr/bin/WebKitWebDriver; do
+  if [ ! -x "$b" ]; then
+    echo "error: $b is missing: apt-get install -y chromium firefox-esr webkit2gtk-driver xvfb xauth (.ci/run does)" >&2
+    exit 1
+  fi
+done
 bash scripts/serve.sh --build-only
 (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
 # The native binary the page is compared with (target/release/monolayer): the one the tests step
@@ -53,4 +55,5 @@ bash scripts/serve.sh --build-only
 # bitflags' `std`), which would rebuild bitflags, wgpu and naga here a second time; with the same
 # command nothing is compiled again.
 cargo test --release --features gpu --no-run
-node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/demo.test.mjs tests/browser/viewer.test.mjs
+node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/demo.test.mjs tests/browser/viewer.test.mjs \
+  tests/browser/engines.test.mjs

@@ -12,3 +12,18 @@ pub fn js_err(e: impl std::fmt::Display) -> wasm_bindgen::JsError {
 pub fn start() {
     console_error_panic_hook::set_once();
 }
+
+/// How many threads run the core's parallel loops: 1 in the single-thread build; in the
+/// threaded one (feature `threads`), the workers of the pool that `initThreadPool(n)` started
+/// (the worker that calls the core waits while they work).
+#[wasm_bindgen::prelude::wasm_bindgen(js_name = coreThreads)]
+pub fn core_threads() -> usize {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::current_num_threads()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        1
+    }
+}

@@ -7,11 +7,14 @@
 //!   [`tissue_stats`]);
 //! - `readouts`: the readout log the page downloads, and its run record ([`run_record_json`]);
 //! - `playback`: a native run's frames opened in the page ([`Playback`]);
+//! - `raster`: a view as one pixel per site, for the page's Canvas 2D renderer ([`site_colours`]);
 //! - `version`: the code version the page names ([`code_version`]);
 //! - `sim` (wasm32): `WebSim`, the simulation object the page drives (step, parameters, brushes);
-//! - `render` (wasm32): `Renderer`, wgpu on WebGPU or WebGL2, with the shaders of `shaders/`;
+//! - `render` (wasm32): `Renderer`, wgpu on WebGPU or WebGL2, with the shaders of `shaders/`
+//!   (and what the page's Canvas 2D renderer reads of a view where neither exists);
 //! - `player` (wasm32): `WebPlayback`, the binding of `playback`;
-//! - `binding` (wasm32): what the bindings share (the start hook, the error they throw);
+//! - `binding` (wasm32): what the bindings share (the start hook, the error they throw, the
+//!   threads the core runs on);
 //! - `gpu_engine` (wasm32, feature `gpu`): `WebGpuEngine`, the model stepped on WebGPU compute
 //!   (`crate::gpu`), handing its state to a `WebSim` to draw and measure.
 //!
@@ -21,6 +24,7 @@
 
 mod measure;
 mod playback;
+mod raster;
 mod readouts;
 mod version;
 mod view;
@@ -38,6 +42,7 @@ mod sim;
 
 pub use measure::{tissue_stats, TissueStats};
 pub use playback::{Playback, RunInfo};
+pub use raster::{bar_colours, site_colours};
 pub use readouts::{run_record_json, ReadoutLog, Row, ROW_EVERY};
 pub use version::code_version;
 pub use view::{FieldKind, Segment, View, ViewBuilder};
@@ -53,3 +58,6 @@ pub use render::{Renderer, WebView};
 pub use sim::GpuState;
 #[cfg(target_arch = "wasm32")]
 pub use sim::{CoreCopy, WebSim};
+// The threaded core's `initThreadPool(n)`: rayon's pool on n Web Workers sharing this memory.
+#[cfg(all(target_arch = "wasm32", feature = "threads"))]
+pub use wasm_bindgen_rayon::init_thread_pool;

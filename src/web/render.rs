@@ -102,6 +102,28 @@ impl WebView {
     pub fn range(&self) -> Vec<f32> {
         vec![self.0.range.0, self.0.range.1]
     }
+
+    /// One RGBA pixel per site, row 0 at the top: the view as the page's Canvas 2D renderer
+    /// draws it, where there is neither WebGPU nor WebGL2 (`raster::site_colours`).
+    pub fn rgba(&self, substrate: bool) -> Vec<u8> {
+        super::raster::site_colours(&self.0, substrate)
+    }
+}
+
+/// The colour bar of a field, `n` RGBA pixels from its minimum to its maximum (the Canvas 2D
+/// renderer's; the wgpu renderer draws it in `shaders/field.wgsl`).
+#[wasm_bindgen(js_name = barColours)]
+pub fn bar_colours(kind: FieldKind, n: usize) -> Vec<u8> {
+    super::raster::bar_colours(kind, n)
+}
+
+/// Where the lattice square and the colour bar go on a canvas of `width × height` device
+/// pixels: [left, top, side, bar top, bar height], as [`Renderer::layout`] gives them. The
+/// Canvas 2D renderer places its drawing with it, so that every renderer shares one geometry.
+#[wasm_bindgen(js_name = canvasLayout)]
+pub fn canvas_layout(width: u32, height: u32, dpr: f32, with_bar: bool) -> Vec<f32> {
+    let g = Layout::of(width.max(1), height.max(1), dpr, with_bar);
+    vec![g.x, g.y, g.side, g.bar_y, g.bar_h]
 }
 
 /// Where things are on the canvas, in device pixels.
@@ -149,17 +171,22 @@ pub struct Renderer {
     segments: wgpu::Buffer,
     segment_capacity: usize,
     layout: Layout,
-    /// Validation errors and device loss, reported asynchronously by wgpu; the page polls them.
+    /// Validation errors, reported asynchronously by wgpu; `draw` returns them.
     errors: Arc<Mutex<Vec<String>>>,
+    /// Why the device was lost, once it is (driver reset, sleep, a crash of the browser's GPU
+    /// process, or `destroy_device`): the page polls it and makes a new renderer.
+    lost: Arc<Mutex<Option<String>>>,
 }
 
 #[wasm_bindgen]
 impl Renderer {
-    /// Finds a GPU for the canvas (WebGPU, else WebGL2) and builds the pipelines. Rejects with a
-    /// message a person can act on when the browser offers neither.
-    pub async fn create(canvas: HtmlCanvasElement) -> Result<Renderer, JsError> {
+    /// Finds a GPU for the canvas (WebGPU if `webgpu` allows it and the browser has an adapter,
+    /// else WebGL2) and builds the pipelines. Rejects with a message a person can act on when
+    /// the browser offers neither. The page asks without WebGPU when it falls back after WebGPU
+    /// devices were lost again and again.
+    pub async fn create(canvas: HtmlCanvasElement, webgpu: bool) -> Result<Renderer, JsError> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = wgpu::Backends::BROWSER_WEBGPU | wgpu::Backends::GL;
+        desc.backends = if webgpu { wgpu::Backends::BROWSER_WEBGPU | wgpu::Backends::GL } else { wgpu::Backends::GL };
         let instance = wgpu::util::new_instance_with_webgpu_detection(desc).await;
         let surface = instance
             .create_surface(wgpu::SurfaceTarget::Canvas(canvas.clone()))
@@ -192,9 +219,10 @@ impl Renderer {
         let sink = errors.clone();
         device
             .on_uncaptured_error(Arc::new(move |e: wgpu::Error| sink.lock().unwrap().push(format!("GPU error: {e}"))));
-        let sink = errors.clone();
+        let lost = Arc::new(Mutex::new(None));
+        let sink = lost.clone();
         device.set_device_lost_callback(move |reason, msg| {
-            sink.lock().unwrap().push(format!("GPU device lost ({reason:?}): {msg}"));
+            sink.lock().unwrap().get_or_insert(format!("the GPU device was lost ({reason:?}: {msg})"));
         });
 
         let (w, h) = (canvas.width().max(1), canvas.height().max(1));
@@ -304,6 +332,7 @@ impl Renderer {
             segment_capacity,
             layout: Layout::of(w, h, 1.0, false),
             errors,
+            lost,
         })
     }
 
@@ -312,10 +341,21 @@ impl Renderer {
         format!("{} ({:?})", self.backend, self.config.format)
     }
 
-    /// GPU errors reported since the last call (validation, device loss), one per line.
+    /// GPU errors reported since the last call (validation), one per line.
     pub fn take_errors(&self) -> Option<String> {
         let mut e = self.errors.lock().unwrap();
         (!e.is_empty()).then(|| e.drain(..).collect::<Vec<_>>().join("\n"))
+    }
+
+    /// Why the device was lost, or nothing while it works. A lost device draws nothing more;
+    /// the page then makes a new renderer (new adapter, new device).
+    pub fn lost(&self) -> Option<String> {
+        self.lost.lock().unwrap().clone()
+    }
+
+    /// Destroys the device, as a driver reset would (the browser tests' forced loss).
+    pub fn destroy_device(&self) {
+        self.device.destroy();
     }
 
     /// [left, top, side, bar top, bar height] in device pixels, as last drawn.
@@ -330,6 +370,9 @@ impl Renderer {
     pub fn draw(&mut self, view: &WebView, dpr: f32, substrate: bool) -> Result<(), JsError> {
         let view = &view.0;
         let kind = view.kind;
+        if self.lost().is_some() {
+            return Ok(()); // nothing draws on a lost device: the page is making a new renderer
+        }
         let (w, h) = (self.canvas.width().max(1), self.canvas.height().max(1));
         if (w, h) != (self.config.width, self.config.height) {
             self.config.width = w;

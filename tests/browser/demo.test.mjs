@@ -1,6 +1,7 @@
 // Browser tests of the demo (www/) with node:test, in Debian's headless Chromium driven by
 // playwright-core (no browser is downloaded): once with real WebGPU on SwiftShader, once without
-// WebGPU (wgpu's WebGL2 fallback), once with neither. Needs www/pkg (scripts/serve.sh
+// WebGPU (wgpu's WebGL2 fallback). The page with neither (Canvas 2D), and the checks every
+// engine runs, are in engines.test.mjs. Needs www/pkg and www/pkg-threads (scripts/serve.sh
 // --build-only) and the native binary (for the fingerprint and the speed ratio).
 //
 //   node --test --test-reporter=spec tests/browser/demo.test.mjs
@@ -404,8 +405,9 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       await p.evaluate(() => window.demo.call('step', 300));
       await until(p, 'a frame after 300 steps', (d) => window.demo.drawn > d, drawn); // drawn after
       // Where the centre is at the moment of the click: checking a radio low in the panel may
-      // scroll the page.
+      // scroll the page, the canvas's middle out of the window.
       const clickCentre = async () => {
+        await p.evaluate(() => document.getElementById('view').scrollIntoView({ block: 'center' }));
         const { cx, cy } = await centre(p);
         await p.mouse.click(cx, cy);
       };
@@ -841,28 +843,3 @@ for (const [modeName, mode] of Object.entries(MODES)) {
     });
   });
 }
-
-describe('nogpu: Chromium --disable-3d-apis (neither WebGPU nor WebGL2)', { skip: !wanted('nogpu') }, () => {
-  let context;
-  let profile;
-  before(async () => {
-    ({ context, profile } = await launch(['--disable-3d-apis']));
-  });
-  after(async () => {
-    await context?.close();
-    if (profile) await rm(profile, { recursive: true, force: true });
-  });
-  check('the canvas says why instead of staying blank', async () => {
-    const page = await context.newPage();
-    await page.goto(base + '/');
-    await until(page, 'the page to load or fail', () => window.demo && (window.demo.ready || window.demo.error));
-    const err = await page.evaluate(() => window.demo.error);
-    assert(err && /WebGPU|WebGL2/.test(err), `no error shown: ${err}`);
-    assert(await page.locator('#message').isVisible(), 'message hidden');
-    const text = await page.textContent('#message');
-    assert(text.includes('WebGPU or WebGL2'), `message: ${text}`);
-    assert.equal(await page.evaluate(() => window.demo.engine), 'none');
-    assert((await page.textContent('#engine')).startsWith('Engine: none'), 'the engine label without a GPU');
-    await page.screenshot({ path: path.join(OUT, 'no-gpu.png') });
-  });
-});

@@ -6,7 +6,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 
-import { PARAMS, FIELDS, PRESETS, SIZES, ENGINES, parseUrl, toUrl, fieldName, shippedStateFor, SHIPPED_STATES, DEFAULT_PRESET } from '../../www/js/state.js';
+import { PARAMS, FIELDS, PRESETS, SIZES, ENGINES, MAX_THREADS, parseUrl, toUrl, fieldName, shippedStateFor, SHIPPED_STATES, DEFAULT_PRESET } from '../../www/js/state.js';
 
 // mulberry32: a small, well-mixed 32-bit generator.
 function rng(seed) {
@@ -20,7 +20,7 @@ function rng(seed) {
   };
 }
 
-const KEYS = [...Object.keys(PARAMS), 'preset', 'field', 'embed', 'paused', 'relax', 'size', 'engine', 'junk', ''];
+const KEYS = [...Object.keys(PARAMS), 'preset', 'field', 'embed', 'paused', 'relax', 'size', 'engine', 'threads', 'tour', 'junk', ''];
 const NASTY = ['', 'NaN', 'nan', 'Infinity', '-Infinity', '1e999', '-1e999', '.5', '5.', '0x10', '1e-400', ' 3 ',
   'abc', '%', '%%20', '∞', '🙂', '-0', '4294967296', '-1', '1,5', 'null', 'undefined', '[]', '{}', '&&', '=='];
 
@@ -56,6 +56,8 @@ function assertValid(state, search) {
   assert.ok(state.preset === null || state.preset in PRESETS, `${search}: preset ${state.preset}`);
   assert.ok(state.size in SIZES, `${search}: size ${state.size}`);
   assert.ok(state.engine in ENGINES, `${search}: engine ${state.engine}`);
+  assert.ok(state.threads === null || (Number.isInteger(state.threads) && state.threads >= 1 && state.threads <= MAX_THREADS),
+    `${search}: threads ${state.threads}`);
 }
 
 test('any query string parses to a valid state, and its URL round-trips', () => {

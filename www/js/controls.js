@@ -19,7 +19,8 @@ export class Controls {
     this.buildSliders();
     this.buildChoosers();
     this.wireButtons();
-    this.installBrush($('view'));
+    // On the canvas's wrapper: a new renderer brings a new canvas.
+    this.installBrush($('view').parentElement);
     window.addEventListener('keydown', (e) => this.onKey(e));
   }
 
@@ -131,18 +132,19 @@ export class Controls {
     else if (this.tool === 'ablate') this.actions.ablate(at[0], at[1]);
   }
 
-  // Brushes paint while the pointer is down; the laser removes one cell per press.
-  installBrush(canvas) {
+  // Brushes paint while the pointer is down on the canvas; the laser removes one cell per press.
+  installBrush(wrap) {
     let down = false;
-    canvas.addEventListener('pointerdown', (e) => {
+    wrap.addEventListener('pointerdown', (e) => {
+      if (e.target.id !== 'view') return;
       down = true;
-      canvas.setPointerCapture(e.pointerId);
+      e.target.setPointerCapture(e.pointerId);
       this.applyTool(e);
     });
-    canvas.addEventListener('pointermove', (e) => {
+    wrap.addEventListener('pointermove', (e) => {
       if (down && this.tool !== 'ablate') this.applyTool(e);
     });
-    canvas.addEventListener('pointerup', () => {
+    wrap.addEventListener('pointerup', () => {
       down = false;
     });
   }

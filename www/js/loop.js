@@ -7,9 +7,12 @@
 
 const FRAME_MS = 1000 / 30;
 const MIN_SCALE = 0.3;
+// Animation frames missing this long on a visible page: the watchdog draws instead.
+const WATCHDOG_MS = 500;
 
 export class FrameLoop {
-  // hooks: draw(frame, dpr); request(dpr) asks the worker for a frame; readouts(); fatal(error).
+  // hooks: check() before each frame (the renderer still has its device); draw(frame, dpr);
+  // request(dpr) asks the worker for a frame; readouts(); fatal(error).
   constructor(canvas, hooks) {
     this.canvas = canvas;
     this.hooks = hooks;
@@ -23,12 +26,30 @@ export class FrameLoop {
     this.renderScale = 1; // backing pixels per device pixel (≤ 1)
     this.scaleCooldownUntil = 0; // ms: let the estimates settle between changes
     this.drewAt = null; // when the last frame was drawn, until the next animation frame
+    this.frameAt = performance.now(); // when the last frame (drawn or not) ran
+    this.rafPending = false; // an animation frame is asked for
+    this.watchdog = undefined;
     // Steps the worker took and frames drawn here, per second.
     this.rate = { steps: 0, frames: 0, t0: performance.now(), sps: 0, fps: 0, lastStep: null };
   }
 
+  // Frames come from requestAnimationFrame; a watchdog draws them from a timer when animation
+  // frames stop while the page is visible (Firefox stops them for the whole page once a WebGPU
+  // canvas's device is destroyed, and does not start them again for a new canvas).
   start() {
-    requestAnimationFrame((t) => this.frame(t));
+    this.request();
+    this.watchdog ??= setInterval(() => {
+      if (!this.stopped && !document.hidden && performance.now() - this.frameAt > WATCHDOG_MS) this.frame(performance.now());
+    }, FRAME_MS);
+  }
+
+  request() {
+    if (this.rafPending) return;
+    this.rafPending = true;
+    requestAnimationFrame((t) => {
+      this.rafPending = false;
+      this.frame(t);
+    });
   }
 
   // A frame from the worker.
@@ -82,8 +103,10 @@ export class FrameLoop {
 
   frame(now) {
     if (this.stopped) return;
-    requestAnimationFrame((t) => this.frame(t));
+    this.frameAt = performance.now();
+    this.request();
     try {
+      this.hooks.check();
       this.adaptResolution(now);
       const t0 = performance.now();
       const dpr = this.resizeCanvas();

@@ -1,18 +1,22 @@
 // The page: starts the simulation's worker (worker.js, where the WebAssembly core steps) and the
-// renderer (the same core's wgpu drawing, instantiated here), and ties the frame loop (loop.js),
-// the controls (controls.js) and the readouts (readouts.js) to them. Every change of state goes
-// through the actions below, which keep the worker, the controls and the URL in step.
+// renderer (the same core's wgpu drawing, instantiated here, or Canvas 2D where the browser has
+// no GPU API: canvas2d.js), and ties the frame loop (loop.js), the controls (controls.js) and the
+// readouts (readouts.js) to them. Every change of state goes through the actions below, which
+// keep the worker, the controls and the URL in step.
 
 import init, { Renderer, WebView, FieldKind, codeVersion } from '../pkg/monolayer.js';
-import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZES, parseUrl, toUrl, shippedStateFor } from './state.js';
+import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZES, parseUrl, toUrl, shippedStateFor, fieldName } from './state.js';
 import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
 import { Readouts, formatSeconds } from './readouts.js';
 import { Recorder } from './recorder.js';
 import { Viewer } from './viewer.js';
+import { Canvas2DRenderer } from './canvas2d.js';
+import { Tour, TOUR_SPF } from './tour.js';
 
 const $ = (id) => document.getElementById(id);
-const canvas = $('view');
+// The canvas drawn on; a new renderer gets a new one (renderers below).
+let canvas = $('view');
 const message = $('message');
 
 // Everything the tests read lives here too (window.demo); `demo.call` reaches the simulation.
@@ -85,6 +89,7 @@ worker.onmessage = (e) => {
   const m = e.data;
   if (m.type === 'frame') {
     page.stats = m.stats;
+    page.cores = m.cores;
     showSpeed(m.stats);
     loop.receive(m);
   } else if (m.type === 'result') {
@@ -136,11 +141,14 @@ function showEngine(s) {
     // From the relaxation, not from a shipped state further on (showOrigin).
     const slow = s.l >= SIZES.paper.box && s.startedAt <= s.relaxSteps
       ? ' At the paper\'s size the CPU engine takes minutes from the relaxation to the first hole.' : '';
-    text = `Engine: CPU (WebAssembly), bit-identical to native, ${size}.${why}${slow}`;
+    const threads = ` The core runs on ${s.threads} thread${s.threads === 1 ? '' : 's'} (${s.coreNote}).`;
+    text = `Engine: CPU (WebAssembly), bit-identical to native, ${size}.${why}${slow}${threads}`;
   }
   $('engine').textContent = text;
   demo.engine = s.engine;
   demo.engineNote = s.engineNote;
+  demo.threads = s.threads;
+  demo.coreNote = s.coreNote;
 }
 
 // The engine's speed as measured in this page (steps and their time since the engine was
@@ -167,6 +175,7 @@ function showOrigin(s) {
 const readouts = new Readouts();
 
 const loop = new FrameLoop(canvas, {
+  check: checkRenderer,
   draw,
   request: (dpr) => worker.postMessage({ type: 'frame', field: page.state.field, dpr }),
   readouts: updateReadouts,
@@ -182,6 +191,8 @@ demo.drawing = (on) => {
 };
 
 function draw(frame, dpr) {
+  // Between a lost renderer and its replacement (which redraws the latest frame).
+  if (!page.renderer) return;
   const p = frame.parts;
   const view = new WebView(p.l, p.kind, p.tissue, p.field, p.segments, p.range);
   try {
@@ -190,6 +201,8 @@ function draw(frame, dpr) {
     view.free();
   }
   demo.drawn = (demo.drawn ?? 0) + 1;
+  // Since the page's navigation began (performance.now's origin): the load's measure.
+  demo.firstFrameMs ??= performance.now();
   if (p.kind === FieldKind.Tissue) readouts.hideColourBar();
   else readouts.colourBar(p.kind, p.range, page.renderer.layout(), dpr);
   if (recorder.recording) recorder.frame(caption());
@@ -236,8 +249,9 @@ function updateReadouts() {
   const s = page.stats;
   if (!s) return;
   readouts.update(s, loop, page.state.spf, isPlaying());
+  tour.update(s, page.cores ?? 0);
   if (s.active && s.holes > 0 && demo.firstHole === null) {
-    demo.firstHole = { seconds: (performance.now() - demo.loadedAt) / 1000, step: s.step };
+    demo.firstHole = { seconds: (performance.now() - demo.loadedAt) / 1000, step: s.step, sinceNavigationMs: performance.now() };
   }
   demo.stats = {
     ...s, sps: loop.rate.sps, fps: loop.rate.fps, playing: isPlaying(), drawMs: loop.drawMs,
@@ -278,6 +292,111 @@ function saveScreenshot() {
   demo.lastScreenshot = url;
 }
 
+// --- renderers ------------------------------------------------------------------------------------
+// The page draws with wgpu on WebGPU, else on WebGL2, else with Canvas 2D (canvas2d.js), in
+// that order. A lost device or context (a driver update, sleep, a crash of the browser's GPU
+// process: normal events) gets a new renderer of the same kind on a new canvas, and drawing goes
+// on from the next frame; the simulation, in its worker, loses nothing. After
+// LOSSES_BEFORE_FALLBACK losses within LOSS_WINDOW_MS, the page falls back to the next kind and
+// says why.
+const RENDERERS = ['WebGPU', 'WebGL2', 'Canvas 2D'];
+const LOSSES_BEFORE_FALLBACK = 3;
+const LOSS_WINDOW_MS = 60_000;
+// The kind in use (an index of RENDERERS), the times of its recent losses, and why the page
+// draws with a later kind than the first (shown beside the renderer's name).
+const renderers = { level: 0, losses: [], lostOnes: [], recovering: false, glLost: null, why: '' };
+demo.rendererLosses = [];
+
+// A fresh canvas in place of the old one: a canvas keeps the kind of context it was first given
+// (a WebGPU canvas cannot become a 2D one), and a lost WebGL2 context stays lost on its canvas.
+function freshCanvas() {
+  const old = canvas;
+  const c = old.cloneNode(false);
+  c.width = old.width;
+  c.height = old.height;
+  old.replaceWith(c);
+  canvas = c;
+  loop.canvas = c;
+  recorder.source = c;
+  return c;
+}
+
+// A renderer of kind RENDERERS[from] or a later one, on a fresh canvas: { renderer, level }.
+// wgpu asked for WebGPU may come back on WebGL2 (no adapter): its level says which it is.
+async function makeRenderer(from, fresh) {
+  let why = '';
+  for (let level = from; level < RENDERERS.length; level++) {
+    const c = fresh || level === RENDERERS.length - 1 ? freshCanvas() : canvas;
+    fresh = true;
+    renderers.glLost = null;
+    c.addEventListener('webglcontextlost', () => {
+      if (c === canvas) renderers.glLost = 'the WebGL2 context was lost';
+    });
+    try {
+      if (level === RENDERERS.length - 1) return { renderer: new Canvas2DRenderer(c), level, why };
+      const r = await Renderer.create(c, level === 0);
+      return { renderer: r, level: r.backend().startsWith('WebGPU') ? 0 : 1, why };
+    } catch (e) {
+      why = String(e.message ?? e);
+    }
+  }
+  throw new Error(why);
+}
+
+function showBackend() {
+  const r = page.renderer;
+  demo.backend = r.backend();
+  demo.renderer = r;
+  $('backend').textContent = `Drawing with ${r.backend()}${renderers.why ? ` (${renderers.why})` : ''}.`;
+}
+
+// Called by the frame loop before each frame, and every half second besides (Firefox stops
+// animation frames altogether once a WebGPU canvas's device is destroyed): a lost renderer is
+// replaced.
+setInterval(() => checkRenderer(), 500);
+function checkRenderer() {
+  const r = page.renderer;
+  if (!r || renderers.recovering) return;
+  const why = r.lost() ?? renderers.glLost;
+  if (!why) return;
+  renderers.recovering = true;
+  replaceRenderer(why).finally(() => {
+    renderers.recovering = false;
+  });
+}
+
+async function replaceRenderer(why) {
+  const now = performance.now();
+  const losses = renderers.losses.filter((t) => now - t < LOSS_WINDOW_MS);
+  losses.push(now);
+  const level = renderers.level;
+  const fallBack = losses.length >= LOSSES_BEFORE_FALLBACK;
+  renderers.losses = fallBack ? [] : losses;
+  const old = page.renderer;
+  page.renderer = null;
+  // Kept, never freed: freeing a wgpu renderer whose device was destroyed crashed the page in
+  // Chromium (SwiftShader) on the second such loss. A few per minute at most: after
+  // LOSSES_BEFORE_FALLBACK the page falls back to a renderer that is not lost like this.
+  renderers.lostOnes.push(old);
+  let made;
+  try {
+    made = await makeRenderer(fallBack ? level + 1 : level, true);
+  } catch (e) {
+    fatal('The page cannot draw any more', e);
+    return;
+  }
+  page.renderer = made.renderer;
+  renderers.level = made.level;
+  const record = { at: now, why, from: RENDERERS[level], to: RENDERERS[made.level] };
+  demo.rendererLosses.push(record);
+  if (fallBack) {
+    renderers.why = `${RENDERERS[level]} lost its device ${LOSSES_BEFORE_FALLBACK} times within a minute, the last time because ${why}`;
+    notify([`Drawing with ${RENDERERS[made.level]} now: ${renderers.why}.`]);
+  }
+  showBackend();
+  loop.dirty = true;
+}
+
 // --- actions: the only writers of the state -------------------------------------------------------
 const isPlaying = () => !page.state.paused;
 
@@ -286,9 +405,18 @@ function changed() {
   history.replaceState(null, '', toUrl(page.state, page.version));
 }
 
+// Another field drawn. The frame asked for before was of the old field: the worker holds such a
+// request until the state changes, so a paused tissue would never be drawn in the new field
+// without asking again.
+function showField(kind) {
+  page.state.field = kind;
+  loop.requested = false;
+  changed();
+}
+
 // A new tissue from the state's parameters and seed; resolves once the worker has it.
 function newSim() {
-  if (viewer.active && page.renderer) $('backend').textContent = `Drawing with ${page.renderer.backend()}.`;
+  if (viewer.active && page.renderer) showBackend();
   viewer.close();
   const s = page.state;
   const ready = new Promise((resolve) => {
@@ -296,7 +424,7 @@ function newSim() {
   });
   worker.postMessage({
     type: 'new', size: SIZES[s.size], params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed, shipped: shippedStateFor(s)?.file ?? null,
-    engine: s.engine,
+    engine: s.engine, threads: s.threads,
   });
   demo.size = SIZES[s.size];
   tellWorkerToPlay();
@@ -346,7 +474,7 @@ function setParam(name, value, fromPreset = false) {
 
 // Pointer → lattice site, through the layout the renderer drew.
 function latticeAt(ev) {
-  if (!page.stats) return null;
+  if (!page.stats || !page.renderer) return null;
   const rect = canvas.getBoundingClientRect();
   const scale = canvas.width / rect.width; // backing pixels per CSS pixel
   const [x0, y0, side] = page.renderer.layout();
@@ -371,10 +499,7 @@ const controls = new Controls({
     // Another size is another tissue: a new one, from the shipped relaxed state if there is one.
     if (resize) newSim();
   },
-  setField(kind) {
-    page.state.field = kind;
-    changed();
-  },
+  setField: (kind) => showField(kind),
   setSeed(raw) {
     const p = PARAMS.seed;
     let v = Math.round(Number(raw));
@@ -407,6 +532,29 @@ const controls = new Controls({
   ablate: (x, y) => edit('remove_cell_at', x, y),
   latticeAt,
 });
+
+// The guided tour (tour.js): the paper's tissue from its shipped state, captions at its events.
+const tour = new Tour({
+  async begin(playing) {
+    const s = page.state;
+    Object.assign(s, { preset: 'paper', size: PRESETS.paper.size, seed: 1, tour: true, paused: !playing });
+    for (const k of MODEL_PARAMS) s[k] = PRESETS.paper[k];
+    // The tour's pace, unless the link set one (a test, or a visitor who wants it faster).
+    if (!new URLSearchParams(location.search).has('spf')) s.spf = TOUR_SPF;
+    worker.postMessage({ type: 'spf', n: s.spf });
+    changed();
+    await newSim();
+    return page.stats;
+  },
+  setField: (name) => showField([...FIELDS.keys()].find((k) => fieldName(k) === name)),
+  setPlaying: (on) => setPlaying(on),
+  end() {
+    page.state.tour = false;
+    changed();
+  },
+});
+demo.tour = tour;
+$('tour-start').addEventListener('click', () => tour.start());
 
 // A run's frames (viewer.js): they replace the live tissue until Reset.
 const viewer = new Viewer({
@@ -446,18 +594,26 @@ async function boot() {
   showMessage('Looking for WebGPU or WebGL2…');
   loop.resizeCanvas();
   try {
-    page.renderer = await Renderer.create(canvas);
+    const made = await makeRenderer(0, false);
+    page.renderer = made.renderer;
+    renderers.level = made.level;
+    if (made.level === RENDERERS.length - 1) renderers.why = `this browser offers neither WebGPU nor WebGL2: ${made.why}`;
   } catch (e) {
-    $('engine').textContent = 'Engine: none (nothing steps without WebGPU or WebGL2 to draw the tissue).';
+    $('engine').textContent = 'Engine: none (nothing steps without a canvas to draw the tissue on).';
     demo.engine = 'none';
-    fatal('This page needs WebGPU or WebGL2 to draw the tissue', e);
+    fatal('This page cannot draw on its canvas', e);
     return;
   }
-  $('backend').textContent = `Drawing with ${page.renderer.backend()}.`;
-  demo.backend = page.renderer.backend();
-  await newSim();
+  showBackend();
+  // The browser tests' forced loss: the renderer's device destroyed, as a driver reset would,
+  // or its WebGL2 context lost.
+  demo.loseRenderer = () => {
+    if (page.renderer.destroy_device) page.renderer.destroy_device();
+    canvas.getContext('webgl2')?.getExtension('WEBGL_lose_context')?.loseContext();
+  };
+  if (page.state.tour) await tour.start();
+  else await newSim();
   if (demo.error) return;
-  demo.renderer = page.renderer;
   demo.ready = true;
   loop.start();
 }

@@ -44,6 +44,9 @@ export function shippedStateFor(state) {
 // with WebGPU compute and the CPU engine elsewhere (on a software adapter such as SwiftShader
 // the CPU engine is the faster); 'cpu' and 'gpu' choose one ('gpu' falls back to the CPU
 // where WebGPU compute is missing, and the page says why).
+// The most threads a link may ask of the threaded core.
+export const MAX_THREADS = 64;
+
 export const ENGINES = {
   auto: 'Auto (GPU on a hardware GPU)',
   cpu: 'CPU (WebAssembly, bit-identical to native)',
@@ -151,13 +154,22 @@ export function parseUrl(search, version) {
     embed: q.has('embed'),
     paused: q.has('paused'),
     relax: q.has('relax'),
+    tour: q.has('tour'),
     size: base.size,
     engine: 'auto',
+    threads: null,
   };
   const engine = q.get('engine');
   if (engine !== null) {
     if (engine in ENGINES) state.engine = engine;
     else notices.push(`engine=${engine} is unknown (${Object.keys(ENGINES).join(', ')}): using auto.`);
+  }
+  // The threaded core's pool (worker.js): every core unless the link asks for fewer.
+  const threads = q.get('threads');
+  if (threads !== null) {
+    const n = Number(threads);
+    if (Number.isInteger(n) && n >= 1 && n <= MAX_THREADS) state.threads = n;
+    else notices.push(`threads=${threads} is not a whole number from 1 to ${MAX_THREADS}: using every core.`);
   }
   const size = q.get('size');
   if (size !== null) {
@@ -196,7 +208,9 @@ export function toUrl(state, version) {
   if (state.embed) q.set('embed', '');
   if (state.paused) q.set('paused', '');
   if (state.relax) q.set('relax', '');
+  if (state.tour) q.set('tour', '');
   if (state.engine !== 'auto') q.set('engine', state.engine);
+  if (state.threads !== null) q.set('threads', String(state.threads));
   if (version !== undefined) q.set('v', version);
   return '?' + q.toString().replace(/=(&|$)/g, '$1');
 }

@@ -8,13 +8,52 @@
 // the `WebSim` only when the page draws, measures or edits: everything drawn and read out is
 // measured by the same code either way.
 //
+// The core comes in two builds (scripts/serve.sh): the single-thread one (www/pkg, with the GPU
+// engine) and a threaded one (www/pkg-threads: the core's parallel loops on a pool of Web
+// Workers sharing its memory, wasm-bindgen-rayon), which needs a cross-origin isolated page
+// (COOP/COEP headers) for its shared memory. The first tissue loads one of them (loadCore):
+// the threaded one where the page is isolated and the CPU engine is to step, else the other.
+// Both give the same bits: the parallel loops do not depend on the thread count (par.rs).
+//
 // Messages in: { type: 'new', size, params, seed, shipped (a shipped state's URL, or null),
-// engine ('auto' | 'cpu' | 'gpu') }, { type: 'engine', engine }, { type: 'play', on }, { type: 'spf', n },
+// engine ('auto' | 'cpu' | 'gpu'), threads (null: every core) }, { type: 'engine', engine },
+// { type: 'play', on }, { type: 'spf', n },
 // { type: 'frame', field, dpr }, { type: 'call', id, method, args }.
-// Messages out: { type: 'ready', info }, { type: 'progress', text }, { type: 'engine', stats }, { type: 'frame', parts, stats }, { type: 'stopped', why,
+// Messages out: { type: 'ready', info }, { type: 'progress', text }, { type: 'engine', stats }, { type: 'frame', parts, stats, cores }, { type: 'stopped', why,
 // active }, { type: 'result', id, value | error }, { type: 'fatal', message }.
 
-import init, { WebSim, WebPlayback, WebGpuEngine } from '../pkg/monolayer.js';
+// The core's module (its exports: WebSim, WebPlayback, and WebGpuEngine in the single-thread
+// build), once loaded; which build it is, on how many threads, and why.
+let core = null;
+let coreNote = '';
+
+// Loads the core for the first tissue `m` (the build stays for the worker's life).
+async function loadCore(m) {
+  if (core) return;
+  let why;
+  if (!self.crossOriginIsolated) why = 'the page is not cross-origin isolated';
+  else if (typeof SharedArrayBuffer === 'undefined') why = 'this browser has no SharedArrayBuffer';
+  else if (m.engine === 'gpu') why = 'the GPU engine is in the single-thread build';
+  else if (m.engine === 'auto' && !(await gpuAdapterOnce()).software && !(await gpuAdapterOnce()).error) {
+    why = 'the GPU engine may step here, and it is in the single-thread build';
+  }
+  if (!why) {
+    try {
+      const threaded = await import('../pkg-threads/monolayer.js');
+      await threaded.default();
+      await threaded.initThreadPool(Math.max(1, m.threads ?? navigator.hardwareConcurrency ?? 1));
+      core = threaded;
+      coreNote = 'threaded build, cross-origin isolated';
+      return;
+    } catch (e) {
+      why = `the threaded build did not load (${e.message ?? e})`;
+    }
+  }
+  const single = await import('../pkg/monolayer.js');
+  await single.default();
+  core = single;
+  coreNote = `single-thread build: ${why}`;
+}
 
 let sim = null;
 // The GPU engine, or null while the CPU engine steps: { engine: WebGpuEngine, adapter,
@@ -182,7 +221,7 @@ function gpuAdapterOnce() {
 function gpuDeviceOnce(found) {
   gpuDevice ??= (async () => {
     try {
-      const engine = await WebGpuEngine.create();
+      const engine = await core.WebGpuEngine.create();
       return { engine, adapter: found.adapter, software: found.software || engine.runs_on_cpu() };
     } catch (e) {
       return { error: `WebGPU refused a device for compute (${e.message ?? e})` };
@@ -219,6 +258,10 @@ async function chooseEngine(wanted) {
   }
   if (wanted === 'auto' && found.software) {
     gpuNote = `WebGPU runs in software here (${found.adapter}), where the CPU engine is faster`;
+    return;
+  }
+  if (!core.WebGpuEngine) {
+    gpuNote = 'the threaded core has no GPU engine (?engine=gpu opens the page on the single-thread core, which has)';
     return;
   }
   const d = await gpuDeviceOnce(found);
@@ -459,6 +502,9 @@ function stats() {
     engineNote: gpuNote,
     stepsPerSecond: speed.steps > 0 && speed.ms > 0 ? (1000 * speed.steps) / speed.ms : null,
     solveIterations: gpu ? gpu.engine.solve_iterations() : null,
+    // The core's build and threads (loadCore).
+    threads: core.coreThreads(),
+    coreNote,
   };
 }
 
@@ -478,7 +524,9 @@ function sendFrame() {
     range: view.range(),
   };
   view.free();
-  postMessage({ type: 'frame', parts, stats: stats() }, [parts.tissue.buffer, parts.field.buffer, parts.segments.buffer]);
+  // The spiral cores this view marks (the guided tour waits for one in the flow).
+  const cores = (playback ? playback.p : sim).spiral_cores().length / 3;
+  postMessage({ type: 'frame', parts, stats: stats(), cores }, [parts.tissue.buffer, parts.field.buffer, parts.segments.buffer]);
 }
 
 // What the page and the tests may ask of the simulation, beyond stepping.
@@ -594,7 +642,7 @@ async function openRun(files) {
   if (records.length > 1) errors.push(`${records.length} files named run.json: using the first`);
   let p;
   try {
-    p = records.length ? new WebPlayback('run.json', await records[0].text()) : new WebPlayback('', '');
+    p = records.length ? new core.WebPlayback('run.json', await records[0].text()) : new core.WebPlayback('', '');
   } catch (e) {
     return { error: String(e.message ?? e), errors };
   }
@@ -643,7 +691,7 @@ async function showFrame(index) {
 // A new tissue (the 'new' message): from a shipped state where one fits, else from
 // random disks; then the engine that steps it.
 async function newTissue(m) {
-  if (!sim) await init();
+  await loadCore(m);
   gpu = null;
   if (sim) sim.free();
   sim = null;
@@ -655,7 +703,7 @@ async function newTissue(m) {
     try {
       const res = await fetch(m.shipped);
       if (!res.ok) throw new Error(`HTTP ${res.status}`);
-      sim = WebSim.from_snapshot(new Uint8Array(await res.arrayBuffer()), ...args);
+      sim = core.WebSim.from_snapshot(new Uint8Array(await res.arrayBuffer()), ...args);
       startedFrom = 'snapshot';
     } catch (err) {
       // Not fatal: the same tissue comes from relaxing here, only later.
@@ -664,7 +712,7 @@ async function newTissue(m) {
   }
   try {
     if (!sim) {
-      sim = new WebSim(...args);
+      sim = new core.WebSim(...args);
       startedFrom = 'disks';
     }
     startedAt = sim.step_count();

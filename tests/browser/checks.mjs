@@ -1,0 +1,390 @@
+// The list of checks every browser engine runs (engines.test.mjs), written once against the
+// small page interface of drivers.mjs: evaluate, click, press, setFiles, screenshot. Chromium
+// also runs the fuller checks of demo.test.mjs and viewer.test.mjs.
+//
+// A check that an engine cannot run names the engine and says why (`skip`); one whose Chromium
+// run would repeat demo.test.mjs says where it is (`chromium`). No check depends on the
+// machine's speed: each waits for a state (under the hang guard) and asserts steps, counts and
+// bits; times are reported.
+
+import assert from 'node:assert/strict';
+import { readFile } from 'node:fs/promises';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { parseReadouts } from './readouts.mjs';
+import { SHIPPED_STATES, DEFAULT_PRESET } from '../../www/js/state.js';
+import { TOUR } from '../../www/js/tour.js';
+
+const ROOT = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
+export const HANG_MS = Number(process.env.HANG_MS ?? 30 * 60 * 1000);
+const DEFAULT_START = SHIPPED_STATES.find((r) => r.preset === DEFAULT_PRESET && r.seed === 1);
+
+// Polls fn(arg) in the page until it is truthy; fails only a page that is stuck ("hung").
+export async function until(p, what, fn, arg) {
+  const t0 = Date.now();
+  for (;;) {
+    const v = await p.evaluate(fn, arg);
+    if (v) return v;
+    if (Date.now() - t0 > HANG_MS) throw new Error(`hung: waited ${HANG_MS / 1000} s for ${what}`);
+    await new Promise((r) => setTimeout(r, 150));
+  }
+}
+
+// Opens the page at `query` and waits until it is ready (or failed, which fails the check).
+export async function openPage(b, base, query, opts) {
+  const p = await b.open(base + query, opts);
+  if (!p) return null;
+  await until(p, 'the page to load', () => window.demo && (window.demo.ready || window.demo.error));
+  const err = await p.evaluate(() => window.demo.error);
+  assert(!err, `page error: ${err}`);
+  return p;
+}
+
+// A PNG's distinct colours (every 7th pixel), decoded in a page.
+export function pngColours(p, png) {
+  return p.evaluate(async (b64) => {
+    const img = new Image();
+    img.src = `data:image/png;base64,${b64}`;
+    await img.decode();
+    const c = document.createElement('canvas');
+    c.width = img.width;
+    c.height = img.height;
+    const g = c.getContext('2d');
+    g.drawImage(img, 0, 0);
+    const d = g.getImageData(0, 0, img.width, img.height).data;
+    const colours = new Set();
+    for (let i = 0; i < d.length; i += 4 * 7) colours.add((d[i] << 16) | (d[i + 1] << 8) | d[i + 2]);
+    return { colours: colours.size, width: img.width, height: img.height };
+  }, png.toString('base64'));
+}
+
+const workerStats = (p) => p.evaluate(() => window.demo.call('stats'));
+const drawn = (p) => p.evaluate(() => window.demo.drawn ?? 0);
+
+// Each check: { name, core (run in every engine), skip: { engine: why }, chromium: where
+// demo.test.mjs covers it, run(browser, ctx) }. ctx: { base (the page, cross-origin isolated),
+// plainBase (the page without COOP/COEP), engine, nativeRun (a native run's directory and
+// frames), metrics (reported), launch(opts) (another browser of this engine) }.
+export const CHECKS = [
+  {
+    name: 'the page loads, draws its tissue and steps',
+    core: true,
+    chromium: 'demo.test.mjs checks it on WebGPU and on WebGL2',
+    async run(b, ctx) {
+      const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1');
+      const backend = await p.evaluate(() => window.demo.backend);
+      ctx.metrics.backend = backend;
+      assert.match(await p.evaluate(() => document.getElementById('backend').textContent), /^Drawing with /);
+      await until(p, 'a frame drawn', () => window.demo.drawn > 0 && window.demo.stats);
+      const a = (await workerStats(p)).step;
+      await until(p, `a step after ${a}`, (a) => window.demo.stats.step > a, a);
+      const shot = await pngColours(p, await p.screenshot('#view'));
+      assert(shot.colours > 20, `the canvas has only ${shot.colours} colours: blank?`);
+      assert.deepEqual(p.errors, [], p.errors.join('\n'));
+      await p.close();
+    },
+  },
+  {
+    name: 'a preset and a field change the core, the view and the URL',
+    core: true,
+    chromium: "demo.test.mjs checks every field and the presets' values",
+    async run(b, ctx) {
+      const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1');
+      await until(p, 'a frame drawn', () => window.demo.drawn > 0);
+      await p.evaluate(() => {
+        const s = document.getElementById('preset');
+        s.value = 'no-holes';
+        s.dispatchEvent(new Event('change'));
+      });
+      await until(p, 'the preset in the core', () => window.demo.call('stats').then((s) => s.chi === 0.1 && s.zeta === 2));
+      const before = await drawn(p);
+      await p.press('3');
+      await until(p, 'a frame of the speed', (d) => window.demo.drawn > d + 1 && location.search.includes('field=speed'), before);
+      const url = await p.evaluate(() => location.search);
+      assert.match(url, /preset=no-holes/);
+      assert(await p.evaluate(() => !document.getElementById('colorbar-labels').hidden), 'no colour bar with the speed');
+      await p.close();
+    },
+  },
+  {
+    name: 'Download gives the readouts and the state',
+    core: true,
+    chromium: 'viewer.test.mjs checks the download against monolayer analyze',
+    async run(b, ctx) {
+      const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1');
+      await until(p, 'three rows of readouts', () => window.demo.call('readout_rows').then((n) => n >= 3));
+      await p.click('#play');
+      await p.click('#download');
+      await until(p, 'the download', () => window.demo.lastDownload);
+      const info = await p.evaluate(() => window.demo.lastDownload);
+      const stats = await workerStats(p);
+      assert.equal(info.step, stats.step, 'the download is of the paused state');
+      assert(info.npzBytes > 1000, `frame of ${info.npzBytes} bytes`);
+      const csv = await p.evaluate(() => window.demo.call('download').then((d) => d.csv));
+      const { rows, rowEvery } = parseReadouts(csv);
+      assert.equal(rowEvery, 10);
+      assert(rows.length >= 3, `${rows.length} rows`);
+      assert.equal(rows.at(-1).step, stats.step);
+      assert.equal(rows.at(-1).holes, stats.holes);
+      await p.close();
+    },
+  },
+  {
+    name: "a native run's frames open and play",
+    core: true,
+    chromium: "viewer.test.mjs checks them against monolayer analyze, a damaged frame among them",
+    async run(b, ctx) {
+      const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1&field=director');
+      const frames = ctx.nativeRun.frames.map((n) => path.join(ctx.nativeRun.dir, 'frames', n));
+      await p.setFiles('#open-files', [path.join(ctx.nativeRun.dir, 'run.json'), ...frames]);
+      await until(p, 'the run opened', () => window.demo.playback.opened === 1);
+      const pb = await p.evaluate(() => window.demo.playback);
+      assert.deepEqual(pb.frames.map((f) => f.step), ctx.nativeRun.steps);
+      assert.deepEqual(pb.errors, []);
+      const d = await drawn(p);
+      await p.click('#player-play');
+      await until(p, 'the frames playing', (d) => window.demo.drawn > d + 2 && window.demo.stats.step > 300, d);
+      await p.close();
+    },
+  },
+  {
+    name: "the shipped tissue's first hole opens at its native step",
+    core: true,
+    chromium: 'demo.test.mjs asserts it on WebGPU and on WebGL2',
+    async run(b, ctx) {
+      const p = await openPage(b, ctx.base, '/');
+      await until(p, 'the first hole', () => window.demo.firstHole !== null);
+      const hole = await p.evaluate(() => window.demo.firstHole);
+      const { rows, rowEvery } = parseReadouts(await p.evaluate(() => window.demo.call('download').then((d) => d.csv)));
+      const first = rows.find((r) => r.holes > 0);
+      ctx.metrics.firstHole = { ...hole, row: first?.step };
+      console.log(`       ${ctx.engine}: first hole ${hole.seconds.toFixed(1)} s after loading (row at step ${first?.step}; ${ctx.metrics.backend})`);
+      assert(first, 'no row of readouts has a hole');
+      assert(first.step >= DEFAULT_START.firstHole && first.step < DEFAULT_START.firstHole + rowEvery,
+        `first row with a hole at step ${first.step}; it opens at ${DEFAULT_START.firstHole}`);
+      await p.close();
+    },
+  },
+  {
+    name: 'with neither WebGPU nor WebGL2 the page draws the cells with Canvas 2D',
+    core: true,
+    async run(b, ctx) {
+      const nogpu = await ctx.launch({ gpu: false });
+      try {
+        const p = await openPage(nogpu, ctx.base, '/?preset=persistent&seed=1&paused');
+        await until(p, 'a frame drawn', () => window.demo.drawn > 0);
+        assert.equal(await p.evaluate(() => window.demo.backend), 'Canvas 2D');
+        assert.match(await p.evaluate(() => document.getElementById('backend').textContent),
+          /^Drawing with Canvas 2D \(this browser offers neither WebGPU nor WebGL2/);
+        // The pixels: the canvas as shown, against the image of the sites the core made for it.
+        // A site deep inside each cell (φ > 0.9) is shown, where the layout puts it, in the
+        // cell's own colour.
+        const png = await p.screenshot('#view');
+        const check = await p.evaluate(async (b64) => {
+          const img = new Image();
+          img.src = `data:image/png;base64,${b64}`;
+          await img.decode();
+          const c = document.createElement('canvas');
+          c.width = img.width;
+          c.height = img.height;
+          const g = c.getContext('2d');
+          g.drawImage(img, 0, 0);
+          const shown = g.getImageData(0, 0, c.width, c.height).data;
+          const view = document.getElementById('view');
+          const k = img.width / view.width; // screenshot pixels per backing pixel
+          const [x0, y0, side] = window.demo.renderer.layout();
+          const l = await window.demo.call('box_size');
+          // The core's colours of this frame, as the renderer drew them.
+          const { rgba, tissue } = window.demo.renderer.last;
+          let cells = 0;
+          let matched = 0;
+          const seen = new Set();
+          // Away from the lattice's edges: WebKit's element screenshots leave the top rows of
+          // some canvases black.
+          for (let y = 7; y < l - 5; y += 5) {
+            for (let x = 7; x < l - 5; x += 5) {
+              const t = 4 * (y * l + x);
+              if (tissue[t + 1] < 0.9 || seen.has(tissue[t])) continue; // deep inside a cell
+              seen.add(tissue[t]);
+              cells++;
+              // The pixels of the site's square, its edges left out: most have its colour (a
+              // line of the overlay, such as the cell's axis, may cross some).
+              const [ax, bx] = [x, x + 1].map((v) => (x0 + (v * side) / l) * k);
+              const [ay, by] = [y, y + 1].map((v) => (y0 + (v * side) / l) * k);
+              let same = 0;
+              let all = 0;
+              for (let py = Math.ceil(ay) + 1; py < Math.floor(by) - 1; py++) {
+                for (let px = Math.ceil(ax) + 1; px < Math.floor(bx) - 1; px++) {
+                  const i = 4 * (py * img.width + px);
+                  all++;
+                  if (Math.max(...[0, 1, 2].map((j) => Math.abs(shown[i + j] - rgba[t + j]))) <= 3) same++;
+                }
+              }
+              if (all > 0 && same >= all / 2) matched++;
+
+            }
+          }
+          return { cells, matched };
+        }, png.toString('base64'));
+        ctx.metrics.canvas2d = check;
+        assert(check.cells >= 10, `only ${check.cells} cells sampled`);
+        assert.equal(check.matched, check.cells, `${check.matched} of ${check.cells} cells show their own colour`);
+        const look = await pngColours(p, png);
+        assert(look.colours > 20, `only ${look.colours} colours`);
+        // The fields draw too, with their colour bar.
+        const before = await drawn(p);
+        await p.press('5');
+        await until(p, 'a frame of the strain rate', (d) => window.demo.drawn > d, before);
+        assert(await p.evaluate(() => !document.getElementById('colorbar-labels').hidden), 'no colour bar');
+        assert.deepEqual(p.errors, [], p.errors.join('\n'));
+        await p.close();
+      } finally {
+        await nogpu.close();
+      }
+    },
+  },
+  {
+    name: "the renderer survives its device's loss, and falls back after repeated losses",
+    core: true,
+    async run(b, ctx) {
+      const p = await openPage(b, ctx.base, '/?preset=persistent&seed=1');
+      await until(p, 'a frame drawn', () => window.demo.drawn > 0);
+      const first = await p.evaluate(() => window.demo.backend);
+      const losses = [];
+      // One loss: a new renderer of the same kind; the tissue steps and is drawn on, no error.
+      for (let n = 1; n <= 3; n++) {
+        const at = await p.evaluate(() => ({ step: window.demo.stats.step, drawn: window.demo.drawn }));
+        await p.evaluate(() => window.demo.loseRenderer());
+        await until(p, `loss ${n} answered`, (n) => window.demo.rendererLosses.length >= n, n);
+        await until(p, `drawing and stepping after loss ${n}`,
+          (at) => window.demo.drawn > at.drawn + 2 && window.demo.stats.step > at.step, at);
+        const st = await p.evaluate(() => ({ error: window.demo.error, backend: window.demo.backend, losses: window.demo.rendererLosses }));
+        assert(!st.error, `error shown after loss ${n}: ${st.error}`);
+        losses.push(st.losses.at(-1));
+        if (n < 3) assert.equal(st.backend, first, `loss ${n}: the same kind of renderer again`);
+      }
+      // The third within a minute: the next kind, and the page says why.
+      const last = await p.evaluate(() => ({ backend: window.demo.backend, notices: window.demo.notices }));
+      ctx.metrics.deviceLoss = { first, after: last.backend, losses };
+      // The next kind this browser offers (headless Firefox has no WebGL2: Canvas 2D).
+      const order = ['WebGPU', 'WebGL2', 'Canvas 2D'];
+      const kind = (backend) => order.find((k) => backend.startsWith(k));
+      const next = kind(last.backend);
+      assert(order.indexOf(next) > order.indexOf(kind(first)), `after three losses: ${last.backend}, after ${first}`);
+      assert(last.notices.some((t) => t.includes(`Drawing with ${next} now`) && t.includes('3 times within a minute')), `notices: ${last.notices}`);
+      assert.match(await p.evaluate(() => document.getElementById('backend').textContent), /lost its device 3 times/);
+      assert.deepEqual(p.errors, [], p.errors.join('\n'));
+      await p.close();
+    },
+  },
+  {
+    name: 'the guided tour shows each caption at its event, in an embedded page',
+    core: true,
+    async run(b, ctx) {
+      const p = await openPage(b, ctx.base, '/?tour&embed&spf=20');
+      const caption = () => p.evaluate(() => ({
+        id: window.demo.tour.log.at(-1)?.id, text: document.getElementById('tour-caption').textContent,
+        visible: !document.getElementById('tour').hidden,
+      }));
+      const first = await caption();
+      assert(first.visible, 'the tour is not shown in the embedded page');
+      assert.equal(first.id, 'cells');
+      // Walk it: wait for the hole's caption (the tissue plays, captions come at their events).
+      await until(p, "the hole's caption", () => window.demo.tour.log.some((c) => c.id === 'hole'));
+      const paused = await workerStats(p);
+      await new Promise((r) => setTimeout(r, 500));
+      assert.equal((await workerStats(p)).step, paused.step, 'the tour did not pause on the hole');
+      await p.click('#tour-next');
+      await until(p, 'the last caption', () => window.demo.tour.log.at(-1)?.id === 'verdict');
+      const log = await p.evaluate(() => window.demo.tour.log);
+      ctx.metrics.tour = log;
+      assert.deepEqual(log.map((c) => c.id), TOUR.map((c) => c.id), `captions ${log.map((c) => c.id)}`);
+      const start = log[0].step;
+      assert.equal(start, DEFAULT_START.step, 'the tour starts on the shipped tissue');
+      for (let i = 1; i < log.length; i++) {
+        const c = TOUR[i];
+        if (c.after !== undefined) assert(log[i].step - log[i - 1].step >= c.after, `${c.id} at step ${log[i].step}, ${c.after} after ${log[i - 1].step}`);
+        if (c.cores) assert(log[i].cores > 0 || log[i].coresSeen, `${c.id} without a spiral core seen`);
+        if (c.hole) assert(log[i].holes > 0 && log[i].step >= DEFAULT_START.firstHole, `${c.id} at step ${log[i].step} with ${log[i].holes} holes`);
+      }
+      // The last caption's verdict is docs/figures.md's "the argument" row, word for word.
+      const figures = await readFile(path.join(ROOT, 'docs', 'figures.md'), 'utf8');
+      const row = figures.split('\n').find((l) => l.startsWith('| the argument |')).split('|').map((c) => c.trim());
+      const verdict = row[3].replace(/\*\*/g, '');
+      const said = (await caption()).text;
+      assert(said.includes(verdict), `the last caption does not carry the verdict "${verdict}": ${said}`);
+      // Keyboard: Escape closes it.
+      await p.evaluate(() => document.getElementById('tour-next').focus());
+      await p.press('Escape');
+      await until(p, 'the tour closed', () => document.getElementById('tour').hidden);
+      await p.close();
+    },
+  },
+  {
+    name: 'with prefers-reduced-motion the guided tour waits for its Play button',
+    core: true,
+    async run(b, ctx) {
+      const q = await openPage(b, ctx.base, '/?tour&spf=20', { reducedMotion: true });
+      assert(q, `${ctx.engine}: no way to ask for reduced motion`);
+      const a = (await workerStats(q)).step;
+      await new Promise((r) => setTimeout(r, 800));
+      assert.equal((await workerStats(q)).step, a, 'the tour played with reduced motion');
+      assert(await q.evaluate(() => !document.getElementById('tour-play').hidden && document.activeElement.id === 'tour-play'), 'no focused Play button');
+      await q.click('#tour-play');
+      await until(q, 'the tissue playing', (a) => window.demo.stats.step > a, a);
+      await q.close();
+    },
+  },
+  {
+    name: 'the threaded core gives the bits of one thread, on one and two threads',
+    core: true,
+    async run(b, ctx) {
+      const run = async (query, base = ctx.base) => {
+        const p = await openPage(b, base, `/?preset=persistent&seed=1&paused${query}`);
+        const r = await p.evaluate(async () => {
+          const call = window.demo.call;
+          await call('step', 60);
+          const s = await call('stats');
+          return { step: s.step, fingerprint: await call('fingerprint'), threads: s.threads, note: s.coreNote, isolated: crossOriginIsolated };
+        });
+        await p.close();
+        return r;
+      };
+      const one = await run('&threads=1');
+      const two = await run('&threads=2');
+      // A host that sends no COOP/COEP headers: the single-thread build.
+      const single = await run('', ctx.plainBase);
+      ctx.metrics.threads = { one, two, single };
+      assert(two.isolated, 'the test server isolates the page (COOP/COEP)');
+      assert.match(two.note, /^threaded build/, `two threads: ${two.note}`);
+      assert.equal(two.threads, 2);
+      assert.equal(one.threads, 1);
+      assert(!single.isolated && /^single-thread build: the page is not cross-origin isolated/.test(single.note), `without the headers: ${JSON.stringify(single)}`);
+      assert.equal(one.step, two.step);
+      assert.equal(one.fingerprint, two.fingerprint, 'one thread and two part');
+      assert.equal(single.step, two.step);
+      assert.equal(single.fingerprint, two.fingerprint, 'the threaded build and the single-thread one part');
+    },
+  },
+  {
+    name: "the threaded core's speed on the paper's tissue, one thread against two (reported, not asserted)",
+    core: false,
+    async run(b, ctx) {
+      // Two pages of the paper's tissue, paused, on one and on two threads; blocks of steps on
+      // a copy of each tissue, taken in turn (the other page idle), so that both see the same
+      // machine.
+      const one = await openPage(b, ctx.base, '/?preset=paper&paused&threads=1');
+      const two = await openPage(b, ctx.base, '/?preset=paper&paused&threads=2');
+      const block = (p) => p.evaluate(() => window.demo.call('core_ms_per_step', 20, 1));
+      const pairs = [];
+      for (let i = 0; i < 4; i++) pairs.push({ one: await block(one), two: await block(two) });
+      const ratios = pairs.map((r) => r.one / r.two).sort((a, c) => a - c);
+      const median = (ratios[1] + ratios[2]) / 2;
+      ctx.metrics.threadsSpeed = { pairs, median, threads: [await one.evaluate(() => window.demo.threads), await two.evaluate(() => window.demo.threads)] };
+      console.log(`       the paper's tissue: ${pairs.map((r) => `${(1000 / r.one).toFixed(0)}/${(1000 / r.two).toFixed(0)}`).join(', ')} steps/s on 1/2 threads; median speed-up ${median.toFixed(2)}`);
+      assert(pairs.every((r) => r.one > 0 && r.two > 0));
+      await one.close();
+      await two.close();
+    },
+  },
+];
