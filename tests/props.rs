@@ -131,7 +131,7 @@ proptest! {
         if let Ok(s) = read_checkpoint(&path, small().box_size) {
             prop_assert_eq!(s.step, good.step);
             prop_assert!(s.cells == good.cells && s.warm_start == good.warm_start && s.substrate == good.substrate);
-            prop_assert!(Monolayer::from_state(small(), 1, s).is_ok());
+            prop_assert!(Monolayer::from_saved(small(), 1, s).is_ok());
         }
     }
 
@@ -329,5 +329,62 @@ proptest! {
         prop_assert_eq!(o.status.code(), Some(2), "{}", e);
         prop_assert!(e.contains(special.to_str().unwrap()) && e.contains("not a regular file"), "{:?}: {}", kind, e);
         prop_assert!(!e.contains("panicked") && !out.exists(), "{}", e);
+    }
+}
+
+// ---- States out of range ----
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// A checkpoint with any value of φ put anywhere in its patches is refused where a run
+    /// never leaves one (beyond [phi_min, phi_max], or not 0 on the ring around a patch),
+    /// naming the value, and read otherwise; a substrate factor ≤ 0 is refused as it is read.
+    #[test]
+    fn checkpoints_with_values_out_of_range_are_refused(
+        at in 0.0f64..1.0,
+        value in prop_oneof![-1e6f64..-0.5, -0.5f64..1.5, 1.5f64..1e6, Just(0.0), Just(-0.5), Just(1.5)],
+        substrate in prop_oneof![Just(None), (-1e3f64..=0.0).prop_map(Some)],
+    ) {
+        let (_, _, checkpoint) = files();
+        let p = small();
+        let state = read_checkpoint(checkpoint, p.box_size).unwrap();
+        let len: usize = state.cells.iter().map(|(_, phi)| phi.len()).sum();
+        let k = ((at * len as f64) as usize).min(len - 1);
+        // The cell, and the padded site, of the k-th value.
+        let (mut cell, mut rest) = (0, k);
+        while rest >= state.cells[cell].1.len() {
+            rest -= state.cells[cell].1.len();
+            cell += 1;
+        }
+        let patch = state.cells[cell].0;
+        let (a, b) = (rest % (patch.w + 2), rest / (patch.w + 2));
+        let ring = a == 0 || b == 0 || a == patch.w + 1 || b == patch.h + 1;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("checkpoint.npz");
+        fs::copy(checkpoint, &path).unwrap();
+        common::npz::edit_npz(&path, "phi_padded", |arr| match arr {
+            common::npz::Npy::F(arr) => arr.as_slice_mut().unwrap()[k] = value,
+            _ => unreachable!("φ is real"),
+        });
+        if let Some(s) = substrate {
+            common::npz::edit_npz(&path, "substrate", |arr| match arr {
+                common::npz::Npy::F(arr) => arr.as_slice_mut().unwrap()[k % (p.box_size * p.box_size)] = s,
+                _ => unreachable!("the substrate is real"),
+            });
+            let e = read_checkpoint(&path, p.box_size).unwrap_err().to_string();
+            prop_assert!(e.contains("`substrate`") && e.contains("> 0"), "{}", e);
+            return Ok(());
+        }
+        let read = read_checkpoint(&path, p.box_size).unwrap();
+        let outside = !(p.phi_min..=p.phi_max).contains(&value) || (ring && value != 0.0);
+        match Monolayer::from_saved(p, 1, read) {
+            Ok(_) => prop_assert!(!outside, "φ = {} at {} (ring: {}) was taken", value, k, ring),
+            Err(e) => {
+                let e = e.to_string();
+                prop_assert!(outside, "φ = {} at {} refused: {}", value, k, e);
+                prop_assert!(e.contains(&format!("cell {cell}: φ = {value}")) && e.contains("a damaged state"), "{}", e);
+            }
+        }
     }
 }

@@ -11,7 +11,7 @@ use std::fs;
 use common::faults::{analyzed, edit_record, ok, refused, refused_within, small, SMALL_RUN, TINY};
 use common::npz::{edit_npz, npy, read_npz, replace_npz_entry, write_npz, Npy};
 use common::{arg, monolayer};
-use monolayer::formats::RunRecord;
+use monolayer::formats::{snapshot, RunRecord};
 use monolayer::run::{checkpoint_path, frame_path, memory_estimate, RunFrames, RunLock, SweepSpec};
 use monolayer::{Monolayer, Params};
 
@@ -404,6 +404,52 @@ fn damaged_checkpoints_configs_and_locks_are_named() {
         .unwrap_err()
         .to_string();
     assert!(e.starts_with("--set: parameter `zeta`"), "{e}");
+}
+
+/// A checkpoint with φ beyond [phi_min, phi_max] somewhere, or a φ other than 0 on the ring
+/// around a patch, is refused by name on resume, the status unchanged: it used to run, into a
+/// `failed: unstable` recorded as the run's result, or silently onto another trajectory. A
+/// relaxed state out of range is refused as `bench --from-relaxed` reads it.
+#[test]
+fn states_with_phi_out_of_range_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    edit_record(&run, |v| v["status"] = "stopped: signal SIGTERM".into());
+    let checkpoint = checkpoint_path(&run);
+    let saved = fs::read(&checkpoint).unwrap();
+    for (index, value, expect) in [
+        (500, 3.0, "φ = 3 at padded site"),
+        (500, -0.75, "φ = -0.75 at padded site"),
+        (0, 0.25, "φ = 0.25 on the ring"),
+    ] {
+        fs::write(&checkpoint, &saved).unwrap();
+        edit_npz(&checkpoint, "phi_padded", |a| match a {
+            Npy::F(a) => a[[index]] = value,
+            _ => panic!("φ is real"),
+        });
+        let o = monolayer(&["run", "--quiet", "--resume", arg(&run)]);
+        refused(&o, &["checkpoint.npz", expect, "a damaged state"]);
+        let record = RunRecord::load(&run).unwrap();
+        assert_eq!(record.status.to_string(), "stopped: signal SIGTERM", "the status changed");
+    }
+    fs::write(&checkpoint, &saved).unwrap();
+    ok(&monolayer(&["run", "--quiet", "--resume", arg(&run)]));
+
+    // A relaxed state (the page's, `bench --from-relaxed`).
+    let file = dir.path().join("relaxed.bin");
+    let relax = ["--set", "box_size=48", "--set", "n_cells=10", "--relax-steps", "50"];
+    ok(&monolayer(&[&["relaxed-state", "--out", arg(&file)][..], &relax].concat()));
+    let p = Params { box_size: 48, n_cells: 10, relax_steps: 50, ..Params::default() };
+    let mut state = snapshot::decode_relaxed(&fs::read(&file).unwrap(), &p, 1).unwrap();
+    let bench = [&["bench", "--steps", "2", "--blocks", "1", "--chi", "0.1", "--from-relaxed", arg(&file)][..], &relax]
+        .concat();
+    ok(&monolayer(&bench));
+    let ring = state.cells[0].1.len() - 1;
+    state.cells[0].1[ring] = 0.5;
+    fs::write(&file, snapshot::encode(&state, snapshot::relaxation_key(&p, 1))).unwrap();
+    refused(&monolayer(&bench), &["--from-relaxed", "relaxed.bin", "φ = 0.5 on the ring"]);
+    assert!(Monolayer::from_saved(p, 1, state).is_err());
 }
 
 /// Every flag that names an input file refuses a FIFO (or a link to one) before opening it,

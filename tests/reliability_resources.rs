@@ -10,10 +10,11 @@ use std::fs;
 use std::path::Path;
 use std::process::Command;
 
-use common::faults::{ok, refused, refused_within, with_file_size_limit, SMALL_RUN, SPEC, TINY};
+use common::faults::{ok, refused, refused_within, with_file_size_limit, SMALL_RUN, SPEC, SWEEP_ARGS, TINY};
 use common::{arg, monolayer, stderr};
 use monolayer::formats::{RunRecord, RunStatus};
-use monolayer::run::{checkpoint_path, frame_path, run_sweep, tables, SweepSpec};
+use monolayer::run::{checkpoint_path, kept_checkpoint_path, memory_estimate, run_sweep, tables, RunDir, SweepSpec};
+use monolayer::Params;
 
 // ---- Memory ----
 
@@ -67,22 +68,62 @@ fn the_memory_check_reads_its_variable_and_the_process_limits() {
     assert_eq!(cgroup_room("9223372036854771712", None), None, "cgroup v1's 'no limit'");
 }
 
+/// The memory check of `sweep` and `figures` counts what their jobs hold at once, as `bench`
+/// does: two runs under a limit that holds one are refused with `--jobs 2` (they were
+/// accepted, and took twice the limit), and run with `--jobs 1`.
+#[test]
+fn the_memory_check_counts_the_runs_held_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let one = memory_estimate(&Params { box_size: 48, n_cells: 6, ..Params::default() });
+    let limit = (one + one / 2) >> 20;
+    let env = [("MONOLAYER_MEMORY_LIMIT_MB", limit.to_string())];
+    let env: Vec<(&str, &str)> = env.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let out = dir.path().join("s");
+    let sweep =
+        |jobs: &'static str| [&["sweep", "--quiet", "--jobs", jobs, "--out", arg(&out)][..], &SWEEP_ARGS].concat();
+    refused_within(&sweep("2"), &env, &["for the 2 simulations run at once (--jobs 2", "lower"]);
+    assert!(!out.join("runs/zeta0.2_seed1").exists(), "a run was started");
+    ok(&common::monolayer_within(120, &sweep("1"), &env));
+
+    let smoke = memory_estimate(&Params { box_size: 48, n_cells: 10, ..Params::default() });
+    let limit = ((smoke + smoke / 2) >> 20).to_string();
+    let env = [("MONOLAYER_MEMORY_LIMIT_MB", limit.as_str())];
+    let figures = |jobs: &str| {
+        let figs = dir.path().join("f");
+        ["figures", "--dry-run", "--quiet", "--only", "S3", "--jobs", jobs, "--out"]
+            .map(String::from)
+            .into_iter()
+            .chain([arg(&figs).to_string()])
+            .collect::<Vec<String>>()
+    };
+    let args = figures("2");
+    refused_within(&args.iter().map(String::as_str).collect::<Vec<_>>(), &env, &["simulations run at once (--jobs 2"]);
+    let args = figures("1");
+    ok(&common::monolayer_within(120, &args.iter().map(String::as_str).collect::<Vec<_>>(), &env));
+}
+
 // ---- Disk ----
 
-/// A run whose frame cannot be written (here a directory is in the way; a full disk is the same
-/// to the program) is recorded as stopped, not as blown up, is left out of the regime map, and
-/// runs to its end when the sweep runs again.
+/// A run whose file cannot be written (here a directory is in the way of the checkpoint it
+/// keeps at step 150; a full disk is the same to the program) is recorded as stopped, not as
+/// blown up, is left out of the regime map, and runs to its end when the sweep runs again.
 #[test]
 fn a_sweep_retries_runs_stopped_by_an_io_error() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path();
     let spec: SweepSpec = toml::from_str(SPEC).unwrap();
     let jobs = spec.jobs().unwrap();
-    let blocked = frame_path(&out.join("runs").join(&jobs[1].name), 150);
-    fs::create_dir_all(blocked.join("in_the_way")).unwrap();
+    // The run started (its record and first checkpoint written), keeping its checkpoints.
+    let run = out.join("runs").join(&jobs[1].name);
+    drop(RunDir::create(&run, jobs[1].params.clone(), jobs[1].seed, 50).unwrap().keep_checkpoints().unwrap());
+    // In the way at 150, and at 200 for the sweep run again before the way is cleared.
+    for step in [150, 200] {
+        fs::create_dir_all(kept_checkpoint_path(&run, step).join("in_the_way")).unwrap();
+    }
     let first = run_sweep(&jobs, 50, out, 2, None, &|_, _, _| {}).unwrap();
     assert_eq!(first[0].status, RunStatus::Finished);
-    assert!(matches!(&first[1].status, RunStatus::Stopped(why) if why.contains("frame_0000150.npz")), "{:?}", first[1]);
+    let stopped = |s: &RunStatus| matches!(s, RunStatus::Stopped(why) if why.contains("checkpoint_0000150.npz"));
+    assert!(stopped(&first[1].status), "{:?}", first[1]);
     assert!(!first[1].blew_up());
     let (summary, regimes) = tables(&first);
     assert!(summary.contains("\"stopped: "), "{summary}");
@@ -93,7 +134,9 @@ fn a_sweep_retries_runs_stopped_by_an_io_error() {
     let o = monolayer(&["sweep", arg(&file), "--quiet", "--out", arg(out)]);
     refused(&o, &["1 run(s) stopped", "zeta0.4_seed1", "run the same command again"]);
 
-    fs::remove_dir_all(&blocked).unwrap();
+    for step in [150, 200] {
+        fs::remove_dir_all(kept_checkpoint_path(&run, step)).unwrap();
+    }
     let again = run_sweep(&jobs, 50, out, 2, None, &|_, _, _| {}).unwrap();
     assert!(again.iter().all(|s| s.status == RunStatus::Finished), "{again:?}");
     assert_eq!(again[1].steps, 200);

@@ -10,11 +10,14 @@ use std::fs;
 use std::process::Stdio;
 use std::time::Duration;
 
-use common::faults::{analyzed, edit_record, killed_at, ok, refused, small, SPEC};
+use common::faults::{analyzed, edit_record, killed_at, ok, refused, small, SPEC, SWEEP_ARGS};
 use common::npz::{edit_npz, read_npz, write_npz, Npy};
 use common::{arg, lines, monolayer, stderr};
 use monolayer::formats::{RunRecord, RunStatus};
-use monolayer::run::{checkpoint_path, frame_path, run_sweep, RunDir, RunFrames, RunLock, SweepSpec};
+use monolayer::run::{
+    checkpoint_path, frame_path, run_sweep, write_run_checkpoint, RunDir, RunFrames, RunLock, SweepSpec,
+};
+use monolayer::Monolayer;
 
 // ---- One writer ----
 
@@ -62,6 +65,93 @@ fn the_lock_is_not_followed_through_a_symlink() {
     let e = RunLock::acquire(&run).unwrap_err().to_string();
     assert!(e.contains("symbolic link"), "{e}");
     assert_eq!(fs::read_to_string(&victim).unwrap(), "keep me");
+}
+
+/// A run directory without its run.json (a kill between the checkpoint of the start and the
+/// record, or a record deleted) is not a place for a new run: `run --out` there is refused,
+/// saying why and what to do, and leaves the checkpoint and the frames as they were. A directory
+/// holding anything else is refused too. A sweep whose own run was killed so, at its start,
+/// starts it again.
+#[test]
+fn a_new_run_is_never_written_over_a_run_without_its_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    fs::remove_file(run.join("run.json")).unwrap();
+    let checkpoint = fs::read(checkpoint_path(&run)).unwrap();
+    let frame = fs::read(frame_path(&run, 100)).unwrap();
+    let o = small(&run, 100, &["--zeta", "0.3"]);
+    refused(&o, &[arg(&run), "no run.json", "nothing here was changed", "delete", "another --out"]);
+    assert!(fs::read(checkpoint_path(&run)).unwrap() == checkpoint, "the checkpoint was changed");
+    assert!(fs::read(frame_path(&run, 100)).unwrap() == frame, "a frame was changed");
+    assert!(!run.join("run.json").exists());
+    // A directory of anything else.
+    let other = dir.path().join("other");
+    fs::create_dir_all(&other).unwrap();
+    fs::write(other.join("notes.txt"), "mine").unwrap();
+    refused(&small(&other, 50, &[]), &["is not empty (notes.txt)", "choose another --out"]);
+    assert_eq!(fs::read_dir(&other).unwrap().count(), 1, "something was written beside notes.txt");
+    // What a start that wrote nothing leaves is no run: an empty frames/ and a .lock.
+    let empty = dir.path().join("empty");
+    fs::create_dir_all(empty.join("frames")).unwrap();
+    fs::write(empty.join(RunLock::FILE), "").unwrap();
+    ok(&small(&empty, 50, &[]));
+    // A sweep's run killed between its first checkpoint and its record starts again.
+    let out = dir.path().join("s");
+    let spec: SweepSpec = toml::from_str(SPEC).unwrap();
+    let jobs = spec.jobs().unwrap();
+    let killed = out.join("runs").join(&jobs[0].name);
+    drop(RunDir::create(&killed, jobs[0].params.clone(), jobs[0].seed, 50).unwrap());
+    fs::remove_file(killed.join("run.json")).unwrap();
+    let summaries = run_sweep(&jobs, 50, &out, 1, None, &|_, _, _| {}).unwrap();
+    assert!(summaries.iter().all(|s| s.status == RunStatus::Finished && s.steps == 200), "{summaries:?}");
+}
+
+/// Two sweeps of one OUT at once: each takes up the runs the other had under way once they
+/// are let go of, so both end with the tables of every run (where each refused to write any).
+#[test]
+fn two_sweeps_of_one_out_both_write_every_run_s_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let args = [&["sweep", "--quiet", "--jobs", "1", "--seeds", "1,2", "--out", arg(&out)][..], &SWEEP_ARGS].concat();
+    let spawn = || common::command().args(&args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let (first, second) = (spawn(), spawn());
+    for o in [first.wait_with_output().unwrap(), second.wait_with_output().unwrap()] {
+        ok(&o);
+        assert!(String::from_utf8_lossy(&o.stdout).contains("summary.csv"), "{}", stderr(&o));
+    }
+    let summary = lines(&out.join("summary.csv"));
+    assert_eq!(summary.len(), 1 + 4, "{summary:?}");
+    assert!(summary[1..].iter().all(|l| l.contains("\"finished\"")), "{summary:?}");
+}
+
+/// In one process: a run held by another writer is taken up once it is let go of (here when
+/// the other run of the sweep has finished), done by then or not.
+#[test]
+fn a_sweep_waits_for_the_runs_another_writer_holds() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec: SweepSpec = toml::from_str(
+        "seeds = [1, 2]\nframe_interval = 10\n[base]\nbox_size = 48\nn_cells = 10\nrelax_steps = 10\nactive_steps = 10\n",
+    )
+    .unwrap();
+    let jobs = spec.jobs().unwrap();
+    let runs = dir.path().join("runs");
+    let held = runs.join(&jobs[0].name);
+    fs::create_dir_all(&held).unwrap();
+    let lock = RunLock::acquire(&held).unwrap();
+    let other = runs.join(&jobs[1].name);
+    let summaries = std::thread::scope(|s| {
+        let sweep = s.spawn(|| run_sweep(&jobs, 10, dir.path(), 1, None, &|_, _, _| {}));
+        while !RunRecord::load(&other).is_ok_and(|r| r.status == RunStatus::Finished) {
+            assert!(!sweep.is_finished(), "the sweep ended without waiting: {:?}", sweep.join());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        drop(lock);
+        sweep.join().unwrap()
+    })
+    .unwrap();
+    assert_eq!(summaries.len(), 2);
+    assert!(summaries.iter().all(|s| s.status == RunStatus::Finished), "{summaries:?}");
 }
 
 /// A sweep run again over its OUT with another frame interval is refused: its runs would
@@ -189,6 +279,80 @@ fn a_resume_under_edited_parameters_is_refused_by_name() {
     assert_eq!(RunRecord::load(&run).unwrap().status, RunStatus::Finished);
 }
 
+/// An edit of run.json's box or frame interval is named on resume as any other parameter is,
+/// not taken for a damaged checkpoint (its lattice, its step off the schedule).
+#[test]
+fn a_resume_after_editing_the_box_or_the_frame_interval_names_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 100, &[]));
+    edit_record(&run, |v| v["status"] = "running".into());
+    let saved = fs::read_to_string(run.join("run.json")).unwrap();
+    let resume = || monolayer(&["run", "--quiet", "--resume", arg(&run)]);
+    for (key, value) in [("box_size", 40), ("box_size", 140)] {
+        edit_record(&run, |v| v["params"][key] = value.into());
+        refused(&resume(), &[&format!("`{key}` = {value} there"), &format!("{key} = 48"), "run.json"]);
+        fs::write(run.join("run.json"), &saved).unwrap();
+    }
+    edit_record(&run, |v| v["frame_interval"] = 30.into());
+    refused(&resume(), &["`frame_interval` = 30 there", "frame_interval = 50", "run.json edited"]);
+    fs::write(run.join("run.json"), &saved).unwrap();
+    ok(&resume());
+}
+
+/// The engine edited in run.json (cpu ↔ gpu-f32) is refused on resume by name, the status
+/// unchanged: the checkpoint records the engine that stepped it.
+#[test]
+fn an_engine_edited_in_the_record_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 100, &[]));
+    edit_record(&run, |v| v["status"] = "stopped: signal SIGTERM".into());
+    let resume = || monolayer(&["run", "--quiet", "--resume", arg(&run)]);
+    edit_record(&run, |v| v["engine"] = "gpu-f32".into());
+    refused(&resume(), &["`engine` = \"gpu-f32\" there", "engine = \"cpu\"", "restore `engine`"]);
+    assert_eq!(RunRecord::load(&run).unwrap().status, RunStatus::Stopped("signal SIGTERM".into()));
+    // The other way: a checkpoint of the GPU engine under a record edited to the CPU's.
+    let mut record = RunRecord::load(&run).unwrap();
+    let state = monolayer::run::read_checkpoint(&checkpoint_path(&run), 48).unwrap();
+    let m = Monolayer::from_state(record.params.clone(), record.seed, state).unwrap();
+    record.engine = "gpu-f32".into();
+    write_run_checkpoint(&m, &checkpoint_path(&run), &record).unwrap();
+    edit_record(&run, |v| v["engine"] = "cpu".into());
+    refused(&resume(), &["`engine` = \"cpu\" there", "engine = \"gpu-f32\""]);
+    assert_eq!(RunRecord::load(&run).unwrap().status, RunStatus::Stopped("signal SIGTERM".into()));
+}
+
+/// A healthy run of the GPU engine that cannot have its GPU (no adapter, or a build without
+/// the GPU kernels) is `stopped:` (resumable), not `failed:` (a permanent result), and the
+/// reason is printed once.
+#[test]
+fn a_gpu_run_without_its_gpu_is_stopped_not_failed() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 100, &[]));
+    killed_at(&run, 150);
+    let mut record = RunRecord::load(&run).unwrap();
+    record.engine = "gpu-f32".into();
+    record.status = RunStatus::Stopped("signal SIGTERM".into());
+    record.save(&run).unwrap();
+    let state = monolayer::run::read_checkpoint(&checkpoint_path(&run), 48).unwrap();
+    let m = Monolayer::from_state(record.params.clone(), record.seed, state).unwrap();
+    write_run_checkpoint(&m, &checkpoint_path(&run), &record).unwrap();
+    // No Vulkan driver for the loader to find: no adapter, in a build with the GPU engine.
+    let o = common::command()
+        .args(["run", "--quiet", "--resume", arg(&run)])
+        .env("VK_ICD_FILENAMES", "/nonexistent.json")
+        .env("VK_DRIVER_FILES", "/nonexistent.json")
+        .output()
+        .unwrap();
+    let why = if cfg!(feature = "gpu") { "no GPU adapter" } else { "built without the GPU kernels" };
+    refused(&o, &[why, "--resume"]);
+    assert_eq!(stderr(&o).matches(why).count(), 1, "printed more than once: {}", stderr(&o));
+    let status = RunRecord::load(&run).unwrap().status;
+    assert!(matches!(&status, RunStatus::Stopped(s) if s.contains(why)), "{status:?}");
+}
+
 /// A record with `frame_interval` = 0 is refused by name.
 #[test]
 fn a_record_with_frame_interval_zero_is_refused() {
@@ -279,23 +443,4 @@ fn a_fifo_among_the_frames_is_refused() {
     let fifo = frame_path(&run, 1000);
     common::make_fifo(&fifo);
     refused(&analyzed(&run, &dir.path().join("a")), &["frame_0001000.npz", "not a regular file"]);
-}
-
-/// A sweep that finds some of its runs held by another writer (the same sweep started twice)
-/// says so, naming the holder, and why it writes no tables.
-#[test]
-fn a_sweep_beside_another_names_the_holder_of_its_runs() {
-    let dir = tempfile::tempdir().unwrap();
-    let spec: SweepSpec = toml::from_str(
-        "seeds = [1, 2]\nframe_interval = 10\n[base]\nbox_size = 48\nn_cells = 10\nrelax_steps = 10\nactive_steps = 10\n",
-    )
-    .unwrap();
-    let jobs = spec.jobs().unwrap();
-    let held = dir.path().join("runs").join(&jobs[0].name);
-    fs::create_dir_all(&held).unwrap();
-    let _lock = RunLock::acquire(&held).unwrap();
-    let e = run_sweep(&jobs, 10, dir.path(), 1, None, &|_, _, _| {}).unwrap_err().to_string();
-    let pid = std::process::id();
-    assert!(e.contains(&format!("being written by process {pid}")) && e.contains("summary.csv"), "{e}");
-    assert!(e.contains(&jobs[0].name) && !e.contains(&jobs[1].name), "{e}");
 }

@@ -193,6 +193,9 @@ impl Default for Params {
 /// The most steps of either phase of the protocol.
 pub const MAX_STEPS: u64 = 1_000_000_000;
 
+/// The largest lattice a run may have (`box_size`), 4096²: hundreds of times the paper's.
+pub const MAX_BOX_SIZE: usize = 4096;
+
 /// A parameter outside its allowed range, named as in the config file.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("parameter `{name}` = {value}: {allowed}")]
@@ -261,7 +264,12 @@ impl Params {
 
     /// Checks every parameter against its allowed range and against the others.
     pub fn validate(&self) -> Result<(), ParamError> {
-        check(self.box_size >= 16 && self.box_size <= 4096, "box_size", self.box_size, "must be in [16, 4096]")?;
+        check(
+            (16..=MAX_BOX_SIZE).contains(&self.box_size),
+            "box_size",
+            self.box_size,
+            format!("must be in [16, {MAX_BOX_SIZE}]"),
+        )?;
         check(self.n_cells >= 1 && self.n_cells <= 100_000, "n_cells", self.n_cells, "must be in [1, 100000]")?;
         check(self.radius.is_finite() && self.radius >= 2.0, "radius", self.radius, "must be ≥ 2 sites")?;
         check(

@@ -215,7 +215,7 @@ pub fn relaxed_start(file: &Path, params: &Params, seed: u64) -> Result<Monolaye
             file.display()
         ))
     })?;
-    Monolayer::from_state(params.clone(), seed, state)
+    Monolayer::from_saved(params.clone(), seed, state)
         .map_err(|e| RunError::from(e).context(format!("--from-relaxed {}", file.display())))
 }
 

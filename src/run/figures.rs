@@ -90,8 +90,9 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         return draw_figures(&plan, &o.out, o.jobs);
     }
     // 2. The runs: what they will cost, then here or on Slurm.
-    runs::check_memory(&plan)?;
     let share = runs::Share::of(&plan, &o.out, o.shard);
+    // On Slurm each task runs one; here `--jobs` at a time.
+    runs::check_memory(&plan, &share, if o.slurm { 1 } else { o.jobs })?;
     let ids: Vec<&str> = figures.iter().map(|f| f.id()).collect();
     eprintln!(
         "figures (scale {}): {} need {} runs{}; {} to run, {} steps",

@@ -14,8 +14,8 @@ use ndarray::{arr0, Array1, Array2, Array3};
 use ndarray_npy::{NpzReader, NpzWriter};
 use num_complex::Complex64 as C64;
 
-use crate::formats::{self, frame_file_name, FrameData, RunRecord, FORMAT, FORMAT_VERSION};
-use crate::model::{Monolayer, Params, Patch, State};
+use crate::formats::{self, frame_file_name, Engine, FrameData, RunRecord, FORMAT, FORMAT_VERSION};
+use crate::model::{Monolayer, Params, Patch, State, MAX_BOX_SIZE};
 use crate::run::error::RunError;
 
 pub type IoResult<T> = Result<T, RunError>;
@@ -407,7 +407,8 @@ pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
 }
 
 /// The array of a checkpoint that holds the seed and parameters it was stepped with (JSON text as
-/// bytes): a resume under other ones would continue another trajectory from this state.
+/// bytes), and for a run's own checkpoints its engine and frame interval: a resume under other
+/// ones would continue another trajectory from this state.
 const RUN_PARAMS: &str = "run_params";
 
 fn run_params_json(params: &Params, seed: u64) -> serde_json::Value {
@@ -417,6 +418,27 @@ fn run_params_json(params: &Params, seed: u64) -> serde_json::Value {
 /// Writes the exact state (f64 bits, padded patches, the solver's warm start and corrector
 /// shift), and the seed and parameters it belongs to.
 pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
+    write_state(m, path, run_params_json(m.params(), m.seed()))
+}
+
+/// [`write_checkpoint`] of a run's state: with the engine that stepped it and the run's frame
+/// interval from its `record`, so that a resume under another (run.json edited) is refused by name.
+pub fn write_run_checkpoint(m: &Monolayer, path: &Path, record: &RunRecord) -> IoResult<()> {
+    let mut key = run_params_json(m.params(), m.seed());
+    key["engine"] = engine_name(&record.engine).into();
+    key["frame_interval"] = record.frame_interval.into();
+    write_state(m, path, key)
+}
+
+/// The engine a record names, as `run.json` writes it (an unknown name as it is, for the error).
+fn engine_name(recorded: &str) -> String {
+    match Engine::parse(if recorded.is_empty() { "cpu" } else { recorded }) {
+        Ok(e) => e.name().to_string(),
+        Err(_) => recorded.to_string(),
+    }
+}
+
+fn write_state(m: &Monolayer, path: &Path, key: serde_json::Value) -> IoResult<()> {
     let s = m.state();
     let l = m.params().box_size;
     let n = s.cells.len();
@@ -430,7 +452,7 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     let warm = complex_field(&s.warm_start, l);
     let shift = complex_field(&s.corrector_shift, l);
     let substrate = Array2::from_shape_vec((l, l), s.substrate.clone()).expect("L×L");
-    let key = run_params_json(m.params(), m.seed()).to_string().into_bytes();
+    let key = key.to_string().into_bytes();
     write_npz(path, |z| {
         z.add_array(RUN_PARAMS, &Array1::from(key))?;
         z.add_array("step", &arr0(s.step as i64))?;
@@ -532,12 +554,16 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     })
 }
 
-/// Checks that the checkpoint at `path` was written with the seed and parameters of `record`,
-/// naming the first that differs: `run.json` edited after the run started would otherwise
-/// continue one trajectory under another's parameters. Checkpoints written before they held
-/// their parameters are not checked.
+/// Checks that the checkpoint at `path` was written with the seed and parameters of `record`
+/// (and, where it records them, its engine and frame interval), naming the first that differs:
+/// `run.json` edited after the run started would otherwise continue one trajectory under
+/// another's parameters, or be blamed on the checkpoint. Read before the state itself, whose
+/// arrays are checked against the record's lattice. Checkpoints written before they held their
+/// parameters are not checked.
 pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> {
-    check_npz_file_headers(path, formats::max_array_values(record.params.box_size))?;
+    // Bounded by the largest lattice a run may have, not the record's: an edited box_size is
+    // named below, not taken for a damaged checkpoint.
+    check_npz_file_headers(path, formats::max_array_values(MAX_BOX_SIZE))?;
     let file = File::open(path).map_err(|e| io(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let has_key = z.names().map_err(|x| err(path, x))?.iter().any(|n| n.trim_end_matches(".npy") == RUN_PARAMS);
@@ -547,30 +573,36 @@ pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> 
     let bytes: Array1<u8> = z.by_name(RUN_PARAMS).map_err(|x| err(path, format!("array `{RUN_PARAMS}`: {x}")))?;
     let stored: serde_json::Value = serde_json::from_slice(&bytes.to_vec())
         .map_err(|x| err(path, format!("array `{RUN_PARAMS}`: not the JSON of a run's parameters: {x}")))?;
+    let step: ndarray::Array0<i64> = z.by_name("step").map_err(|x| err(path, format!("array `step`: {x}")))?;
     let given = run_params_json(&record.params, record.seed);
-    let mut pairs = vec![("seed".to_string(), stored.get("seed"), given.get("seed"))];
+    let mut pairs = vec![("seed".to_string(), stored.get("seed").cloned(), given.get("seed").cloned())];
     if let Some(table) = given.get("params").and_then(|p| p.as_object()) {
         // `active_steps` says only where the trajectory ends: raising it extends the same run.
         for (k, v) in table.iter().filter(|(k, _)| *k != "active_steps") {
-            pairs.push((k.clone(), stored.get("params").and_then(|p| p.get(k)), Some(v)));
+            pairs.push((k.clone(), stored.get("params").and_then(|p| p.get(k)).cloned(), Some(v.clone())));
         }
+    }
+    pairs.push(("frame_interval".into(), stored.get("frame_interval").cloned(), Some(record.frame_interval.into())));
+    // The state of step 0 is the random disks, which every engine starts from (a new run takes
+    // its engine after its first checkpoint); from the first step on, it is the engine's.
+    if step.into_scalar() > 0 {
+        let engine = engine_name(&record.engine);
+        pairs.push(("engine".into(), stored.get("engine").cloned(), Some(engine.into())));
     }
     // A parameter newer than the checkpoint is not in it, and has its default there.
     let differs = pairs.into_iter().find(|(_, s, g)| s.is_some() && s != g);
     match differs {
         None => Ok(()),
         Some((k, s, g)) => {
-            let show = |v: Option<&serde_json::Value>| v.map(|v| v.to_string()).unwrap_or_default();
+            let show = |v: Option<serde_json::Value>| v.map(|v| v.to_string()).unwrap_or_default();
+            let (s, g) = (show(s), show(g));
             Err(err(
                 &RunRecord::path(path.parent().unwrap_or(Path::new("."))),
                 format!(
-                    "`{k}` = {} there, but the checkpoint {} was written with {k} = {}: a run continues only with \
-                     the parameters it started with (was run.json edited?); restore `{k}` to {}, or start a new run \
-                     with these parameters in another --out",
-                    show(g),
+                    "`{k}` = {g} there, but the checkpoint {} was written with {k} = {s}: a run continues only with \
+                     the parameters, frame interval and engine it started with (was run.json edited?); restore \
+                     `{k}` to {s}, or start a new run with these parameters in another --out",
                     path.display(),
-                    show(s),
-                    show(s)
                 ),
             ))
         }

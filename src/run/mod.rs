@@ -37,14 +37,14 @@ pub use config::{load_params, parse_assignment};
 pub use error::{RunError, RunResult};
 pub use files::{
     checkpoint_path, frame_path, kept_checkpoint_path, read_checkpoint, read_frame, replaceable, write_atomic,
-    write_checkpoint, write_frame, Frame, RunFrames, RunLock,
+    write_checkpoint, write_frame, write_run_checkpoint, Frame, RunFrames, RunLock,
 };
 pub use forecast::forecast;
 pub use offline::analyze_run;
 pub use plots::Background;
 pub use runner::{
-    cgroup_room, check_frame_interval, check_memory, check_memory_of, memory_estimate, parse_memory_limit_mb,
-    stop_gracefully_on_signals, stop_signal, Event, RunDir,
+    cgroup_room, check_frame_interval, check_memory, check_memory_of, check_memory_of_jobs, memory_estimate,
+    parse_memory_limit_mb, stop_gracefully_on_signals, stop_signal, Event, RunDir,
 };
 pub use sweep::{
     jobs_of_runs, measure_existing, run_sweep, steps_to_run, tables, write_tables, Job, Output, RunSummary, Shard,

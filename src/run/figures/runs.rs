@@ -54,14 +54,15 @@ impl<'p> Share<'p> {
     }
 }
 
-/// Before the estimate, which steps a simulation of every size in the plan (and would abort
-/// where one does not fit): the largest must fit, as every run must.
-pub fn check_memory(plan: &Plan) -> Result<(), RunError> {
+/// Before the estimate, which steps a simulation of every size in the plan one at a time (and
+/// would abort where one does not fit): the largest must fit, as every run must; and the runs
+/// the share has left, `workers` at a time, must fit together.
+pub fn check_memory(plan: &Plan, share: &Share, workers: usize) -> Result<(), RunError> {
     if let Some(job) = plan.jobs.iter().max_by_key(|j| crate::run::runner::memory_estimate(&j.params)) {
         job.params.validate().map_err(RunError::from)?;
         crate::run::runner::check_memory(&job.params)?;
     }
-    Ok(())
+    crate::run::runner::check_memory_of_jobs(share.todo.iter().map(|(job, _)| &job.params), workers)
 }
 
 /// A duration of core time in the unit that reads best.
