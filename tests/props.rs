@@ -1,7 +1,8 @@
 //! Property tests of everything that reads the user's text or the disk: parameters from
-//! `--set` and config files, and frames and checkpoints cut short or with a bit flipped. None may
-//! panic; a damaged file is refused or reads as exactly what was written. A few dozen cases
-//! each, so that the suite stays quick.
+//! `--set` and config files; frames and checkpoints cut short or with a bit flipped; run
+//! directories with frames missing anywhere; checkpoints with values out of range. None may
+//! panic; a damaged file is refused or reads as exactly what was written, and a run that is not
+//! whole is refused by every reader. A few dozen cases each, so that the suite stays quick.
 
 mod common;
 
@@ -332,10 +333,65 @@ proptest! {
     }
 }
 
-// ---- States out of range ----
+// ---- Run directories with frames missing, states out of range ----
+
+/// A small finished run (frames at steps 20, 30, …, 70) in OUT/runs/r, written once.
+fn finished_run() -> &'static (tempfile::TempDir, PathBuf) {
+    static RUN: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path().join("runs").join("r");
+        let params = Params { relax_steps: 20, active_steps: 50, ..small() };
+        let mut r = monolayer::run::RunDir::create(&run, params, 1, 10).unwrap();
+        r.execute(false, &mut |_, _| {}).unwrap();
+        (dir, run)
+    })
+}
+
+/// A copy of the files of the run directory `from` (its record, checkpoint and frames) in `to`.
+fn copy_run(from: &Path, to: &Path) {
+    fs::create_dir_all(to.join("frames")).unwrap();
+    for name in ["run.json", "checkpoint.npz"] {
+        fs::copy(from.join(name), to.join(name)).unwrap();
+    }
+    for entry in fs::read_dir(from.join("frames")).unwrap() {
+        let path = entry.unwrap().path();
+        fs::copy(&path, to.join("frames").join(path.file_name().unwrap())).unwrap();
+    }
+}
 
 proptest! {
     #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Frames missing anywhere (the first, the last, any in between, several, all): every reader
+    /// of a run's frames refuses the run, naming the first step missing, and writes nothing;
+    /// none counts it as a shorter run.
+    #[test]
+    fn readers_refuse_a_run_with_frames_missing_anywhere(
+        gone in proptest::collection::btree_set(0usize..6, 1..=6),
+    ) {
+        use monolayer::run::{analyze_run, jobs_of_runs, measure_existing, Background, RunFrames};
+        let (_, run) = finished_run();
+        let dir = tempfile::tempdir().unwrap();
+        let copy = dir.path().join("runs").join("r");
+        copy_run(run, &copy);
+        let steps: Vec<u64> = gone.iter().map(|&k| 20 + 10 * k as u64).collect();
+        for step in &steps {
+            fs::remove_file(monolayer::run::frame_path(&copy, *step)).unwrap();
+        }
+        // The first step missing is named (with every frame gone: that the record has some).
+        let names = |e: &str| if steps.len() == 6 { e.contains("no frame files") } else { e.contains(&format!(" {}", steps[0])) };
+        let e = RunFrames::open(&copy).unwrap_err().to_string();
+        prop_assert!(names(&e), "{:?}: {}", steps, e);
+        let e = RunFrames::open_if_any(&copy).unwrap_err().to_string();
+        prop_assert!(names(&e), "{:?}: {}", steps, e);
+        let jobs = jobs_of_runs(dir.path()).unwrap();
+        let e = measure_existing(&jobs, dir.path()).unwrap_err().to_string();
+        prop_assert!(names(&e) && e.contains("run r"), "{:?}: {}", steps, e);
+        let out = dir.path().join("analysis");
+        let e = analyze_run(&copy, Some(&out), None, Background::StrainRate).unwrap_err().to_string();
+        prop_assert!(names(&e) && !out.exists(), "{:?}: {}", steps, e);
+    }
 
     /// A checkpoint with any value of φ put anywhere in its patches is refused where a run
     /// never leaves one (beyond [phi_min, phi_max], or not 0 on the ring around a patch),

@@ -401,6 +401,90 @@ fn a_run_resumes_only_in_its_own_storage_precision() {
 
 // ---- Read only whole ----
 
+/// A sweep whose run lost a frame (its first, one in the middle, its last) does not count that
+/// run as a shorter one: `sweep --tables-only` and `figures` refuse it, naming the run and the
+/// step, and leave the tables as they were; no `no_holes` is written for it.
+#[test]
+fn a_run_with_a_frame_missing_is_never_counted_as_measured() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let sweep =
+        |extra: &[&str]| monolayer(&[&["sweep", "--quiet", "--jobs", "1", "--out", arg(&out)][..], extra].concat());
+    ok(&sweep(&SWEEP_ARGS));
+    let tables = || (fs::read(out.join("summary.csv")).unwrap(), fs::read(out.join("regimes.csv")).unwrap());
+    let before = tables();
+    let run = out.join("runs/zeta0.4_seed1");
+    for step in [100, 150, 200] {
+        let frame = frame_path(&run, step);
+        let saved = fs::read(&frame).unwrap();
+        fs::remove_file(&frame).unwrap();
+        for extra in [&["--tables-only"][..], &[&["--tables-only"][..], &SWEEP_ARGS].concat()] {
+            let o = sweep(extra);
+            refused(&o, &["zeta0.4_seed1", "no table written", "frames missing at step", &step.to_string()]);
+            assert!(tables() == before, "the tables were rewritten");
+        }
+        fs::write(&frame, saved).unwrap();
+    }
+    // Every frame gone, where the record says there are some.
+    let frames = run.join("frames");
+    fs::rename(&frames, dir.path().join("away")).unwrap();
+    refused(&sweep(&["--tables-only"]), &["zeta0.4_seed1", "no frame files", "last_frame_step"]);
+    fs::rename(dir.path().join("away"), &frames).unwrap();
+    ok(&sweep(&["--tables-only"]));
+    assert!(tables() == before);
+
+    // The figures read the same way.
+    let figs = dir.path().join("f");
+    let figures = |stage: &str| {
+        monolayer(&[
+            "figures",
+            "--only",
+            "S3",
+            "--quiet",
+            "--jobs",
+            "1",
+            "--stage",
+            stage,
+            "--out",
+            arg(&figs),
+            "--set",
+            "relax_steps=50",
+            "--set",
+            "active_steps=100",
+        ])
+    };
+    ok(&figures("runs"));
+    let run = fs::read_dir(figs.join("runs")).unwrap().next().unwrap().unwrap().path();
+    let record = RunRecord::load(&run).unwrap();
+    fs::remove_file(frame_path(&run, record.params.relax_steps)).unwrap();
+    let o = figures("figures");
+    refused(&o, &[arg(&run), "frames missing at step 50"]);
+    assert!(!figs.join("figures.md").exists(), "figures drawn from a run with a frame missing");
+}
+
+/// `analyze` refuses a run missing its first or its last frames (it measured up to the last
+/// one present) and a directory named like a frame (it skipped it).
+#[test]
+fn analyze_refuses_a_run_missing_its_first_or_last_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 100, &[]));
+    let out = dir.path().join("a");
+    for (step, expect) in [(100, "frames missing at step 100 before"), (200, "frames missing at step 200 after")] {
+        let frame = frame_path(&run, step);
+        let saved = fs::read(&frame).unwrap();
+        fs::remove_file(&frame).unwrap();
+        refused(&analyzed(&run, &out), &[expect, "restore them"]);
+        fs::write(&frame, saved).unwrap();
+    }
+    let named = frame_path(&run, 250);
+    fs::create_dir_all(&named).unwrap();
+    refused(&analyzed(&run, &out), &["frame_0000250.npz", "is a directory, not a regular file: not a frame"]);
+    fs::remove_dir(&named).unwrap();
+    assert!(!out.exists());
+    ok(&analyzed(&run, &out));
+}
+
 /// Frames missing in the middle of a run would be measured as one frame interval; refused,
 /// naming the steps, as is a frame off the run's schedule.
 #[test]

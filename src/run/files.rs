@@ -618,7 +618,10 @@ pub struct Frame {
     pub data: FrameData,
 }
 
-/// A run directory checked for analysis: its record and its complete frames, in step order.
+/// A run directory checked for analysis: its record and every frame it has written, in step
+/// order, none missing. Every reader of a run's frames (`analyze`, the sweep's tables, the
+/// figures, the forecast) goes through it: a frame missing anywhere would be measured as a
+/// shorter run or a longer frame interval, and counted as a result that was never measured.
 #[derive(Clone, Debug)]
 pub struct RunFrames {
     pub dir: PathBuf,
@@ -628,40 +631,47 @@ pub struct RunFrames {
 }
 
 impl RunFrames {
-    /// Opens `dir` as a run: its `run.json` must be this program's, of this format version,
-    /// and it must have at least one frame. Frames are written by an atomic rename, so every
-    /// `frame_*.npz` present is complete (a frame being written is a hidden temporary file,
-    /// skipped): a run in progress is read up to its last complete frame.
+    /// Opens `dir` as a run with at least one frame: its `run.json` must be this program's, of
+    /// this format version, and its frames all there from the first ([`RunRecord::first_frame_step`])
+    /// to the last its record names, one every frame interval. Frames are written by an atomic
+    /// rename, so every `frame_*.npz` present is complete (a frame being written is a hidden
+    /// temporary file, skipped): a run in progress is read up to its last complete frame.
     pub fn open(dir: &Path) -> Result<Self, RunError> {
         let record = RunRecord::load(dir)?;
-        let frames_dir = dir.join("frames");
-        let entries = fs::read_dir(&frames_dir).map_err(|e| {
-            err(&frames_dir, format!("{e} (a run's frames are in DIR/frames; has this run written any yet?)"))
-        })?;
-        let mut frames = Vec::new();
-        for entry in entries {
-            let entry = entry.map_err(|e| io(&frames_dir, e))?;
-            let name = entry.file_name().to_string_lossy().into_owned();
-            if entry.file_type().is_ok_and(|t| t.is_dir()) {
-                continue;
-            }
-            if let Some(step) = name.strip_prefix("frame_").and_then(|s| s.strip_suffix(".npz")) {
-                // A FIFO or a device would block the reader, or never end.
-                if !fs::metadata(entry.path()).is_ok_and(|m| m.is_file()) {
-                    return Err(err(&entry.path(), "not a regular file: not a frame"));
-                }
-                let step: u64 = step.parse().map_err(|_| err(&entry.path(), "not a frame name (frame_<step>.npz)"))?;
-                frames.push((step, entry.path()));
-            }
-        }
-        if frames.is_empty() {
-            return Err(err(
-                &frames_dir,
+        let (status, interval) = (record.status.to_string(), record.frame_interval);
+        Self::scan(dir, record)?.ok_or_else(|| {
+            err(
+                &dir.join("frames"),
                 format!(
-                    "no frames yet (status \"{}\"); frames are written every {} active steps",
-                    record.status, record.frame_interval
+                    "no frames yet (status \"{status}\"); frames are written every {interval} active steps (a run's \
+                     frames are in DIR/frames)"
                 ),
-            ));
+            )
+        })
+    }
+
+    /// [`RunFrames::open`], or None for a run whose record says it has written no frame yet (one
+    /// that failed or stopped before its first): the sweep's tables and the figures count such a
+    /// run by its status alone. Frames missing where the record says there are some are refused.
+    pub fn open_if_any(dir: &Path) -> Result<Option<Self>, RunError> {
+        Self::scan(dir, RunRecord::load(dir)?)
+    }
+
+    fn scan(dir: &Path, record: RunRecord) -> Result<Option<Self>, RunError> {
+        let frames_dir = dir.join("frames");
+        let mut frames = frame_files(&frames_dir)?;
+        if frames.is_empty() {
+            return match record.last_frame_step {
+                None => Ok(None),
+                Some(last) => Err(err(
+                    &frames_dir,
+                    format!(
+                        "no frame files, but run.json records frames from step {} to step {last} (last_frame_step): \
+                         they were removed or moved; restore them, or move the run out of where it is read",
+                        record.first_frame_step()
+                    ),
+                )),
+            };
         }
         frames.sort();
         if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
@@ -677,39 +687,128 @@ impl RunFrames {
                 own,
             });
         }
-        // A gap would be measured as one frame interval: holes would seem to open and close
-        // faster, and a lifetime would end early. The frames need not start at the end of the
-        // relaxation (a page's download holds only its last).
-        let fi = record.frame_interval;
-        if let Some(w) = frames.windows(2).find(|w| w[1].0 - w[0].0 != fi) {
-            let (a, b) = (w[0].0, w[1].0);
-            if (b - a) % fi != 0 {
-                return Err(err(
-                    &w[1].1,
-                    format!(
-                        "step {b} is not a frame interval after the frame before it ({}, step {a}; run.json: \
-                         frame_interval = {fi}): not a frame of this run",
-                        w[0].1.display()
-                    ),
-                ));
-            }
-            let missing: Vec<u64> = (1..(b - a) / fi).map(|k| a + k * fi).collect();
-            let shown: Vec<String> = missing.iter().take(10).map(u64::to_string).collect();
-            let more = if missing.len() > 10 { format!(" and {} more", missing.len() - 10) } else { String::new() };
+        check_frame_sequence(&frames_dir, &record, &frames)?;
+        Ok(Some(RunFrames { dir: dir.to_path_buf(), record, frames }))
+    }
+
+    /// Reads every frame in order, each checked against the run ([`read_run_frame`]).
+    pub fn read(&self) -> impl Iterator<Item = Result<Frame, RunError>> + '_ {
+        self.frames.iter().map(|(step, path)| read_run_frame(path, *step, &self.record.params))
+    }
+}
+
+/// (step, path) of every `frame_<step>.npz` in `frames_dir`, unsorted; none where the directory
+/// does not exist. Anything named like a frame that is not a regular file is refused: a FIFO
+/// or a device would block the reader or never end, and a directory would be a frame skipped.
+fn frame_files(frames_dir: &Path) -> IoResult<Vec<(u64, PathBuf)>> {
+    let entries = match fs::read_dir(frames_dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(err(frames_dir, format!("{e} (a run's frames are in DIR/frames)"))),
+        Ok(entries) => entries,
+    };
+    let mut frames = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| io(frames_dir, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(step) = name.strip_prefix("frame_").and_then(|s| s.strip_suffix(".npz")) else { continue };
+        let meta = fs::metadata(entry.path()).map_err(|e| io(&entry.path(), e))?;
+        if !meta.is_file() {
+            let kind = file_kind(&meta.file_type());
             return Err(err(
-                &frames_dir,
+                &entry.path(),
+                format!("is {kind}, not a regular file: not a frame; move it out of frames/"),
+            ));
+        }
+        let step: u64 = step.parse().map_err(|_| err(&entry.path(), "not a frame name (frame_<step>.npz)"))?;
+        frames.push((step, entry.path()));
+    }
+    Ok(frames)
+}
+
+/// The steps `from`, `from + every`, … up to `to` as a list for a message: the first ten, then
+/// how many more (a gap may span millions of frames).
+fn steps_text(from: u64, to: u64, every: u64) -> String {
+    let count = (to - from) / every + 1;
+    let shown: Vec<String> = (0..count.min(10)).map(|k| (from + k * every).to_string()).collect();
+    let more = if count > 10 { format!(" and {} more", count - 10) } else { String::new() };
+    format!("step{} {}{more}", if count == 1 { "" } else { "s" }, shown.join(", "))
+}
+
+/// Checks that `frames` (sorted, of distinct steps) are every frame of the run from its first
+/// to the last its record names, one every frame interval: a frame missing at the start would
+/// be measured as a shorter run, one in the middle as one long frame interval (holes would seem
+/// to open and close faster), one at the end as a run that ended early.
+fn check_frame_sequence(frames_dir: &Path, record: &RunRecord, frames: &[(u64, PathBuf)]) -> IoResult<()> {
+    let fi = record.frame_interval;
+    let first = record.first_frame_step();
+    let (start, start_path) = (frames[0].0, &frames[0].1);
+    let restore = "restore them, or move the run out of where it is read";
+    if start < first || !(start - first).is_multiple_of(fi) {
+        return Err(err(
+            start_path,
+            format!(
+                "step {start} is not a step this run writes a frame at (from step {first}, every frame_interval = \
+                 {fi} steps: run.json): not a frame of this run"
+            ),
+        ));
+    }
+    if start > first {
+        return Err(err(
+            frames_dir,
+            format!(
+                "frames missing at {} before {} (the run's frames start at step {first}, the end of its \
+                 relaxation, one every frame_interval = {fi} steps: run.json): {restore}",
+                steps_text(first, start - fi, fi),
+                start_path.display()
+            ),
+        ));
+    }
+    if let Some(w) = frames.windows(2).find(|w| w[1].0 - w[0].0 != fi) {
+        let (a, b) = (w[0].0, w[1].0);
+        if !(b - a).is_multiple_of(fi) {
+            return Err(err(
+                &w[1].1,
                 format!(
-                    "frames missing at step{} {}{more}, between {} and {} (run.json: a frame every frame_interval = \
-                     {fi} steps): restore them, or move the frames after the gap out of the run to measure up to it",
-                    if missing.len() == 1 { "" } else { "s" },
-                    shown.join(", "),
-                    w[0].1.display(),
-                    w[1].1.display()
+                    "step {b} is not a frame interval after the frame before it ({}, step {a}; run.json: \
+                     frame_interval = {fi}): not a frame of this run",
+                    w[0].1.display()
                 ),
             ));
         }
-        Ok(RunFrames { dir: dir.to_path_buf(), record, frames })
+        return Err(err(
+            frames_dir,
+            format!(
+                "frames missing at {}, between {} and {} (run.json: a frame every frame_interval = {fi} steps): \
+                 {restore}, or move the frames after the gap out of the run to measure up to it",
+                steps_text(a + fi, b - fi, fi),
+                w[0].1.display(),
+                w[1].1.display()
+            ),
+        ));
     }
+    let end = frames[frames.len() - 1].0;
+    if let Some(last) = record.last_frame_step.filter(|&last| last > end) {
+        return Err(err(
+            frames_dir,
+            format!(
+                "frames missing at {} after {} (run.json records frames up to last_frame_step = {last}): {restore}",
+                steps_text(end + fi, last, fi),
+                frames[frames.len() - 1].1.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Reads the frame of `step` of a run at `path` and checks it against the run: its size, its
+/// cells, its φ and the step it holds ([`read_frame`], [`check_frame`]).
+pub fn read_run_frame(path: &Path, step: u64, params: &Params) -> IoResult<Frame> {
+    let frame = read_frame(path, params.box_size)?;
+    check_frame(&frame, params)?;
+    if frame.data.step != step {
+        return Err(err(path, format!("holds step {}, its name says {step}", frame.data.step)));
+    }
+    Ok(frame)
 }
 
 /// The largest frame file read: the arrays of a 2,048² run with the cells' φ, deflated, are far

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
-use super::files::{check_frame, read_frame, write_atomic, RunFrames};
+use super::files::{read_run_frame, write_atomic, RunFrames};
 use super::plots::{both_of, plot_err, Draw, FONT, PALETTE};
 use crate::analysis::{
     caught_in_top, forecast_samples, matched_baseline, roc_auc, roc_curve, Analysis, BaselineRow, Features,
@@ -74,12 +74,12 @@ fn measure_run(dir: &Path, partial: bool) -> Result<RunData, RunError> {
     let mut a = Analysis::new(params);
     let mut tracker = HoleTracker::new(params.radius);
     let mut history = RunHistory::new(params.box_size, params.radius);
-    for (step, path) in &run.frames {
-        let frame = read_frame(path, params.box_size)?;
-        check_frame(&frame, params)?;
+    for frame in run.read() {
+        let frame = frame?;
+        let step = frame.data.step;
         a.measure_cells(frame.data.cell_views(), &frame.data.velocity);
         tracker.update(&a.voids, frame.data.time);
-        history.push(&a, &tracker, *step);
+        history.push(&a, &tracker, step);
     }
     let thinning = crate::analysis::thinning_before(&history, DEPTH);
     let baseline = matched_baseline(&history, DEPTH);
@@ -528,7 +528,7 @@ fn fig1b(runs: &[RunData], out: &Path) -> Result<Vec<PathBuf>, RunError> {
     for (i, (r, t)) in chosen.into_iter().enumerate() {
         let n = r.history.nucleations.iter().find(|n| n.hole == t.hole).expect("a nucleation of the run");
         let (step, path) = &r.frames[n.frame - 1];
-        let frame = read_frame(path, r.params.box_size)?;
+        let frame = read_run_frame(path, *step, &r.params)?;
         let mut a = Analysis::new(&r.params);
         a.measure_cells(frame.data.cell_views(), &frame.data.velocity);
         let caption = format!(

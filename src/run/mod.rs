@@ -36,8 +36,8 @@ pub use bench::{bench, bench_analysis, BenchOptions};
 pub use config::{load_params, parse_assignment};
 pub use error::{RunError, RunResult};
 pub use files::{
-    checkpoint_path, frame_path, kept_checkpoint_path, read_checkpoint, read_frame, replaceable, write_atomic,
-    write_checkpoint, write_frame, write_run_checkpoint, Frame, RunFrames, RunLock,
+    checkpoint_path, frame_path, kept_checkpoint_path, read_checkpoint, read_frame, read_run_frame, replaceable,
+    write_atomic, write_checkpoint, write_frame, write_run_checkpoint, Frame, RunFrames, RunLock,
 };
 pub use forecast::forecast;
 pub use offline::analyze_run;

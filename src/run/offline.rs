@@ -9,7 +9,7 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::files::{check_frame, read_frame, Frame, RunFrames};
+use super::files::{read_run_frame, Frame, RunFrames};
 use super::plots::{self, Background};
 use crate::analysis::{
     boundary_sites, correlation_length, tangential_angles, Analysis, FrameSummary, HoleProbability, HoleTracker,
@@ -335,31 +335,22 @@ pub fn analyze_run(
     let run = RunFrames::open(dir)?;
     let params = &run.record.params;
     let mut ra = RunAnalysis::new(params);
-    let kept = measure_frames(&mut ra, &run.frames, params, snapshot_step)?;
+    let kept = measure_frames(&mut ra, &run, snapshot_step)?;
     let chosen = match snapshot_step {
         Some(s) => kept.ok_or_else(|| RunError::NoFrame { step: s, frames: dir.join("frames") })?,
-        None => snapshot_frame(&ra, dir, params.box_size)?.expect("at least one frame"),
+        None => snapshot_frame(&ra, dir, params)?.expect("at least one frame"),
     };
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| dir.join("analysis"));
     ra.write(&out, Some(&chosen), field, params)
 }
 
-/// Measures the frame files in order; returns the frame of `keep` if it was among them.
-fn measure_frames(
-    ra: &mut RunAnalysis,
-    frames: &[(u64, PathBuf)],
-    params: &Params,
-    keep: Option<u64>,
-) -> Result<Option<Frame>, RunError> {
+/// Measures the run's frames in order; returns the frame of `keep` if it was among them.
+fn measure_frames(ra: &mut RunAnalysis, run: &RunFrames, keep: Option<u64>) -> Result<Option<Frame>, RunError> {
     let mut kept = None;
-    for (step, path) in frames {
-        let frame = read_frame(path, params.box_size)?;
-        check_frame(&frame, params)?;
-        if frame.data.step != *step {
-            return Err(RunError::file(path, format!("holds step {}, its name says {step}", frame.data.step)));
-        }
+    for frame in run.read() {
+        let frame = frame?;
         ra.push_frame(&frame);
-        if Some(*step) == keep {
+        if Some(frame.data.step) == keep {
             kept = Some(frame);
         }
     }
@@ -367,8 +358,8 @@ fn measure_frames(
 }
 
 /// The frame [`RunAnalysis::snapshot_step`] chooses, read from the run's directory.
-fn snapshot_frame(ra: &RunAnalysis, dir: &Path, l: usize) -> Result<Option<Frame>, RunError> {
-    ra.snapshot_step().map(|s| read_frame(&frame_path(dir, s), l)).transpose()
+fn snapshot_frame(ra: &RunAnalysis, dir: &Path, params: &Params) -> Result<Option<Frame>, RunError> {
+    ra.snapshot_step().map(|s| read_run_frame(&frame_path(dir, s), s, params)).transpose()
 }
 
 /// `run --analyze`: the analysis kept up to date as frames are written.
@@ -387,13 +378,10 @@ impl LiveRun {
     /// their checkpoint: the run writes them again, and measures them then.
     pub fn start(dir: &Path, params: &Params, step: u64) -> Result<Self, RunError> {
         let mut ra = RunAnalysis::new(params);
-        let mut frames = match RunFrames::open(dir) {
-            Ok(run) => run.frames,
-            Err(_) if !dir.join("frames").read_dir().is_ok_and(|mut d| d.next().is_some()) => Vec::new(),
-            Err(e) => return Err(e),
-        };
-        frames.retain(|(s, _)| *s <= step);
-        measure_frames(&mut ra, &frames, params, None)?;
+        if let Some(mut run) = RunFrames::open_if_any(dir)? {
+            run.frames.retain(|(s, _)| *s <= step);
+            measure_frames(&mut ra, &run, None)?;
+        }
         // A resumed `run --analyze` wrote the snapshot of this step last.
         let snapshot = ra.snapshot_step();
         Ok(LiveRun { ra, dir: dir.to_path_buf(), params: params.clone(), snapshot })
@@ -402,7 +390,7 @@ impl LiveRun {
     /// Measures the state whose frame was just written and rewrites `DIR/analysis`.
     pub fn frame(&mut self, m: &Monolayer) -> Result<(), RunError> {
         self.ra.push_monolayer(m);
-        let snapshot = snapshot_frame(&self.ra, &self.dir, self.params.box_size)?;
+        let snapshot = snapshot_frame(&self.ra, &self.dir, &self.params)?;
         let out = self.dir.join("analysis");
         self.ra.write(&out, snapshot.as_ref(), Background::StrainRate, &self.params)?;
         let now = snapshot.map(|f| f.data.step);

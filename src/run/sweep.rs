@@ -30,7 +30,7 @@ use crate::formats::{RunRecord, RunStatus};
 use crate::model::Params;
 use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
 use crate::run::error::RunError;
-use crate::run::files::{check_frame, read_frame, RunFrames};
+use crate::run::files::RunFrames;
 use crate::run::files::{checkpoint_path, read_checkpoint, write_atomic, RunLock};
 use crate::run::offline::RunAnalysis;
 use crate::run::runner::{Event, RunDir};
@@ -393,7 +393,9 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
     (n > 0).then(|| s / n as f64)
 }
 
-/// Measures the frames of the run in `dir`.
+/// Measures the frames of the run in `dir`: every frame its record says it wrote, or none for a
+/// run that wrote none (it failed or stopped before its first). A frame missing anywhere is
+/// refused, naming the run, rather than counted as a run that ended there.
 pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, RunError> {
     let record = RunRecord::load(dir)?;
     let mut s = RunSummary {
@@ -403,13 +405,13 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, RunError> {
         status: record.status.clone(),
         ..RunSummary::default()
     };
-    let Ok(run) = RunFrames::open(dir) else { return Ok(s) };
-    let p = &record.params;
+    let Some(run) = RunFrames::open_if_any(dir)? else { return Ok(s) };
+    let p = &run.record.params;
+    s.status = run.record.status.clone();
     s.microns_per_hour = p.microns_per_hour();
     let mut ra = RunAnalysis::new(p);
-    for (_, path) in &run.frames {
-        let frame = read_frame(path, p.box_size)?;
-        check_frame(&frame, p)?;
+    for frame in run.read() {
+        let frame = frame?;
         ra.push_frame(&frame);
         s.steps = frame.data.step;
     }
@@ -736,7 +738,8 @@ pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, Run
     for job in jobs {
         let dir = runs_dir.join(&job.name);
         if RunRecord::path(&dir).exists() {
-            summaries.push(summarize(job, &dir)?);
+            summaries
+                .push(summarize(job, &dir).map_err(|e| e.context(format!("run {} (no table written)", job.name)))?);
         }
     }
     Ok(summaries)
