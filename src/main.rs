@@ -13,8 +13,9 @@ use monolayer::model::MAX_STEPS;
 use monolayer::run::figures::{FiguresOptions, Scale, Stage};
 use monolayer::run::{
     analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, jobs_of_runs, load_params,
-    measure_existing, parse_assignment, replaceable, run_sweep, steps_to_run, stop_gracefully_on_signals, stop_signal,
-    write_atomic, write_tables, Background, BenchOptions, Event, Output, RunDir, RunError, Shard, SweepSpec,
+    measure_existing, note, out, out_text, parse_assignment, replaceable, run_sweep, steps_to_run,
+    stop_gracefully_on_signals, stop_signal, write_atomic, write_tables, Background, BenchOptions, Event, Output,
+    RunDir, RunError, Shard, SweepSpec,
 };
 use monolayer::{Monolayer, Params, Phase};
 
@@ -373,7 +374,7 @@ fn main() -> ExitCode {
     // The commands that run simulations stop gracefully on SIGTERM and SIGINT.
     if matches!(cli.command, Command::Run(_) | Command::Sweep(_) | Command::Figures(_)) {
         if let Err(e) = stop_gracefully_on_signals() {
-            eprintln!("error: {e}");
+            note(format_args!("error: {e}"));
             return ExitCode::from(2);
         }
     }
@@ -384,7 +385,7 @@ fn main() -> ExitCode {
             .transpose()
             .and_then(|threads| with_threads(threads, || run(&a))),
         Command::Bench(a) => bench(&a),
-        Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(RunError::from),
+        Command::Params => toml::to_string(&Params::default()).map_err(RunError::from).and_then(|s| out_text(&s)),
         Command::Fingerprint(a) => fingerprint(&a),
         Command::RelaxedState(a) => relaxed_state(&a),
         Command::Sweep(a) => sweep(&a),
@@ -395,7 +396,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            note(format_args!("error: {e}"));
             // 128 + the signal, as a shell reports a process the signal ended.
             match stop_signal() {
                 Some((_, sig)) => ExitCode::from(128 + sig as u8),
@@ -434,7 +435,7 @@ fn run(a: &RunArgs) -> Result<(), RunError> {
     let run = match &a.resume {
         Some(dir) => {
             let run = RunDir::resume(dir)?;
-            eprintln!("resuming {} at step {}", dir.display(), run.monolayer.step_count());
+            note(format_args!("resuming {} at step {}", dir.display(), run.monolayer.step_count()));
             run
         }
         None => {
@@ -466,15 +467,18 @@ fn run(a: &RunArgs) -> Result<(), RunError> {
         Event::Frame if a.quiet => {
             let s = m.step_count();
             let rate = (s - start_step) as f64 / start.elapsed().as_secs_f64();
-            eprintln!("step {s}/{total}: frame written ({rate:.0} steps/s)");
+            note(format_args!("step {s}/{total}: frame written ({rate:.0} steps/s)"));
         }
         Event::Frame => {}
+        Event::AnalysisFailed(e) if bar.is_hidden() => {
+            note(format_args!("warning: analysis of step {}: {e}", m.step_count()))
+        }
         Event::AnalysisFailed(e) => bar.println(format!("warning: analysis of step {}: {e}", m.step_count())),
     });
     match outcome {
         Ok(()) => {
             bar.finish();
-            eprintln!("done: {} steps in {}", run.monolayer.step_count(), run.dir.display());
+            note(format_args!("done: {} steps in {}", run.monolayer.step_count(), run.dir.display()));
             Ok(())
         }
         Err(e) => {
@@ -531,15 +535,12 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         let jobs = jobs_of_runs(&a.out)?;
         let summaries = measure_existing(&jobs, &a.out)?;
         let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
-        eprintln!(
+        note(format_args!(
             "sweep --tables-only: {} runs in {}, {complete} of them ended",
             summaries.len(),
             a.out.join("runs").display()
-        );
-        for path in write_tables(&a.out, &summaries)? {
-            println!("{}", path.display());
-        }
-        return Ok(());
+        ));
+        return print_tables(&a.out, &summaries);
     }
     let jobs = spec.jobs()?;
     if let Some(fi) = a.frame_interval {
@@ -551,16 +552,13 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     if a.tables_only {
         let summaries = measure_existing(&jobs, &a.out)?;
         let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
-        eprintln!(
+        note(format_args!(
             "sweep --tables-only: {} of {} runs have a directory in {}, {complete} of them ended",
             summaries.len(),
             jobs.len(),
             a.out.join("runs").display()
-        );
-        for path in write_tables(&a.out, &summaries)? {
-            println!("{}", path.display());
-        }
-        return Ok(());
+        ));
+        return print_tables(&a.out, &summaries);
     }
     let shard = match a.shard {
         Some(s) => Some(s),
@@ -572,14 +570,14 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     };
     let mine = jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).count();
     let todo = steps_to_run(&jobs, &a.out, shard);
-    eprintln!(
+    note(format_args!(
         "sweep: {} runs ({} in this shard), {} steps to run, {} at a time, into {}",
         jobs.len(),
         mine,
         todo,
         workers,
         a.out.display()
-    );
+    ));
     let bar = progress_bar(todo, 0, a.quiet);
     bar.set_message(format!("runs 0/{mine}"));
     let start = Instant::now();
@@ -589,13 +587,11 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         bar.set_position(steps);
         bar.set_message(format!("runs {done}/{total}"));
         if a.quiet && reported.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done {
-            eprintln!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64());
+            note(format_args!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64()));
         }
     })?;
     bar.finish();
-    for path in write_tables(&a.out, &summaries)? {
-        println!("{}", path.display());
-    }
+    print_tables(&a.out, &summaries)?;
     let stopped: Vec<String> = summaries
         .iter()
         .filter_map(|s| match &s.status {
@@ -618,10 +614,18 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     }
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
-    eprintln!(
+    note(format_args!(
         "sweep done in {wall:.0} s; runs took {run_time:.0} s together ({:.2} runs' worth of time per second of wall time)",
         run_time / wall.max(1e-9)
-    );
+    ));
+    Ok(())
+}
+
+/// Writes a sweep's tables and prints their paths.
+fn print_tables(out_dir: &std::path::Path, summaries: &[monolayer::run::RunSummary]) -> Result<(), RunError> {
+    for path in write_tables(out_dir, summaries)? {
+        out(path.display())?;
+    }
     Ok(())
 }
 
@@ -690,7 +694,7 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), RunError> {
     check_memory(&params)?;
     let mut m = Monolayer::new(params, a.seed)?;
     m.advance(a.total_steps)?;
-    println!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint());
+    out(format_args!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint()))?;
     Ok(())
 }
 
@@ -715,13 +719,13 @@ fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), RunError> {
     bar.finish_and_clear();
     let bytes = snapshot::encode(&m.state(), key);
     write_atomic(&a.out, |w| w.write_all(&bytes).map_err(|e| RunError::io(&a.out, e)))?;
-    eprintln!(
+    note(format_args!(
         "{}: step {steps}, {} cells, {} bytes, key {key:016x}, fingerprint {:016x}",
         a.out.display(),
         m.cells().len(),
         bytes.len(),
         m.fingerprint()
-    );
+    ));
     Ok(())
 }
 
@@ -771,13 +775,13 @@ fn bench_gpu(_: &Params, _: &BenchArgs) -> Result<(), RunError> {
 /// `forecast DIR… --out OUT`.
 fn forecast(a: &ForecastArgs) -> Result<(), RunError> {
     let quiet = a.quiet;
-    let written = monolayer::run::forecast(&a.dirs, &a.out, a.partial, |line| {
+    let progress = |line: &str| {
         if !quiet {
-            eprintln!("{line}");
+            note(line);
         }
-    })?;
-    for path in written {
-        println!("{}", path.display());
+    };
+    for path in monolayer::run::forecast(&a.dirs, &a.out, a.partial, progress)? {
+        out(path.display())?;
     }
     Ok(())
 }
@@ -788,9 +792,8 @@ fn analyze(a: &AnalyzeArgs) -> Result<(), RunError> {
         return bench_analysis(a.bench_frames);
     }
     let dir = a.dir.as_deref().expect("clap requires DIR without --bench");
-    let written = analyze_run(dir, a.out.as_deref(), a.snapshot, a.field)?;
-    for path in written {
-        println!("{}", path.display());
+    for path in analyze_run(dir, a.out.as_deref(), a.snapshot, a.field)? {
+        out(path.display())?;
     }
     Ok(())
 }

@@ -7,9 +7,9 @@ mod common;
 
 use std::fs;
 use std::path::Path;
-use std::process::Stdio;
+use std::process::{Output, Stdio};
 
-use common::faults::{ok, send, wait_for_file, SMALL_RUN};
+use common::faults::{ok, send, wait_for_file, SMALL_RUN, SWEEP_ARGS};
 use common::{arg, monolayer, stderr};
 use monolayer::formats::{RunRecord, RunStatus};
 use monolayer::run::{checkpoint_path, frame_path};
@@ -88,4 +88,72 @@ fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
     for run in ["zeta0.2_seed1", "zeta0.4_seed1"] {
         assert_eq!(RunRecord::load(&out.join("runs").join(run)).unwrap().status, RunStatus::Finished);
     }
+}
+
+/// `args` run with its stdout a pipe whose reader is gone (`… | head -0`), and its stderr too
+/// with `both` (`… |& head -0`): every write fails, from the first. What it wrote to stderr
+/// otherwise.
+fn with_output_closed(args: &[&str], both: bool) -> Output {
+    let closed = || {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        Stdio::from(writer)
+    };
+    let mut command = common::command();
+    command.args(args).stdout(closed());
+    if both {
+        command.stderr(closed());
+    }
+    command.output().unwrap()
+}
+
+/// Status 141 (128 + SIGPIPE, as a shell reports a writer the signal ended), not a panic (101).
+fn stopped_by_the_pipe(o: &Output) {
+    assert_eq!(o.status.code(), Some(141), "{:?}: {}", o.status, stderr(o));
+    assert!(!stderr(o).contains("panicked"), "{}", stderr(o));
+}
+
+/// A closed stdout or stderr stops `run` as SIGPIPE would: `stopped: signal SIGPIPE`, status
+/// 141, never a panic (101) with the record left `running`; the resume ends the run. `analyze`,
+/// `sweep`, `forecast`, `bench` and `params` end with 141 too, what they write written whole.
+#[test]
+fn a_closed_output_is_a_stop_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    let args = [&SMALL_RUN[..], &["--steps", "3000", "--frame-interval", "50", "--out", arg(&run)]].concat();
+    stopped_by_the_pipe(&with_output_closed(&args, true));
+    let record = RunRecord::load(&run).unwrap();
+    assert_eq!(record.status, RunStatus::Stopped("signal SIGPIPE".into()));
+    assert!(record.last_frame_step.is_some_and(|s| s < 3100), "{record:?}");
+    // A resume that cannot say it resumes stops at once.
+    stopped_by_the_pipe(&with_output_closed(&["run", "--quiet", "--resume", arg(&run)], true));
+    assert_eq!(RunRecord::load(&run).unwrap().last_frame_step, record.last_frame_step);
+    ok(&monolayer(&["run", "--quiet", "--resume", arg(&run)]));
+    assert_eq!(RunRecord::load(&run).unwrap().status, RunStatus::Finished);
+
+    // The files are written before their paths are printed.
+    let out = dir.path().join("a");
+    stopped_by_the_pipe(&with_output_closed(&["analyze", arg(&run), "--out", arg(&out)], false));
+    assert!(out.join("frames.csv").is_file());
+    let sweep = dir.path().join("s");
+    let args = [&["sweep", "--quiet", "--jobs", "1", "--out", arg(&sweep)][..], &SWEEP_ARGS].concat();
+    stopped_by_the_pipe(&with_output_closed(&args, false));
+    assert!(sweep.join("summary.csv").is_file());
+    let (a, b) = (dir.path().join("fa"), dir.path().join("fb"));
+    for (run, seed) in [(&a, "1"), (&b, "2")] {
+        ok(&common::small_run(run, "60", &["--seed", seed]));
+        common::tear_open_a_hole(run, 3, 330);
+    }
+    let forecast = dir.path().join("f");
+    stopped_by_the_pipe(&with_output_closed(&["forecast", arg(&a), arg(&b), "--out", arg(&forecast)], false));
+    assert!(forecast.join("forecast.csv").is_file());
+    let bench =
+        ["bench", "--steps", "2", "--blocks", "1", "--chi", "0.1", "--relax-steps", "5", "--set", "box_size=48"];
+    stopped_by_the_pipe(&with_output_closed(&[&bench[..], &["--set", "n_cells=6"]].concat(), false));
+    stopped_by_the_pipe(&with_output_closed(&["params"], false));
+    // A sweep that cannot say what it starts starts nothing.
+    let quiet = dir.path().join("q");
+    let args = [&["sweep", "--quiet", "--jobs", "1", "--out", arg(&quiet)][..], &SWEEP_ARGS].concat();
+    stopped_by_the_pipe(&with_output_closed(&args, true));
+    assert!(!quiet.join("runs/zeta0.2_seed1/run.json").exists());
 }

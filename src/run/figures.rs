@@ -94,7 +94,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
     // On Slurm each task runs one; here `--jobs` at a time.
     runs::check_memory(&plan, &share, if o.slurm { 1 } else { o.jobs })?;
     let ids: Vec<&str> = figures.iter().map(|f| f.id()).collect();
-    eprintln!(
+    crate::run::console::note(format_args!(
         "figures (scale {}): {} need {} runs{}; {} to run, {} steps",
         o.scale.name(),
         ids.join(", "),
@@ -102,14 +102,14 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         o.shard.map(|s| format!(" ({} in shard {}/{})", share.mine.len(), s.index, s.count)).unwrap_or_default(),
         share.todo.len(),
         share.steps()
-    );
+    ));
     // The longest run and the whole plan, for the estimate and for Slurm's time limits.
     let sample: Vec<&Job> = if share.todo.is_empty() && !o.slurm { Vec::new() } else { plan.jobs.iter().collect() };
     let speed = Speed::measure(&sample, 100, 30)?;
     for ((l, n), (r, a)) in &speed.sizes {
-        eprintln!(
+        crate::run::console::note(format_args!(
             "  measured on one thread at L = {l}, N = {n}: {r:.2} ms/step relaxing, {a:.2} ms/step active (χ = 0.001)"
-        );
+        ));
     }
     if o.slurm {
         if o.stage != Stage::All || o.shard.is_some() {
@@ -129,15 +129,15 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
     let core_seconds = share.core_seconds(&speed);
     let workers = o.jobs.min(share.todo.len().max(1));
     if !share.todo.is_empty() {
-        eprintln!(
+        crate::run::console::note(format_args!(
             "  estimate: {:.2} core-hours, about {} on {} core(s) (measured before the tissue is confluent: runs with holes cost more)",
             core_seconds / 3600.0,
             runs::hours(core_seconds / workers as f64),
             workers
-        );
+        ));
     }
     if o.dry_run {
-        eprintln!("dry run: nothing run or written");
+        crate::run::console::note(format_args!("dry run: nothing run or written"));
         return Ok(());
     }
     // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.

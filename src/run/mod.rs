@@ -1,6 +1,8 @@
 //! Native only (feature `cli`): everything that touches files, clocks and the terminal.
 //!
 //! - `bench`: `monolayer bench`, stage by stage, and the two-thread ceiling ([`bench()`]);
+//! - `console`: every line printed, a closed stdout or stderr a stop and not a panic ([`out`],
+//!   [`note`]);
 //! - `config`: parameters from config files, `--set` and `--grid`, the one KEY=VALUE parser
 //!   ([`load_params`]);
 //! - `error`: the errors of this layer, by cause ([`RunError`]);
@@ -21,6 +23,7 @@
 
 mod bench;
 mod config;
+mod console;
 mod error;
 pub mod figures;
 mod files;
@@ -34,6 +37,7 @@ mod sweep;
 pub use bench::bench_gpu;
 pub use bench::{bench, bench_analysis, BenchOptions};
 pub use config::{load_params, parse_assignment};
+pub use console::{note, out, out_text, output_closed};
 pub use error::{RunError, RunResult};
 pub use files::{
     checkpoint_path, frame_path, kept_checkpoint_path, read_checkpoint, read_frame, read_run_frame, replaceable,

@@ -58,12 +58,16 @@ fn signal_handler(e: std::io::Error) -> RunError {
     RunError::SignalHandler(e)
 }
 
-/// The signal that asked this process to stop, if one did: (name, number).
+/// The signal that asked this process to stop, if one did: (name, number). A closed stdout or
+/// stderr is SIGPIPE's ([`crate::run::console`]): Rust ignores the signal, and the write that
+/// found the pipe closed asks for the stop instead.
 pub fn stop_signal() -> Option<(&'static str, i32)> {
     if SIGTERM_SEEN.load(Ordering::SeqCst) {
         Some(("SIGTERM", 15))
     } else if SIGINT_SEEN.load(Ordering::SeqCst) {
         Some(("SIGINT", 2))
+    } else if crate::run::console::output_closed() {
+        Some(("SIGPIPE", 13))
     } else {
         None
     }

@@ -661,11 +661,11 @@ fn wait_for_lock(dir: &Path, name: &str) -> Result<RunLock, JobError> {
             Err(pid) if crate::run::runner::stop_signal().is_some() => return Err(JobError::Held(pid)),
             Err(pid) if !said => {
                 said = true;
-                eprintln!(
+                crate::run::console::note(format_args!(
                     "waiting for {} to let go of run {name} (another sweep of this --out, it seems): the tables \
                      are written once every run is in",
                     holder(pid)
-                );
+                ));
             }
             Err(_) => {}
         }

@@ -197,18 +197,18 @@ pub fn execute(plan: &Plan, share: &Share, out: &Path, workers: usize, quiet: bo
         bar.set_position(s);
         bar.set_message(format!("runs {done}/{total}"));
         if quiet && reported.fetch_max(done, Ordering::Relaxed) < done {
-            eprintln!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64());
+            crate::run::console::note(format_args!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64()));
         }
     })?;
     bar.finish();
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
     let failed: Vec<&str> = summaries.iter().filter(|s| s.blew_up()).map(|s| s.name.as_str()).collect();
-    eprintln!(
+    crate::run::console::note(format_args!(
         "runs done in {wall:.0} s ({:.2} core-hours of runs){}",
         run_time / 3600.0,
         if failed.is_empty() { String::new() } else { format!("; unstable, stopped early: {}", failed.join(", ")) }
-    );
+    ));
     Ok(())
 }
 
