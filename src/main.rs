@@ -780,7 +780,8 @@ fn forecast(a: &ForecastArgs) -> Result<(), RunError> {
             note(line);
         }
     };
-    for path in monolayer::run::forecast(&a.dirs, &a.out, a.partial, progress)? {
+    let warn = |line: &str| note(format_args!("warning: {line}"));
+    for path in monolayer::run::forecast(&a.dirs, &a.out, a.partial, progress, warn)? {
         out(path.display())?;
     }
     Ok(())

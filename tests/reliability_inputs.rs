@@ -10,7 +10,7 @@ use std::fs;
 
 use common::faults::{analyzed, edit_record, ok, refused, refused_within, small, SMALL_RUN, TINY};
 use common::npz::{edit_npz, npy, read_npz, replace_npz_entry, write_npz, Npy};
-use common::{arg, monolayer};
+use common::{arg, monolayer, stderr};
 use monolayer::formats::{snapshot, RunRecord};
 use monolayer::run::{checkpoint_path, frame_path, memory_estimate, RunFrames, RunLock, SweepSpec};
 use monolayer::{Monolayer, Params};
@@ -497,4 +497,27 @@ fn input_files_that_are_not_regular_files_are_refused() {
         &[],
         &["big.toml", "1048576 bytes at most"],
     );
+}
+
+/// `forecast a a`, `a ./a/` or a symbolic link to `a`: one run directory, counted once, and
+/// said so (its nucleations and its seed were counted once per name).
+#[test]
+fn forecast_counts_a_run_given_twice_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    for (run, seed) in [(&a, "1"), (&b, "2")] {
+        ok(&small(run, 50, &["--seed", seed]));
+    }
+    let link = dir.path().join("link");
+    std::os::unix::fs::symlink(&a, &link).unwrap();
+    let dotted = format!("{}/./", arg(&a));
+    let out = dir.path().join("f");
+    let o = monolayer(&["forecast", arg(&a), arg(&a), &dotted, arg(&link), arg(&b), "--out", arg(&out)]);
+    let err = stderr(&o);
+    assert_eq!(err.matches("a: seed 1,").count(), 1, "{err}");
+    assert_eq!(err.matches("counted once").count(), 3, "{err}");
+    assert!(err.contains(&format!("{} is the run {} again", arg(&link), arg(&a))), "{err}");
+    let o = monolayer(&["forecast", arg(&a), arg(&a), "--out", arg(&out)]);
+    refused(&o, &["the runs have 1 seed(s)", "counted once"]);
+    assert_eq!(stderr(&o).matches("a: seed 1,").count(), 1, "{}", stderr(&o));
 }

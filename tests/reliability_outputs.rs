@@ -11,8 +11,8 @@ use std::fs;
 use std::path::Path;
 use std::process::Output;
 
-use common::faults::{analyzed, ok, refused, small, with_file_size_limit};
-use common::{arg, lines, monolayer, stderr};
+use common::faults::{analyzed, files_of, ok, refused, refused_within, small, with_file_size_limit};
+use common::{arg, lines, monolayer, small_run, stderr, tear_open_a_hole};
 use monolayer::run::write_atomic;
 
 /// Two writers of one file at once (`analyze` beside `run --analyze` writing the same tables):
@@ -98,6 +98,55 @@ fn an_output_that_is_not_a_regular_file_is_refused_and_kept() {
     assert_eq!(left, ["holes.csv"], "files moved in beside the refused one");
 }
 
+/// An output's name and directory are checked before anything is computed: a name of 245–255
+/// bytes is written (its temporary name used to be too long, after the computation), a longer
+/// one and a directory that does not exist are refused at once, naming them (not the temporary).
+#[test]
+fn output_names_and_directories_are_checked_before_anything_is_computed() {
+    let dir = tempfile::tempdir().unwrap();
+    let long = dir.path().join(format!("{}.bin", "n".repeat(251)));
+    ok(&relaxed_state(&long));
+    assert!(long.is_file());
+    assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1, "a temporary was left");
+    // Refused before the relaxation, which would take minutes.
+    let forever = ["--set", "box_size=48", "--set", "n_cells=10", "--relax-steps", "100000000"];
+    let longer = dir.path().join(format!("{}.bin", "n".repeat(252)));
+    refused_within(
+        &[&["relaxed-state", "--out", arg(&longer)][..], &forever].concat(),
+        &[],
+        &["a file name of 256 bytes", "255"],
+    );
+    let missing = dir.path().join("missing/deeper");
+    let o = common::monolayer_within(
+        60,
+        &[&["relaxed-state", "--out", arg(&missing.join("f.bin"))][..], &forever].concat(),
+        &[],
+    );
+    refused(&o, &[&format!("{}: no such directory", missing.display())]);
+    assert!(!stderr(&o).contains(".f.bin."), "named by its temporary: {}", stderr(&o));
+}
+
+/// `--out` of `analyze` or `forecast` over a file is refused before any run is read or scored,
+/// naming the option and the file (it failed at the end, naming a staging directory or with a
+/// raw error of the OS).
+#[test]
+fn an_out_that_is_a_file_is_refused_before_anything_is_computed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    for (run, seed) in [(&a, "1"), (&b, "2")] {
+        ok(&small(run, 50, &["--seed", seed]));
+    }
+    let file = dir.path().join("file");
+    fs::write(&file, "mine").unwrap();
+    let o = monolayer(&["forecast", arg(&a), arg(&b), "--out", arg(&file)]);
+    refused(&o, &[arg(&file), "--out: is a file, not a directory"]);
+    assert!(!stderr(&o).contains("seed 1"), "the runs were scored first: {}", stderr(&o));
+    let o = analyzed(&a, &file);
+    refused(&o, &[arg(&file), "--out: is a file, not a directory"]);
+    assert!(!stderr(&o).contains(".staging"), "{}", stderr(&o));
+    assert_eq!(fs::read_to_string(&file).unwrap(), "mine");
+}
+
 /// A full disk while `analyze` writes leaves no partial set of tables.
 #[test]
 fn a_full_disk_during_analyze_leaves_no_partial_tables() {
@@ -110,6 +159,72 @@ fn a_full_disk_during_analyze_leaves_no_partial_tables() {
     let left: Vec<_> = fs::read_dir(&out).map(|d| d.map(|e| e.unwrap().file_name()).collect()).unwrap_or_default();
     assert!(left.is_empty(), "a partial set: {left:?}");
     ok(&analyzed(&run, &out));
+}
+
+/// Every file of `dir` overwritten with a marker: the previous set, told apart from a new one.
+fn mark_previous(dir: &Path) {
+    for name in files_of(dir).keys() {
+        fs::write(dir.join(name), "previous set\n").unwrap();
+    }
+}
+
+fn all_previous(dir: &Path) -> bool {
+    files_of(dir).values().all(|bytes| bytes == b"previous set\n")
+}
+
+/// A full disk while `forecast` or `figures` writes leaves the previous set whole: the new
+/// tables are not moved in beside the previous figures.
+#[test]
+fn forecast_and_figures_write_their_outputs_as_one_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    for (run, seed) in [(&a, "1"), (&b, "2")] {
+        ok(&small_run(run, "60", &["--seed", seed]));
+        tear_open_a_hole(run, 3, 330);
+    }
+    let out = dir.path().join("f");
+    let forecast = ["forecast", arg(&a), arg(&b), "--quiet", "--out", arg(&out)];
+    ok(&monolayer(&forecast));
+    assert!(out.join("forecast_roc.png").is_file() && out.join("fig1b_1.png").is_file());
+    mark_previous(&out);
+    let o = with_file_size_limit(16, &forecast);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(all_previous(&out), "a mix of two sets: {:?}", files_of(&out).keys());
+    assert_eq!(fs::read_dir(&out).unwrap().count(), files_of(&out).len(), "a staging directory was left");
+
+    let figs = dir.path().join("figs");
+    let figures = |stage: &'static str| {
+        let args = ["figures", "--only", "S3", "--quiet", "--jobs", "1", "--set", "relax_steps=50"];
+        [&args[..], &["--set", "active_steps=100", "--stage", stage, "--out", arg(&figs)]].concat()
+    };
+    ok(&monolayer(&figures("all")));
+    mark_previous(&figs);
+    let o = with_file_size_limit(16, &figures("figures"));
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(all_previous(&figs), "a mix of two sets: {:?}", files_of(&figs).keys());
+}
+
+/// `analyze --snapshot STEP` replaces the snapshot of the set it writes into: the previous
+/// step's PNG and SVG go with it (they were left beside the new ones).
+#[test]
+fn analyze_replaces_the_previous_snapshot() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    ok(&small(&run, 100, &[]));
+    let out = dir.path().join("a");
+    let snapshots = || {
+        let mut v: Vec<String> = fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("snapshot_"))
+            .collect();
+        v.sort();
+        v
+    };
+    ok(&monolayer(&["analyze", arg(&run), "--out", arg(&out), "--snapshot", "200"]));
+    assert_eq!(snapshots(), ["snapshot_0000200.png", "snapshot_0000200.svg"]);
+    ok(&monolayer(&["analyze", arg(&run), "--out", arg(&out), "--snapshot", "150"]));
+    assert_eq!(snapshots(), ["snapshot_0000150.png", "snapshot_0000150.svg"]);
 }
 
 /// Temporaries of writers killed with -9 (`.staging.PID.N` in the analysis
@@ -191,6 +306,21 @@ fn tables_only_without_a_grid_measures_the_runs_in_the_directory() {
 }
 
 // ---- Nothing counted that was not measured ----
+
+/// `forecast` over runs in which no hole opens after their first frame has nothing to fit: it
+/// says so and writes nothing (it wrote an empty model and header-only tables, and exited 0).
+#[test]
+fn a_forecast_with_nothing_to_fit_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    for (run, seed) in [(&a, "1"), (&b, "2")] {
+        ok(&small(run, 50, &["--seed", seed]));
+    }
+    let out = dir.path().join("f");
+    let o = monolayer(&["forecast", arg(&a), arg(&b), "--out", arg(&out)]);
+    refused(&o, &["no hole nucleates after the first frame", "2 run(s)", "nothing to fit", "nothing is written"]);
+    assert!(!out.exists(), "written: {:?}", fs::read_dir(&out).map(|d| d.count()));
+}
 
 /// An `--out` an `#SBATCH` line cannot hold is refused, naming what is wrong.
 #[test]

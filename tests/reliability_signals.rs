@@ -9,7 +9,7 @@ use std::fs;
 use std::path::Path;
 use std::process::{Output, Stdio};
 
-use common::faults::{ok, send, wait_for_file, SMALL_RUN, SWEEP_ARGS};
+use common::faults::{ok, send, wait_for_file, wait_for_handler, SMALL_RUN, SWEEP_ARGS};
 use common::{arg, monolayer, stderr};
 use monolayer::formats::{RunRecord, RunStatus};
 use monolayer::run::{checkpoint_path, frame_path};
@@ -88,6 +88,38 @@ fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
     for run in ["zeta0.2_seed1", "zeta0.4_seed1"] {
         assert_eq!(RunRecord::load(&out.join("runs").join(run)).unwrap().status, RunStatus::Finished);
     }
+}
+
+/// SIGTERM while `figures --stage figures` draws: it stops with 143, as the docs say, and
+/// moves no figure into place; the same command again draws them.
+#[test]
+fn a_signal_stops_the_figures_stage_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let figs = dir.path().join("f");
+    let args = |stage: &'static str| -> Vec<String> {
+        ["figures", "--only", "S3", "--quiet", "--jobs", "1", "--set", "relax_steps=50", "--set", "active_steps=1000"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain(["--stage".into(), stage.into(), "--out".into(), arg(&figs).into()])
+            .collect()
+    };
+    ok(&monolayer(&args("runs").iter().map(String::as_str).collect::<Vec<_>>()));
+    let mut child =
+        common::command().args(args("figures")).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    // Caught from the start, the signal comes while the runs' frames (21 each) are measured.
+    wait_for_handler(&mut child, 15);
+    send(&child, "TERM");
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(143), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("stopped by SIGTERM") && stderr(&o).contains("the same command again"),
+        "{}",
+        stderr(&o)
+    );
+    let drawn: Vec<_> = fs::read_dir(&figs).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n != "runs").collect();
+    assert!(drawn.is_empty(), "written despite the signal: {drawn:?}");
+    ok(&monolayer(&args("figures").iter().map(String::as_str).collect::<Vec<_>>()));
+    assert!(figs.join("figures.md").is_file());
 }
 
 /// `args` run with its stdout a pipe whose reader is gone (`… | head -0`), and its stderr too

@@ -167,16 +167,43 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
 }
 
 /// Stages 2 (the runs, all finished) to 5 from the runs in `out/runs`: the figures, their CSVs,
-/// `plan.csv` and `figures.md` into `out`, each file's path printed.
+/// `plan.csv` and `figures.md` into `out` as one set (a full disk or a signal leaves the previous
+/// set as it was), each file's path printed. SIGTERM or SIGINT stops it between runs measured and
+/// before the set is moved in.
 fn draw_figures(plan: &Plan, out: &Path, workers: usize) -> Result<(), RunError> {
     let t = Instant::now();
+    crate::run::files::check_output_dir("--out", out)?;
     let finished = runs::finished(plan, out)?;
     let measured = measures::measure(finished, workers)?;
-    let drawn = draw::draw(measured, out)?;
-    let md = report::write(&drawn, out)?;
-    for path in drawn.files.iter().chain([&md]) {
-        println!("{}", path.display());
+    let files = crate::run::files::write_set(
+        out,
+        |_| false,
+        |stage| {
+            let drawn = draw::draw(measured, stage)?;
+            let md = report::write(&drawn, stage)?;
+            stop_if_signalled()?;
+            Ok(drawn.files.into_iter().chain([md]).collect())
+        },
+    )?;
+    for path in &files {
+        crate::run::console::out(path.display())?;
     }
-    eprintln!("figures drawn in {:.1} s: {}", t.elapsed().as_secs_f64(), out.join("figures.md").display());
+    crate::run::console::note(format!(
+        "figures drawn in {:.1} s: {}",
+        t.elapsed().as_secs_f64(),
+        out.join("figures.md").display()
+    ));
     Ok(())
+}
+
+/// The error of a stop asked for by SIGTERM or SIGINT while the figures are drawn: nothing is
+/// moved into place, and the same command again draws them.
+pub(crate) fn stop_if_signalled() -> Result<(), RunError> {
+    match crate::run::runner::stop_signal() {
+        Some((signal, _)) => Err(RunError::Interrupted {
+            signal,
+            detail: ": no figure was written; the same command again draws them".into(),
+        }),
+        None => Ok(()),
+    }
 }

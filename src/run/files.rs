@@ -75,7 +75,7 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path.file_name().ok_or_else(|| err(path, "not a file name"))?.to_string_lossy();
     let call = CALLS.fetch_add(1, Ordering::Relaxed);
-    let tmp = dir.join(format!(".{name}.{}.{call}.tmp", std::process::id()));
+    let tmp = dir.join(temporary_name(&name, call));
     let file = File::create(&tmp).map_err(|e| io(&tmp, e))?;
     let mut w = BufWriter::new(file);
     let result = write(&mut w).and_then(|_| {
@@ -92,6 +92,21 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
     })
 }
 
+/// The most bytes of a file name (Linux's NAME_MAX, and most file systems').
+const NAME_MAX: usize = 255;
+
+/// The temporary name [`write_atomic`] writes `name` under: `.NAME.PID.CALL.tmp`, this process's
+/// and this call's own, with `NAME` shortened (at a character boundary) where the whole would
+/// exceed [`NAME_MAX`]: an output name near the limit is written, not refused on its temporary.
+fn temporary_name(name: &str, call: u64) -> String {
+    let suffix = format!(".{}.{call}.tmp", std::process::id());
+    let mut room = NAME_MAX - 1 - suffix.len();
+    while room < name.len() && !name.is_char_boundary(room) {
+        room -= 1;
+    }
+    format!(".{}{suffix}", &name[..room.min(name.len())])
+}
+
 /// Writes `text` to `path` atomically ([`write_atomic`]): the tables, reports and scripts.
 pub fn write_text(path: &Path, text: &str) -> IoResult<()> {
     write_atomic(path, |w| w.write_all(text.as_bytes()).map_err(|e| io(path, e)))
@@ -102,6 +117,7 @@ pub fn write_text(path: &Path, text: &str) -> IoResult<()> {
 /// whatever is at its target, so anything else (a device such as `/dev/null`, a FIFO, a
 /// directory, a link to one of those or to nothing) is refused before a byte is written.
 pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
+    check_output_name(path)?;
     let link = match fs::symlink_metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
         Err(e) => return Err(io(path, e)),
@@ -131,6 +147,32 @@ pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
     Ok(path.to_path_buf())
 }
 
+/// Checks what an output path's name and directory allow before anything is computed for it:
+/// a name of at most [`NAME_MAX`] bytes in a directory that exists (else the write would fail
+/// only at the end, naming its temporary file).
+fn check_output_name(path: &Path) -> IoResult<()> {
+    let name = path.file_name().ok_or_else(|| err(path, "not a file name: give the path of a file"))?;
+    if name.len() > NAME_MAX {
+        return Err(err(
+            path,
+            format!("a file name of {} bytes: longer than the {NAME_MAX} a file name may have", name.len()),
+        ));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    match fs::metadata(dir) {
+        Ok(m) if m.is_dir() => Ok(()),
+        Ok(_) => Err(err(dir, format!("not a directory, so {} cannot be written in it", path.display()))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(err(
+            dir,
+            format!("no such directory, so {} cannot be written: create it first, or write elsewhere", path.display()),
+        )),
+        Err(e) => Err(io(dir, e)),
+    }
+}
+
 fn file_kind(t: &fs::FileType) -> &'static str {
     #[cfg(unix)]
     {
@@ -153,6 +195,82 @@ fn file_kind(t: &fs::FileType) -> &'static str {
     } else {
         "not a regular file"
     }
+}
+
+/// Checks, before anything is computed, that `out` (given as `flag`) can be the directory of a
+/// set of outputs: a directory, or nothing yet (it is created). A file there would fail only at
+/// the end, on the name of a temporary.
+pub fn check_output_dir(flag: &str, out: &Path) -> IoResult<()> {
+    match fs::metadata(out) {
+        Ok(m) if m.is_dir() => Ok(()),
+        Ok(m) => Err(err(
+            out,
+            format!(
+                "{flag}: is {}, not a directory: give {flag} a directory (new or existing) to write into",
+                file_kind(&m.file_type()).replace("not a regular file", "a file")
+            ),
+        )),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(io(out, e)),
+    }
+}
+
+/// Writes a set of outputs (the tables and plots of `analyze`, `forecast` or `figures`) into
+/// `out`, created, as one: `write` puts every file into a hidden staging directory in `out`,
+/// which it is given, and only once all are complete are they moved in, each over the file of
+/// its name, every target checked before the first is moved. A failure anywhere (a full disk, a
+/// signal, a target that cannot be replaced) leaves the previous set as it was, not a mix.
+/// `stale(name)` says which files of `out` are of the set though their names vary (a snapshot
+/// of another step): those the new set does not hold are removed once it is in. Returns the
+/// files written, in `out`.
+pub fn write_set(
+    out: &Path,
+    stale: impl Fn(&str) -> bool,
+    write: impl FnOnce(&Path) -> IoResult<Vec<PathBuf>>,
+) -> IoResult<Vec<PathBuf>> {
+    static CALLS: AtomicU64 = AtomicU64::new(0);
+    check_output_dir("--out", out)?;
+    let call = CALLS.fetch_add(1, Ordering::Relaxed);
+    fs::create_dir_all(out).map_err(|e| io(out, e))?;
+    remove_dead_temporaries(out);
+    let stage = out.join(format!(".staging.{}.{call}", std::process::id()));
+    let staged = fs::create_dir(&stage).map_err(|e| io(&stage, e)).and_then(|_| write(&stage));
+    let moved = staged.and_then(|files| move_set_in(out, &files));
+    let _ = fs::remove_dir_all(&stage);
+    let moved = moved?;
+    remove_stale(out, &moved, stale)?;
+    Ok(moved)
+}
+
+/// Moves the staged `files` into `out`, every target checked before the first is moved: one that
+/// cannot be replaced leaves the previous set whole.
+fn move_set_in(out: &Path, files: &[PathBuf]) -> IoResult<Vec<PathBuf>> {
+    let targets = files
+        .iter()
+        .map(|f| {
+            let to = out.join(f.file_name().ok_or_else(|| err(f, "not a file name"))?);
+            replaceable(&to).map(|target| (to, target))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    files
+        .iter()
+        .zip(targets)
+        .map(|(f, (to, target))| fs::rename(f, &target).map(|_| to.clone()).map_err(|e| io(&to, e)))
+        .collect()
+}
+
+/// Removes the files of `out` that `stale` says are of the set and that the set just moved in
+/// (`kept`) does not hold.
+fn remove_stale(out: &Path, kept: &[PathBuf], stale: impl Fn(&str) -> bool) -> IoResult<()> {
+    let entries = fs::read_dir(out).map_err(|e| io(out, e))?;
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let path = entry.path();
+        if stale(&name) && !kept.contains(&path) && entry.file_type().is_ok_and(|t| t.is_file()) {
+            fs::remove_file(&path).map_err(|e| io(&path, e))?;
+        }
+    }
+    Ok(())
 }
 
 /// The largest text file read as input: a config file, a sweep file or a `run.json` holds a

@@ -73,6 +73,7 @@ pub fn measure<'p>(runs: Runs<'p>, workers: usize) -> Result<Measures<'p>, RunEr
 }
 
 fn measure_run(dir: &Path, record: &RunRecord) -> Result<RunData, RunError> {
+    super::stop_if_signalled()?;
     let p = &record.params;
     let mut data = RunData {
         status: record.status.clone(),
