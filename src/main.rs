@@ -9,13 +9,13 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use monolayer::formats::{snapshot, Engine, RunStatus};
-use monolayer::model::MAX_STEPS;
+use monolayer::model::{number_text, MAX_STEPS};
 use monolayer::run::figures::{FiguresOptions, Scale, Stage};
 use monolayer::run::{
-    analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, jobs_of_runs, load_params,
-    measure_existing, note, out, out_text, parse_assignment, replaceable, run_sweep, steps_to_run,
-    stop_gracefully_on_signals, stop_signal, write_atomic, write_tables, Background, BenchOptions, Event, Output,
-    RunDir, RunError, Shard, SweepSpec,
+    analyze_run, bench_analysis, check_distinct, check_frame_interval, check_memory, check_memory_of, jobs_of_runs,
+    load_params, load_params_over, measure_existing, note, out, out_text, parse_assignment, replaceable, run_sweep,
+    steps_to_run, stop_gracefully_on_signals, stop_signal, write_atomic, write_tables, Background, BenchOptions, Event,
+    Output, RunDir, RunError, Shard, SweepSpec,
 };
 use monolayer::{Monolayer, Params, Phase};
 
@@ -200,31 +200,39 @@ struct ParamArgs {
     relax_steps: Option<u64>,
 }
 
+/// Refuses a `--set` of a parameter that a flag sets too: whichever is applied last would win
+/// unsaid. `flags` are (flag, the parameter it sets, its value where it is given).
+fn refuse_flag_beside_set(sets: &[String], flags: &[(&str, &str, Option<String>)]) -> Result<(), RunError> {
+    for s in sets {
+        let (k, _) = parse_assignment("--set", s)?;
+        if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
+            return Err(RunError::Options(format!(
+                "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
+                if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
+            )));
+        }
+    }
+    Ok(())
+}
+
 impl ParamArgs {
     fn params(&self) -> Result<Params, RunError> {
-        // A flag beside a --set of its parameter: whichever is applied last would win unsaid.
-        let flags = [
-            ("--chi", "xi_substrate", self.chi.map(|v| v.to_string())),
-            ("--zeta", "zeta", self.zeta.map(|v| v.to_string())),
-            ("--steps", "active_steps", self.steps.map(|v| v.to_string())),
-            ("--relax-steps", "relax_steps", self.relax_steps.map(|v| v.to_string())),
-        ];
-        for s in &self.set {
-            let (k, _) = parse_assignment("--set", s)?;
-            if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
-                return Err(RunError::Options(format!(
-                    "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
-                    if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
-                )));
-            }
-        }
+        refuse_flag_beside_set(
+            &self.set,
+            &[
+                ("--chi", "xi_substrate", self.chi.map(|v| v.to_string())),
+                ("--zeta", "zeta", self.zeta.map(|v| v.to_string())),
+                ("--steps", "active_steps", self.steps.map(|v| v.to_string())),
+                ("--relax-steps", "relax_steps", self.relax_steps.map(|v| v.to_string())),
+            ],
+        )?;
         let mut p = load_params(self.config.as_deref(), &self.set)?;
         if let Some(z) = self.zeta {
             p.zeta = z;
         }
         if let Some(c) = self.chi {
             if !(c.is_finite() && c > 0.0) {
-                return Err(RunError::invalid("--chi", c, "a finite number > 0"));
+                return Err(RunError::invalid("--chi", number_text(c), "a finite number > 0"));
             }
             p.set_chi(c);
         }
@@ -330,7 +338,7 @@ struct SweepArgs {
 
 #[derive(Args)]
 struct BenchArgs {
-    /// Active steps timed per friction ratio.
+    /// Active steps timed per friction ratio (at most 10⁹).
     #[arg(long, default_value_t = 200)]
     steps: u64,
     /// Relaxation steps before timing (a confluent tissue).
@@ -349,9 +357,9 @@ struct BenchArgs {
     /// Friction ratios χ = ξ_s/ξ_cell timed in turn.
     #[arg(long, value_delimiter = ',', default_value = "0.1,0.001")]
     chi: Vec<f64>,
-    /// Activity of the timed steps.
-    #[arg(long, default_value_t = 0.5)]
-    zeta: f64,
+    /// Activity of the timed steps (default 0.5).
+    #[arg(long)]
+    zeta: Option<f64>,
     /// Any other parameter, e.g. --set friction_weights=subdomain (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
@@ -508,6 +516,7 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         Some(f) => SweepSpec::from_file(f)?,
         None => SweepSpec { seeds: vec![1], frame_interval: 1000, ..SweepSpec::default() },
     };
+    check_distinct("--set", &a.set)?;
     for s in &a.set {
         let (k, v) = parse_assignment("--set", s)?;
         spec.base.insert(k, v);
@@ -591,7 +600,19 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         }
     })?;
     bar.finish();
-    print_tables(&a.out, &summaries)?;
+    // A shard's tables would hold its own runs only: the shard that ends the sweep writes them.
+    let ended = summaries.iter().filter(|s| s.status.is_complete()).count();
+    match shard {
+        Some(s) if ended < jobs.len() => note(format_args!(
+            "shard {}/{}: its runs are done; {ended} of the sweep's {} runs have ended, so summary.csv and the \
+             regime map are not written (they would leave the others out): the shard that ends the sweep writes \
+             them, or `sweep … --tables-only` once every shard is done",
+            s.index,
+            s.count,
+            jobs.len()
+        )),
+        _ => print_tables(&a.out, &summaries)?,
+    }
     let stopped: Vec<String> = summaries
         .iter()
         .filter_map(|s| match &s.status {
@@ -736,9 +757,21 @@ fn bench(a: &BenchArgs) -> Result<(), RunError> {
     for &n in &a.threads {
         check_threads("--threads", n)?;
     }
-    let mut overrides = vec![format!("zeta={}", a.zeta)];
-    overrides.extend(a.set.iter().cloned());
-    let params = load_params(None, &overrides)?;
+    // Bounded as every other step count is.
+    if a.steps == 0 || a.steps > MAX_STEPS {
+        return Err(RunError::invalid("--steps", a.steps, format!("in [1, {MAX_STEPS}]")));
+    }
+    // `--chi` and `--relax-steps` set their parameters whether given or not (their defaults).
+    let chis: Vec<String> = a.chi.iter().map(|c| number_text(*c)).collect();
+    refuse_flag_beside_set(
+        &a.set,
+        &[
+            ("--zeta", "zeta", a.zeta.map(number_text)),
+            ("--chi", "xi_substrate", Some(chis.join(","))),
+            ("--relax-steps", "relax_steps", Some(a.relax_steps.to_string())),
+        ],
+    )?;
+    let params = load_params_over(&[format!("zeta={}", a.zeta.unwrap_or(0.5))], &a.set)?;
     Params { relax_steps: a.relax_steps, ..params.clone() }.validate()?;
     // The relaxed state, a copy per thread count timed, and two more for the ceiling.
     let ceiling = a.threads.contains(&1) && a.threads.contains(&2);

@@ -141,7 +141,7 @@ fn analyze_refuses_what_is_not_a_complete_run_and_writes_nothing() {
     let future = dir.path().join("future");
     fs::create_dir_all(future.join("frames")).unwrap();
     fs::write(future.join("run.json"), record.replace("\"format_version\": 1", "\"format_version\": 99")).unwrap();
-    check(&future, "format_version Some(99)");
+    check(&future, "`format_version` = 99: this program reads format_version 1");
 
     let unstarted = dir.path().join("unstarted");
     fs::create_dir_all(unstarted.join("frames")).unwrap();

@@ -148,6 +148,20 @@ fn bounds_of_steps_intervals_and_frictions_are_enforced() {
     }
 }
 
+/// `bench --steps` is bounded as every other step count is (it was not at all).
+#[test]
+fn bench_steps_are_bounded_as_every_step_count() {
+    let bench =
+        ["bench", "--blocks", "1", "--chi", "0.1", "--relax-steps", "5", "--set", "box_size=48", "--set", "n_cells=6"];
+    for steps in ["1000000001", "0"] {
+        refused_within(
+            &[&bench[..], &["--steps", steps]].concat(),
+            &[],
+            &[&format!("--steps {steps}"), "[1, 1000000000]"],
+        );
+    }
+}
+
 /// A parameter given twice, by a flag and `--set` or by a sweep's base and its grid, is refused
 /// by name in either order, where one of the two used to be dropped unsaid.
 #[test]
@@ -182,6 +196,44 @@ fn a_parameter_set_twice_is_refused_by_name() {
         &["`gamma`", "the points"],
     );
     assert!(!sweep.exists(), "a sweep was started");
+}
+
+/// A parameter given twice by one flag (`--set gamma=0.06 --set gamma=0.07`), or by a flag of
+/// `bench` and `--set` (`--zeta 0.1 --set zeta=0.5`, or `--chi`, whose default sets ξ_s), is
+/// refused by name in every command, where one value used to be taken silently.
+#[test]
+fn a_parameter_given_twice_is_refused_in_every_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let twice = ["--set", "gamma=0.06", "--set", "gamma=0.07"];
+    let expect = ["--set gamma=0.06 and --set gamma=0.07 both set `gamma`", "give one of them"];
+    for command in [
+        vec!["run", "--quiet", "--out", arg(&out)],
+        vec!["fingerprint", "--total-steps", "1"],
+        vec!["relaxed-state", "--out", arg(&out)],
+        vec!["sweep", "--quiet", "--out", arg(&out)],
+        vec!["figures", "--dry-run", "--only", "S3", "--out", arg(&out)],
+        vec!["bench", "--steps", "2", "--blocks", "1"],
+    ] {
+        refused_within(&[&command[..], &TINY[..4], &twice].concat(), &[], &expect);
+    }
+    assert!(!out.exists());
+    let bench = [&["bench", "--steps", "2", "--blocks", "1"][..], &TINY[..4]].concat();
+    refused_within(
+        &[&bench[..], &["--zeta", "0.1", "--set", "zeta=0.5"]].concat(),
+        &[],
+        &["--zeta 0.1 and --set zeta=0.5"],
+    );
+    refused_within(
+        &[&bench[..], &["--set", "xi_substrate=0.5"]].concat(),
+        &[],
+        &["--chi 0.1,0.001 and --set xi_substrate=0.5"],
+    );
+    refused_within(
+        &[&bench[..], &["--set", "relax_steps=5"]].concat(),
+        &[],
+        &["--relax-steps 3000 and --set relax_steps=5"],
+    );
 }
 
 /// Grids that set one parameter twice (directly, or through `chi`) or list
@@ -230,6 +282,38 @@ fn resume_refuses_parameter_options() {
         let o = monolayer(&["run", "--resume", arg(dir.path()), extra[0], extra[1]]);
         refused(&o, &["--resume", extra[0]]);
     }
+}
+
+/// Messages say what was given, briefly: a stability bound broken by `--set gamma=1e308` names
+/// γ, not the Δt it was left at; numbers far from 1 print as 1e308, not 309 digits; a record of
+/// another format version names the version, not `Some(2)`.
+#[test]
+fn messages_name_what_was_given_in_few_words() {
+    let dir = tempfile::tempdir().unwrap();
+    let fingerprint =
+        |set: &str| monolayer(&[&["fingerprint", "--total-steps", "1", "--set", set][..], &TINY].concat());
+    for (set, expect) in [
+        ("gamma=1e308", "parameter `gamma` = 1e308: J₀·2γλ·8·Δt = inf must be < 2"),
+        ("zeta=1e300", "parameter `zeta` = 1e300: must be in [−10, 10]"),
+        ("xi_substrate=1e-300", "parameter `xi_substrate` = 1e-300: must be in [1e-6, 1e3]"),
+    ] {
+        let o = fingerprint(set);
+        refused(&o, &[expect]);
+        assert!(!stderr(&o).contains("00000000"), "a number in full: {}", stderr(&o));
+    }
+    let o = monolayer(&[&["fingerprint", "--total-steps", "1", "--chi", "1e300"][..], &TINY].concat());
+    refused(&o, &["parameter `xi_substrate` = 1e300"]);
+    assert!(!stderr(&o).contains("00000000"), "{}", stderr(&o));
+    let run = dir.path().join("r");
+    ok(&small(&run, 50, &[]));
+    edit_record(&run, |v| v["format_version"] = 2.into());
+    let e = RunRecord::load(&run).unwrap_err().to_string();
+    assert!(e.contains("`format_version` = 2: this program reads format_version 1") && !e.contains("Some"), "{e}");
+    edit_record(&run, |v| {
+        v.as_object_mut().unwrap().remove("format_version");
+    });
+    let e = RunRecord::load(&run).unwrap_err().to_string();
+    assert!(e.contains("no `format_version`"), "{e}");
 }
 
 /// Structure and type errors of TOML and JSON name the key and the line.

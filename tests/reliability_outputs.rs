@@ -11,7 +11,7 @@ use std::fs;
 use std::path::Path;
 use std::process::Output;
 
-use common::faults::{analyzed, files_of, ok, refused, refused_within, small, with_file_size_limit};
+use common::faults::{analyzed, files_of, ok, refused, refused_within, small, with_file_size_limit, SWEEP_ARGS};
 use common::{arg, lines, monolayer, small_run, stderr, tear_open_a_hole};
 use monolayer::run::write_atomic;
 
@@ -252,7 +252,8 @@ fn stale_temporaries_of_dead_writers_are_cleaned() {
 }
 
 /// A sweep's tables are written through temporaries in OUT; those of a sweep killed with -9
-/// are removed by the next one, a living writer's are left.
+/// are removed by the next one (even one that has no run to tabulate), a living writer's are
+/// left.
 #[test]
 fn a_sweep_removes_the_temporaries_of_dead_writers() {
     let dir = tempfile::tempdir().unwrap();
@@ -262,7 +263,7 @@ fn a_sweep_removes_the_temporaries_of_dead_writers() {
     let alive = out.join(format!(".regimes.csv.{}.0.tmp", std::process::id()));
     fs::write(&dead, "x").unwrap();
     fs::write(&alive, "x").unwrap();
-    ok(&monolayer(&["sweep", "--out", arg(&out), "--tables-only", "--grid", "zeta=0.2"]));
+    refused(&monolayer(&["sweep", "--out", arg(&out), "--tables-only", "--grid", "zeta=0.2"]), &["no run"]);
     assert!(!dead.exists() && alive.exists());
 }
 
@@ -303,6 +304,40 @@ fn tables_only_without_a_grid_measures_the_runs_in_the_directory() {
     assert!(after.0[0].starts_with("run,zeta,seed,"), "{}", after.0[0]);
     assert!(after.0[1].starts_with("zeta0.2_seed1,0.2,1,") && after.0[2].starts_with("zeta0.4_seed1,0.4,1,"));
     assert_eq!(after, before, "the tables changed");
+}
+
+/// `sweep --tables-only` never empties the tables: with no run in OUT/runs, or a grid that
+/// matches none, it is refused and the tables are left as they are. A lone shard writes no
+/// tables of its own runs only; the shard that ends the sweep writes them.
+#[test]
+fn the_tables_of_a_sweep_are_never_emptied_or_written_from_part_of_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let sweep =
+        |extra: &[&str]| monolayer(&[&["sweep", "--quiet", "--jobs", "1", "--out", arg(&out)][..], extra].concat());
+    ok(&sweep(&SWEEP_ARGS));
+    let tables = || (fs::read(out.join("summary.csv")).unwrap(), fs::read(out.join("regimes.csv")).unwrap());
+    let before = tables();
+    refused(&sweep(&["--tables-only", "--grid", "zeta=0.7"]), &["no run", "left as they are"]);
+    assert!(tables() == before, "the tables were emptied");
+    let runs = out.join("runs");
+    fs::rename(&runs, dir.path().join("away")).unwrap();
+    fs::create_dir(&runs).unwrap();
+    refused(&sweep(&["--tables-only"]), &["no run", "left as they are"]);
+    assert!(tables() == before, "the tables were emptied");
+
+    let sharded = dir.path().join("sharded");
+    let shard = |k: &str| {
+        monolayer(
+            &[&["sweep", "--quiet", "--jobs", "1", "--shard", k, "--out", arg(&sharded)][..], &SWEEP_ARGS].concat(),
+        )
+    };
+    let o = shard("0/2");
+    ok(&o);
+    assert!(stderr(&o).contains("shard 0/2") && stderr(&o).contains("--tables-only"), "{}", stderr(&o));
+    assert!(!sharded.join("summary.csv").exists(), "tables of one shard's runs");
+    ok(&shard("1/2"));
+    assert_eq!(lines(&sharded.join("summary.csv")).len(), 1 + 2);
 }
 
 // ---- Nothing counted that was not measured ----

@@ -442,9 +442,23 @@ impl RunRecord {
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
             return Err(err(&path, format!("not a record of this program (no \"format\": \"{FORMAT}\")")));
         }
-        let v = value.get("format_version").and_then(|v| v.as_u64());
-        if v != Some(FORMAT_VERSION as u64) {
-            return Err(err(&path, format!("format_version {v:?}, this program reads {FORMAT_VERSION}")));
+        match value.get("format_version") {
+            Some(v) if v.as_u64() == Some(FORMAT_VERSION as u64) => {}
+            Some(v) => {
+                return Err(err(
+                    &path,
+                    format!(
+                        "`format_version` = {v}: this program reads format_version {FORMAT_VERSION} (a run written \
+                         by another version of it: read it with that version)"
+                    ),
+                ))
+            }
+            None => {
+                return Err(err(
+                    &path,
+                    format!("no `format_version`: not a complete run record (this program writes {FORMAT_VERSION})"),
+                ))
+            }
         }
         // A run continues with the parameters it was started with, never with a default: a record
         // without one (hand-edited, or of an older version that lacked it) is refused by name.

@@ -36,7 +36,7 @@ mod sweep;
 #[cfg(feature = "gpu")]
 pub use bench::bench_gpu;
 pub use bench::{bench, bench_analysis, BenchOptions};
-pub use config::{load_params, parse_assignment};
+pub use config::{check_distinct, load_params, load_params_over, parse_assignment};
 pub use console::{note, out, out_text, output_closed};
 pub use error::{RunError, RunResult};
 pub use files::{

@@ -1002,11 +1002,19 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
 }
 
 /// Writes `OUT/summary.csv`, `OUT/regimes.csv` (and the regime map plot where the grid has χ
-/// and ζ); returns the files written.
+/// and ζ); returns the files written. Refused for no run at all.
 pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, RunError> {
     // A sweep takes no lock on OUT (several shards write these tables), so only the temporaries
     // of writers no longer alive are taken.
     crate::run::files::remove_dead_temporaries(out);
+    // Tables of no run would replace the tables of the runs measured before with headers.
+    if summaries.is_empty() {
+        return Err(RunError::file(
+            &out.join("runs"),
+            "no run of this sweep is there to measure: summary.csv and the regime map are left as they are (is \
+             --out the sweep's, with its grid?)",
+        ));
+    }
     let (runs, regimes) = tables(summaries);
     let mut written = Vec::new();
     for (name, text) in [("summary.csv", runs), ("regimes.csv", regimes)] {
