@@ -11,14 +11,13 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use monolayer::formats::{snapshot, Engine, RunStatus};
-use monolayer::model::Perturbation;
-use monolayer::model::MAX_STEPS;
+use monolayer::model::{number_text, Perturbation, MAX_STEPS};
 use monolayer::run::figures::{FiguresOptions, Scale, Stage};
 use monolayer::run::{
-    analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, create_branch, jobs_of_runs,
-    load_params, measure_existing, parse_assignment, replaceable, run_sweep, steps_to_run, stop_gracefully_on_signals,
-    stop_signal, write_atomic, write_tables, Arm, Background, BenchOptions, BranchOptions, Event, InterveneOptions,
-    Output, Report, RunDir, RunError, Shard, SweepSpec,
+    analyze_run, bench_analysis, check_distinct, check_frame_interval, check_memory, check_memory_of, create_branch,
+    jobs_of_runs, load_params, load_params_over, measure_existing, note, out, out_text, parse_assignment, replaceable,
+    run_sweep, steps_to_run, stop_gracefully_on_signals, stop_signal, write_atomic, write_tables, Arm, Background,
+    BenchOptions, BranchOptions, Event, InterveneOptions, Output, Report, RunDir, RunError, Shard, SweepSpec,
 };
 use monolayer::{Monolayer, Params, Phase};
 
@@ -283,31 +282,39 @@ struct ParamArgs {
     relax_steps: Option<u64>,
 }
 
+/// Refuses a `--set` of a parameter that a flag sets too: whichever is applied last would win
+/// unsaid. `flags` are (flag, the parameter it sets, its value where it is given).
+fn refuse_flag_beside_set(sets: &[String], flags: &[(&str, &str, Option<String>)]) -> Result<(), RunError> {
+    for s in sets {
+        let (k, _) = parse_assignment("--set", s)?;
+        if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
+            return Err(RunError::Options(format!(
+                "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
+                if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
+            )));
+        }
+    }
+    Ok(())
+}
+
 impl ParamArgs {
     fn params(&self) -> Result<Params, RunError> {
-        // A flag beside a --set of its parameter: whichever is applied last would win unsaid.
-        let flags = [
-            ("--chi", "xi_substrate", self.chi.map(|v| v.to_string())),
-            ("--zeta", "zeta", self.zeta.map(|v| v.to_string())),
-            ("--steps", "active_steps", self.steps.map(|v| v.to_string())),
-            ("--relax-steps", "relax_steps", self.relax_steps.map(|v| v.to_string())),
-        ];
-        for s in &self.set {
-            let (k, _) = parse_assignment("--set", s)?;
-            if let Some((flag, _, Some(v))) = flags.iter().find(|f| f.1 == k && f.2.is_some()) {
-                return Err(RunError::Options(format!(
-                    "{flag} {v} and --set {s} both set `{k}`{}: give one of them",
-                    if *flag == "--chi" { " (--chi sets xi_substrate = χ·xi_cell)" } else { "" }
-                )));
-            }
-        }
+        refuse_flag_beside_set(
+            &self.set,
+            &[
+                ("--chi", "xi_substrate", self.chi.map(|v| v.to_string())),
+                ("--zeta", "zeta", self.zeta.map(|v| v.to_string())),
+                ("--steps", "active_steps", self.steps.map(|v| v.to_string())),
+                ("--relax-steps", "relax_steps", self.relax_steps.map(|v| v.to_string())),
+            ],
+        )?;
         let mut p = load_params(self.config.as_deref(), &self.set)?;
         if let Some(z) = self.zeta {
             p.zeta = z;
         }
         if let Some(c) = self.chi {
             if !(c.is_finite() && c > 0.0) {
-                return Err(RunError::invalid("--chi", c, "a finite number > 0"));
+                return Err(RunError::invalid("--chi", number_text(c), "a finite number > 0"));
             }
             p.set_chi(c);
         }
@@ -413,7 +420,7 @@ struct SweepArgs {
 
 #[derive(Args)]
 struct BenchArgs {
-    /// Active steps timed per friction ratio.
+    /// Active steps timed per friction ratio (at most 10⁹).
     #[arg(long, default_value_t = 200)]
     steps: u64,
     /// Relaxation steps before timing (a confluent tissue).
@@ -432,9 +439,9 @@ struct BenchArgs {
     /// Friction ratios χ = ξ_s/ξ_cell timed in turn.
     #[arg(long, value_delimiter = ',', default_value = "0.1,0.001")]
     chi: Vec<f64>,
-    /// Activity of the timed steps.
-    #[arg(long, default_value_t = 0.5)]
-    zeta: f64,
+    /// Activity of the timed steps (default 0.5).
+    #[arg(long)]
+    zeta: Option<f64>,
     /// Any other parameter, e.g. --set friction_weights=subdomain (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
@@ -460,7 +467,7 @@ fn main() -> ExitCode {
         Command::Run(_) | Command::Sweep(_) | Command::Figures(_) | Command::Branch(_) | Command::Intervene(_)
     ) {
         if let Err(e) = stop_gracefully_on_signals() {
-            eprintln!("error: {e}");
+            note(format_args!("error: {e}"));
             return ExitCode::from(2);
         }
     }
@@ -471,7 +478,7 @@ fn main() -> ExitCode {
             .transpose()
             .and_then(|threads| with_threads(threads, || run(&a))),
         Command::Bench(a) => bench(&a),
-        Command::Params => toml::to_string(&Params::default()).map(|s| print!("{s}")).map_err(RunError::from),
+        Command::Params => toml::to_string(&Params::default()).map_err(RunError::from).and_then(|s| out_text(&s)),
         Command::Fingerprint(a) => fingerprint(&a),
         Command::RelaxedState(a) => relaxed_state(&a),
         Command::Sweep(a) => sweep(&a),
@@ -488,7 +495,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            note(format_args!("error: {e}"));
             // 128 + the signal, as a shell reports a process the signal ended.
             match stop_signal() {
                 Some((_, sig)) => ExitCode::from(128 + sig as u8),
@@ -527,7 +534,7 @@ fn run(a: &RunArgs) -> Result<(), RunError> {
     let run = match &a.resume {
         Some(dir) => {
             let run = RunDir::resume(dir)?;
-            eprintln!("resuming {} at step {}", dir.display(), run.monolayer.step_count());
+            note(format_args!("resuming {} at step {}", dir.display(), run.monolayer.step_count()));
             run
         }
         None => {
@@ -564,15 +571,18 @@ fn execute(run: &mut RunDir, analyze: bool, quiet: bool) -> Result<(), RunError>
         Event::Frame if quiet => {
             let s = m.step_count();
             let rate = (s - start_step) as f64 / start.elapsed().as_secs_f64();
-            eprintln!("step {s}/{total}: frame written ({rate:.0} steps/s)");
+            note(format_args!("step {s}/{total}: frame written ({rate:.0} steps/s)"));
         }
         Event::Frame => {}
+        Event::AnalysisFailed(e) if bar.is_hidden() => {
+            note(format_args!("warning: analysis of step {}: {e}", m.step_count()))
+        }
         Event::AnalysisFailed(e) => bar.println(format!("warning: analysis of step {}: {e}", m.step_count())),
     });
     match outcome {
         Ok(()) => {
             bar.finish();
-            eprintln!("done: {} steps in {}", run.monolayer.step_count(), run.dir.display());
+            note(format_args!("done: {} steps in {}", run.monolayer.step_count(), run.dir.display()));
             Ok(())
         }
         Err(e) => {
@@ -605,7 +615,7 @@ fn branch(a: &BranchArgs) -> Result<(), RunError> {
     let origin = run.record.branch.as_ref().expect("a branch records its origin");
     let changes: Vec<String> =
         origin.changes.iter().map(|c| format!("{} {} -> {}", c.key, c.parent, c.branch)).collect();
-    eprintln!(
+    note(format_args!(
         "branch of {} at step {} ({}, made in {:.0} ms); {}{}; to step {} in {}",
         origin.parent,
         origin.step,
@@ -618,7 +628,7 @@ fn branch(a: &BranchArgs) -> Result<(), RunError> {
             .unwrap_or_default(),
         run.monolayer.params().total_steps(),
         run.dir.display()
-    );
+    ));
     execute(&mut run, false, a.quiet)
 }
 
@@ -642,6 +652,7 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         Some(f) => SweepSpec::from_file(f)?,
         None => SweepSpec { seeds: vec![1], frame_interval: 1000, ..SweepSpec::default() },
     };
+    check_distinct("--set", &a.set)?;
     for s in &a.set {
         let (k, v) = parse_assignment("--set", s)?;
         spec.base.insert(k, v);
@@ -669,15 +680,12 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         let jobs = jobs_of_runs(&a.out)?;
         let summaries = measure_existing(&jobs, &a.out)?;
         let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
-        eprintln!(
+        note(format_args!(
             "sweep --tables-only: {} runs in {}, {complete} of them ended",
             summaries.len(),
             a.out.join("runs").display()
-        );
-        for path in write_tables(&a.out, &summaries)? {
-            println!("{}", path.display());
-        }
-        return Ok(());
+        ));
+        return print_tables(&a.out, &summaries);
     }
     let jobs = spec.jobs()?;
     if let Some(fi) = a.frame_interval {
@@ -689,16 +697,13 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     if a.tables_only {
         let summaries = measure_existing(&jobs, &a.out)?;
         let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
-        eprintln!(
+        note(format_args!(
             "sweep --tables-only: {} of {} runs have a directory in {}, {complete} of them ended",
             summaries.len(),
             jobs.len(),
             a.out.join("runs").display()
-        );
-        for path in write_tables(&a.out, &summaries)? {
-            println!("{}", path.display());
-        }
-        return Ok(());
+        ));
+        return print_tables(&a.out, &summaries);
     }
     let shard = match a.shard {
         Some(s) => Some(s),
@@ -710,14 +715,14 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     };
     let mine = jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).count();
     let todo = steps_to_run(&jobs, &a.out, shard);
-    eprintln!(
+    note(format_args!(
         "sweep: {} runs ({} in this shard), {} steps to run, {} at a time, into {}",
         jobs.len(),
         mine,
         todo,
         workers,
         a.out.display()
-    );
+    ));
     let bar = progress_bar(todo, 0, a.quiet);
     bar.set_message(format!("runs 0/{mine}"));
     let start = Instant::now();
@@ -727,12 +732,22 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
         bar.set_position(steps);
         bar.set_message(format!("runs {done}/{total}"));
         if a.quiet && reported.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done {
-            eprintln!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64());
+            note(format_args!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64()));
         }
     })?;
     bar.finish();
-    for path in write_tables(&a.out, &summaries)? {
-        println!("{}", path.display());
+    // A shard's tables would hold its own runs only: the shard that ends the sweep writes them.
+    let ended = summaries.iter().filter(|s| s.status.is_complete()).count();
+    match shard {
+        Some(s) if ended < jobs.len() => note(format_args!(
+            "shard {}/{}: its runs are done; {ended} of the sweep's {} runs have ended, so summary.csv and the \
+             regime map are not written (they would leave the others out): the shard that ends the sweep writes \
+             them, or `sweep … --tables-only` once every shard is done",
+            s.index,
+            s.count,
+            jobs.len()
+        )),
+        _ => print_tables(&a.out, &summaries)?,
     }
     let stopped: Vec<String> = summaries
         .iter()
@@ -756,10 +771,18 @@ fn sweep(a: &SweepArgs) -> Result<(), RunError> {
     }
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
-    eprintln!(
+    note(format_args!(
         "sweep done in {wall:.0} s; runs took {run_time:.0} s together ({:.2} runs' worth of time per second of wall time)",
         run_time / wall.max(1e-9)
-    );
+    ));
+    Ok(())
+}
+
+/// Writes a sweep's tables and prints their paths.
+fn print_tables(out_dir: &std::path::Path, summaries: &[monolayer::run::RunSummary]) -> Result<(), RunError> {
+    for path in write_tables(out_dir, summaries)? {
+        out(path.display())?;
+    }
     Ok(())
 }
 
@@ -828,7 +851,7 @@ fn fingerprint(a: &FingerprintArgs) -> Result<(), RunError> {
     check_memory(&params)?;
     let mut m = Monolayer::new(params, a.seed)?;
     m.advance(a.total_steps)?;
-    println!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint());
+    out(format_args!("{{\"step\": {}, \"fingerprint\": \"{:016x}\"}}", m.step_count(), m.fingerprint()))?;
     Ok(())
 }
 
@@ -853,13 +876,13 @@ fn relaxed_state(a: &RelaxedStateArgs) -> Result<(), RunError> {
     bar.finish_and_clear();
     let bytes = snapshot::encode(&m.state(), key);
     write_atomic(&a.out, |w| w.write_all(&bytes).map_err(|e| RunError::io(&a.out, e)))?;
-    eprintln!(
+    note(format_args!(
         "{}: step {steps}, {} cells, {} bytes, key {key:016x}, fingerprint {:016x}",
         a.out.display(),
         m.cells().len(),
         bytes.len(),
         m.fingerprint()
-    );
+    ));
     Ok(())
 }
 
@@ -870,9 +893,21 @@ fn bench(a: &BenchArgs) -> Result<(), RunError> {
     for &n in &a.threads {
         check_threads("--threads", n)?;
     }
-    let mut overrides = vec![format!("zeta={}", a.zeta)];
-    overrides.extend(a.set.iter().cloned());
-    let params = load_params(None, &overrides)?;
+    // Bounded as every other step count is.
+    if a.steps == 0 || a.steps > MAX_STEPS {
+        return Err(RunError::invalid("--steps", a.steps, format!("in [1, {MAX_STEPS}]")));
+    }
+    // `--chi` and `--relax-steps` set their parameters whether given or not (their defaults).
+    let chis: Vec<String> = a.chi.iter().map(|c| number_text(*c)).collect();
+    refuse_flag_beside_set(
+        &a.set,
+        &[
+            ("--zeta", "zeta", a.zeta.map(number_text)),
+            ("--chi", "xi_substrate", Some(chis.join(","))),
+            ("--relax-steps", "relax_steps", Some(a.relax_steps.to_string())),
+        ],
+    )?;
+    let params = load_params_over(&[format!("zeta={}", a.zeta.unwrap_or(0.5))], &a.set)?;
     Params { relax_steps: a.relax_steps, ..params.clone() }.validate()?;
     // The relaxed state, a copy per thread count timed, and two more for the ceiling.
     let ceiling = a.threads.contains(&1) && a.threads.contains(&2);
@@ -924,7 +959,7 @@ fn intervene(a: &InterveneArgs) -> Result<(), RunError> {
     };
     let bar = progress_bar(0, 0, a.quiet || a.dry_run || a.tables_only);
     let written = monolayer::run::intervene(&options, &|r| match r {
-        Report::Line(line) if bar.is_hidden() => eprintln!("{line}"),
+        Report::Line(line) if bar.is_hidden() => note(line),
         Report::Line(line) => bar.println(line),
         Report::Progress { steps, of, done, branches } => {
             bar.set_length(of);
@@ -934,7 +969,7 @@ fn intervene(a: &InterveneArgs) -> Result<(), RunError> {
     });
     bar.finish_and_clear();
     for path in written? {
-        println!("{}", path.display());
+        out(path.display())?;
     }
     Ok(())
 }
@@ -942,13 +977,14 @@ fn intervene(a: &InterveneArgs) -> Result<(), RunError> {
 /// `forecast DIR… --out OUT`.
 fn forecast(a: &ForecastArgs) -> Result<(), RunError> {
     let quiet = a.quiet;
-    let written = monolayer::run::forecast(&a.dirs, &a.out, a.partial, |line| {
+    let progress = |line: &str| {
         if !quiet {
-            eprintln!("{line}");
+            note(line);
         }
-    })?;
-    for path in written {
-        println!("{}", path.display());
+    };
+    let warn = |line: &str| note(format_args!("warning: {line}"));
+    for path in monolayer::run::forecast(&a.dirs, &a.out, a.partial, progress, warn)? {
+        out(path.display())?;
     }
     Ok(())
 }
@@ -959,9 +995,8 @@ fn analyze(a: &AnalyzeArgs) -> Result<(), RunError> {
         return bench_analysis(a.bench_frames);
     }
     let dir = a.dir.as_deref().expect("clap requires DIR without --bench");
-    let written = analyze_run(dir, a.out.as_deref(), a.snapshot, a.field)?;
-    for path in written {
-        println!("{}", path.display());
+    for path in analyze_run(dir, a.out.as_deref(), a.snapshot, a.field)? {
+        out(path.display())?;
     }
     Ok(())
 }

@@ -141,18 +141,23 @@ fn analyze_refuses_what_is_not_a_complete_run_and_writes_nothing() {
     let future = dir.path().join("future");
     fs::create_dir_all(future.join("frames")).unwrap();
     fs::write(future.join("run.json"), record.replace("\"format_version\": 1", "\"format_version\": 99")).unwrap();
-    check(&future, "format_version Some(99)");
+    check(&future, "`format_version` = 99: this program reads format_version 1");
 
     let unstarted = dir.path().join("unstarted");
     fs::create_dir_all(unstarted.join("frames")).unwrap();
-    fs::write(unstarted.join("run.json"), &record).unwrap();
+    let running =
+        record.replace("\"finished\"", "\"running\"").replace("\"last_frame_step\": 330", "\"last_frame_step\": null");
+    fs::write(unstarted.join("run.json"), running).unwrap();
     check(&unstarted, "no frames yet");
+    // A record of frames whose files are gone.
+    fs::write(unstarted.join("run.json"), &record).unwrap();
+    check(&unstarted, "no frame files, but run.json records frames from step 300 to step 330");
 
     // A damaged frame among good ones: named, and nothing written for the good ones either.
     let damaged = dir.path().join("damaged");
     fs::create_dir_all(damaged.join("frames")).unwrap();
     fs::write(damaged.join("run.json"), &record).unwrap();
-    for step in [310, 320] {
+    for step in [300, 310, 320] {
         let name = format!("frame_{step:07}.npz");
         fs::copy(run.join("frames").join(&name), damaged.join("frames").join(&name)).unwrap();
     }

@@ -1529,6 +1529,46 @@ fn a_run_on_the_gpu_engine_writes_the_cpus_frames() {
     assert!(common::stderr(&out).contains("stepped by the gpu-f32 engine"), "{}", common::stderr(&out));
 }
 
+/// A run of the GPU engine, stopped part way, that finds no adapter when resumed (the loader
+/// given no Vulkan driver) is stopped again, not failed: the reason is printed once and
+/// recorded as `stopped: …`, and with its adapter the run then goes on to its end.
+#[test]
+fn a_gpu_run_resumed_without_an_adapter_stays_resumable() {
+    let Some(_ctx) = context() else { return };
+    let tmp = tempfile::tempdir().expect("a temporary directory");
+    let run = tmp.path().join("gpu");
+    let args = ["--set", "box_size=60", "--set", "n_cells=18", "--relax-steps", "40", "--steps", "20"];
+    let more = ["--frame-interval", "10", "--quiet", "--engine", "gpu", "--out", common::arg(&run)];
+    let out = common::monolayer(&[&["run"][..], &args, &more].concat());
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    // Stopped at its last frame, with 20 more active steps to go.
+    let record = run.join("run.json");
+    let text = std::fs::read_to_string(&record).expect("run.json");
+    let stopped = text
+        .replace("\"finished\"", "\"stopped: signal SIGTERM\"")
+        .replace("\"active_steps\": 20", "\"active_steps\": 40");
+    std::fs::write(&record, stopped).expect("run.json written");
+    let resume = common::command()
+        .args(["run", "--quiet", "--resume", common::arg(&run)])
+        .env("VK_ICD_FILENAMES", "/nonexistent.json")
+        .env("VK_DRIVER_FILES", "/nonexistent.json")
+        .output()
+        .expect("the binary runs");
+    let err = common::stderr(&resume);
+    assert_eq!(resume.status.code(), Some(2), "{err}");
+    assert_eq!(err.matches("no GPU adapter").count(), 1, "{err}");
+    assert!(err.contains("--resume"), "{err}");
+    let status = monolayer::formats::RunRecord::load(&run).expect("the record").status;
+    assert!(
+        matches!(&status, monolayer::formats::RunStatus::Stopped(why) if why.contains("no GPU adapter")),
+        "{status:?}"
+    );
+    let out = common::monolayer(&["run", "--quiet", "--resume", common::arg(&run)]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let record = monolayer::formats::RunRecord::load(&run).expect("the record");
+    assert_eq!((record.status, record.last_frame_step), (monolayer::formats::RunStatus::Finished, Some(80)));
+}
+
 /// The kernels compiled one at a time, each awaited (as the page does, to show progress), make
 /// the same run as the kernels compiled together: the same pipelines in the same order.
 #[test]

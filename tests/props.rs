@@ -1,7 +1,8 @@
 //! Property tests of everything that reads the user's text or the disk: parameters from
-//! `--set` and config files, and frames and checkpoints cut short or with a bit flipped. None may
-//! panic; a damaged file is refused or reads as exactly what was written. A few dozen cases
-//! each, so that the suite stays quick.
+//! `--set` and config files; frames and checkpoints cut short or with a bit flipped; run
+//! directories with frames missing anywhere; checkpoints with values out of range. None may
+//! panic; a damaged file is refused or reads as exactly what was written, and a run that is not
+//! whole is refused by every reader. A few dozen cases each, so that the suite stays quick.
 
 mod common;
 
@@ -131,7 +132,7 @@ proptest! {
         if let Ok(s) = read_checkpoint(&path, small().box_size) {
             prop_assert_eq!(s.step, good.step);
             prop_assert!(s.cells == good.cells && s.warm_start == good.warm_start && s.substrate == good.substrate);
-            prop_assert!(Monolayer::from_state(small(), 1, s).is_ok());
+            prop_assert!(Monolayer::from_saved(small(), 1, s).is_ok());
         }
     }
 
@@ -329,5 +330,117 @@ proptest! {
         prop_assert_eq!(o.status.code(), Some(2), "{}", e);
         prop_assert!(e.contains(special.to_str().unwrap()) && e.contains("not a regular file"), "{:?}: {}", kind, e);
         prop_assert!(!e.contains("panicked") && !out.exists(), "{}", e);
+    }
+}
+
+// ---- Run directories with frames missing, states out of range ----
+
+/// A small finished run (frames at steps 20, 30, …, 70) in OUT/runs/r, written once.
+fn finished_run() -> &'static (tempfile::TempDir, PathBuf) {
+    static RUN: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path().join("runs").join("r");
+        let params = Params { relax_steps: 20, active_steps: 50, ..small() };
+        let mut r = monolayer::run::RunDir::create(&run, params, 1, 10).unwrap();
+        r.execute(false, &mut |_, _| {}).unwrap();
+        (dir, run)
+    })
+}
+
+/// A copy of the files of the run directory `from` (its record, checkpoint and frames) in `to`.
+fn copy_run(from: &Path, to: &Path) {
+    fs::create_dir_all(to.join("frames")).unwrap();
+    for name in ["run.json", "checkpoint.npz"] {
+        fs::copy(from.join(name), to.join(name)).unwrap();
+    }
+    for entry in fs::read_dir(from.join("frames")).unwrap() {
+        let path = entry.unwrap().path();
+        fs::copy(&path, to.join("frames").join(path.file_name().unwrap())).unwrap();
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Frames missing anywhere (the first, the last, any in between, several, all): every reader
+    /// of a run's frames refuses the run, naming the first step missing, and writes nothing;
+    /// none counts it as a shorter run.
+    #[test]
+    fn readers_refuse_a_run_with_frames_missing_anywhere(
+        gone in proptest::collection::btree_set(0usize..6, 1..=6),
+    ) {
+        use monolayer::run::{analyze_run, jobs_of_runs, measure_existing, Background, RunFrames};
+        let (_, run) = finished_run();
+        let dir = tempfile::tempdir().unwrap();
+        let copy = dir.path().join("runs").join("r");
+        copy_run(run, &copy);
+        let steps: Vec<u64> = gone.iter().map(|&k| 20 + 10 * k as u64).collect();
+        for step in &steps {
+            fs::remove_file(monolayer::run::frame_path(&copy, *step)).unwrap();
+        }
+        // The first step missing is named (with every frame gone: that the record has some).
+        let names = |e: &str| if steps.len() == 6 { e.contains("no frame files") } else { e.contains(&format!(" {}", steps[0])) };
+        let e = RunFrames::open(&copy).unwrap_err().to_string();
+        prop_assert!(names(&e), "{:?}: {}", steps, e);
+        let e = RunFrames::open_if_any(&copy).unwrap_err().to_string();
+        prop_assert!(names(&e), "{:?}: {}", steps, e);
+        let jobs = jobs_of_runs(dir.path()).unwrap();
+        let e = measure_existing(&jobs, dir.path()).unwrap_err().to_string();
+        prop_assert!(names(&e) && e.contains("run r"), "{:?}: {}", steps, e);
+        let out = dir.path().join("analysis");
+        let e = analyze_run(&copy, Some(&out), None, Background::StrainRate).unwrap_err().to_string();
+        prop_assert!(names(&e) && !out.exists(), "{:?}: {}", steps, e);
+    }
+
+    /// A checkpoint with any value of φ put anywhere in its patches is refused where a run
+    /// never leaves one (beyond [phi_min, phi_max], or not 0 on the ring around a patch),
+    /// naming the value, and read otherwise; a substrate factor ≤ 0 is refused as it is read.
+    #[test]
+    fn checkpoints_with_values_out_of_range_are_refused(
+        at in 0.0f64..1.0,
+        value in prop_oneof![-1e6f64..-0.5, -0.5f64..1.5, 1.5f64..1e6, Just(0.0), Just(-0.5), Just(1.5)],
+        substrate in prop_oneof![Just(None), (-1e3f64..=0.0).prop_map(Some)],
+    ) {
+        let (_, _, checkpoint) = files();
+        let p = small();
+        let state = read_checkpoint(checkpoint, p.box_size).unwrap();
+        let len: usize = state.cells.iter().map(|(_, phi)| phi.len()).sum();
+        let k = ((at * len as f64) as usize).min(len - 1);
+        // The cell, and the padded site, of the k-th value.
+        let (mut cell, mut rest) = (0, k);
+        while rest >= state.cells[cell].1.len() {
+            rest -= state.cells[cell].1.len();
+            cell += 1;
+        }
+        let patch = state.cells[cell].0;
+        let (a, b) = (rest % (patch.w + 2), rest / (patch.w + 2));
+        let ring = a == 0 || b == 0 || a == patch.w + 1 || b == patch.h + 1;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("checkpoint.npz");
+        fs::copy(checkpoint, &path).unwrap();
+        common::npz::edit_npz(&path, "phi_padded", |arr| match arr {
+            common::npz::Npy::F(arr) => arr.as_slice_mut().unwrap()[k] = value,
+            _ => unreachable!("φ is real"),
+        });
+        if let Some(s) = substrate {
+            common::npz::edit_npz(&path, "substrate", |arr| match arr {
+                common::npz::Npy::F(arr) => arr.as_slice_mut().unwrap()[k % (p.box_size * p.box_size)] = s,
+                _ => unreachable!("the substrate is real"),
+            });
+            let e = read_checkpoint(&path, p.box_size).unwrap_err().to_string();
+            prop_assert!(e.contains("`substrate`") && e.contains("> 0"), "{}", e);
+            return Ok(());
+        }
+        let read = read_checkpoint(&path, p.box_size).unwrap();
+        let outside = !(p.phi_min..=p.phi_max).contains(&value) || (ring && value != 0.0);
+        match Monolayer::from_saved(p, 1, read) {
+            Ok(_) => prop_assert!(!outside, "φ = {} at {} (ring: {}) was taken", value, k, ring),
+            Err(e) => {
+                let e = e.to_string();
+                prop_assert!(outside, "φ = {} at {} refused: {}", value, k, e);
+                prop_assert!(e.contains(&format!("cell {cell}: φ = {value}")) && e.contains("a damaged state"), "{}", e);
+            }
+        }
     }
 }

@@ -228,9 +228,23 @@ impl RunRecord {
         }
     }
 
-    /// The step of the run's first frame: the end of the relaxation, or where a branch starts.
+    /// The step of the run's first frame, from which its frames follow every `frame_interval`
+    /// steps: the end of the relaxation (with no relaxation, one frame interval into the
+    /// activity, as no frame is written before the first step), or the step a branch starts at
+    /// (its own first frame). The page's download holds only the frame of its last step. Every
+    /// reader of a run's frames checks that they start here: a run whose first frames are missing
+    /// would be measured as a shorter one.
     pub fn first_frame_step(&self) -> u64 {
-        self.branch.as_ref().map_or(self.params.relax_steps, |b| b.step)
+        if self.status == RunStatus::Stopped(PAGE_DOWNLOAD.into()) {
+            return self.last_frame_step.unwrap_or(0);
+        }
+        if let Some(b) = &self.branch {
+            return b.step;
+        }
+        match self.params.relax_steps {
+            0 => self.frame_interval,
+            relax => relax,
+        }
     }
 
     /// `run.json` as `monolayer run` writes it: pretty-printed in the fields' order, a newline

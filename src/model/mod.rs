@@ -48,7 +48,9 @@ pub use lattice::{row_neighbourhood, Neighbourhood, Patch, Run, Runs};
 pub use monolayer::{LatticeFields, Monolayer, Phase, State};
 pub use motion::friction_weight;
 pub use multigrid::{level_sides, CycleWork, Multigrid, COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
-pub use params::{Advection, FrictionWeights, Laplacian, ParamError, Params, PassiveForce, MAX_STEPS};
+pub use params::{
+    number_text, Advection, FrictionWeights, Laplacian, ParamError, Params, PassiveForce, MAX_BOX_SIZE, MAX_STEPS,
+};
 pub use perturb::{Perturbation, MAX_PERTURBATION};
 pub use precision::{load, Real, Store, STORE_NAME};
 pub use shape::{axis_angle, gradient, shape_tensor};

@@ -151,6 +151,19 @@ pub struct State {
     pub substrate: Vec<f64>,
 }
 
+impl State {
+    /// Checks each cell's φ as every step leaves it ([`check_saved_phi`]): a state read from a
+    /// file (a checkpoint, a relaxed state) beyond that is damaged. A cell whose φ does not fit
+    /// its patch is left to [`Monolayer::from_state`], which refuses it.
+    pub fn check(&self, params: &Params) -> Result<(), SimError> {
+        let fits = |(patch, phi): &&(Patch, Vec<f64>)| phi.len() == patch.padded_len();
+        for (i, (patch, phi)) in self.cells.iter().enumerate().filter(|(_, c)| fits(c)) {
+            check_saved_phi(i, patch, phi, params)?;
+        }
+        Ok(())
+    }
+}
+
 /// The simulated monolayer.
 #[derive(Clone, Debug)]
 pub struct Monolayer {
@@ -287,6 +300,14 @@ impl Monolayer {
         m.solver.mean_velocity = state.warm_start;
         m.solver.corrector_shift = state.corrector_shift;
         Ok(m)
+    }
+
+    /// [`Monolayer::from_state`] of a state read from a file (a checkpoint, a relaxed state),
+    /// checked first as every step leaves one ([`State::check`]): stepped, a damaged state
+    /// would fail as if the run had gone unstable, or go on along another trajectory unsaid.
+    pub fn from_saved(params: Params, seed: u64, state: State) -> Result<Self, SimError> {
+        state.check(&params)?;
+        Self::from_state(params, seed, state)
     }
 
     /// A copy of everything needed to continue bit for bit.
@@ -707,6 +728,33 @@ fn first_out_of_range(c: &Cell, lo: f64, hi: f64) -> Option<(usize, usize, f64)>
         }
     }
     None
+}
+
+/// Checks a saved cell's φ (a checkpoint's, a relaxed state's) as every step leaves it: within
+/// [`Params::phi_min`, `Params::phi_max`] (a step beyond fails the run), and 0 on the one-site
+/// ring around its patch, which the stencils read as the world outside the cell. A state
+/// beyond either is damaged: stepped, it would fail as if the run went unstable, or follow
+/// another trajectory without a word.
+fn check_saved_phi(cell: usize, patch: &Patch, phi: &[f64], params: &Params) -> Result<(), SimError> {
+    let (w, h) = (patch.w + 2, patch.h + 2);
+    let (lo, hi) = (params.phi_min, params.phi_max);
+    for (k, &v) in phi.iter().enumerate() {
+        let (a, b) = (k % w, k / w);
+        let ring = a == 0 || b == 0 || a == w - 1 || b == h - 1;
+        if ring && v != 0.0 {
+            return Err(SimError::Invalid(format!(
+                "cell {cell}: φ = {v} on the ring around its patch (padded site ({a}, {b}), index {k}), \
+                 where every state holds 0: a damaged state"
+            )));
+        }
+        if !(lo..=hi).contains(&v) {
+            return Err(SimError::Invalid(format!(
+                "cell {cell}: φ = {v} at padded site ({a}, {b}) (index {k}), outside [phi_min, phi_max] = \
+                 [{lo}, {hi}] where every step leaves it: a damaged state"
+            )));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -193,6 +193,9 @@ impl Default for Params {
 /// The most steps of either phase of the protocol.
 pub const MAX_STEPS: u64 = 1_000_000_000;
 
+/// The largest lattice a run may have (`box_size`), 4096²: hundreds of times the paper's.
+pub const MAX_BOX_SIZE: usize = 4096;
+
 /// A parameter outside its allowed range, named as in the config file.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("parameter `{name}` = {value}: {allowed}")]
@@ -202,11 +205,45 @@ pub struct ParamError {
     pub allowed: String,
 }
 
-fn check(ok: bool, name: &'static str, value: impl ToString, allowed: impl Into<String>) -> Result<(), ParamError> {
+/// A number as a message shows it: as written where that is short (`0.06`, `1000`), in
+/// scientific notation far from 1 (`1e308`, not its 309 digits; `1e-300`, not 300 zeros).
+pub fn number_text(x: f64) -> String {
+    let a = x.abs();
+    if x.is_finite() && a != 0.0 && !(1e-4..1e15).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
+/// A parameter's value as its error shows it ([`number_text`] for reals).
+trait Shown {
+    fn shown(&self) -> String;
+}
+
+impl Shown for f64 {
+    fn shown(&self) -> String {
+        number_text(*self)
+    }
+}
+
+impl Shown for usize {
+    fn shown(&self) -> String {
+        self.to_string()
+    }
+}
+
+impl Shown for u64 {
+    fn shown(&self) -> String {
+        self.to_string()
+    }
+}
+
+fn check(ok: bool, name: &'static str, value: impl Shown, allowed: impl Into<String>) -> Result<(), ParamError> {
     if ok {
         Ok(())
     } else {
-        Err(ParamError { name, value: value.to_string(), allowed: allowed.into() })
+        Err(ParamError { name, value: value.shown(), allowed: allowed.into() })
     }
 }
 
@@ -234,6 +271,20 @@ fn friction(name: &'static str, v: f64, zero_ok: bool) -> Result<(), ParamError>
 }
 
 impl Params {
+    /// Of `factors` (name, value), the one furthest above its default: where a bound on their
+    /// product is broken, the value most likely given is named, not the one left at its default.
+    fn furthest_above_default(&self, factors: &[(&'static str, f64)]) -> (&'static str, f64) {
+        let defaults = Params::default();
+        let default_of = |name: &str| match name {
+            "j0" => defaults.j0,
+            "gamma" => defaults.gamma,
+            "lambda" => defaults.lambda,
+            _ => defaults.dt,
+        };
+        let ratio = |&(name, v): &(&'static str, f64)| if v.is_finite() { v / default_of(name) } else { f64::INFINITY };
+        *factors.iter().max_by(|a, b| ratio(a).total_cmp(&ratio(b))).expect("factors given")
+    }
+
     /// The friction ratio χ = ξ_s / ξ_cell (infinite in the dry limit ξ_cell = 0).
     pub fn chi(&self) -> f64 {
         self.xi_substrate / self.xi_cell
@@ -261,7 +312,12 @@ impl Params {
 
     /// Checks every parameter against its allowed range and against the others.
     pub fn validate(&self) -> Result<(), ParamError> {
-        check(self.box_size >= 16 && self.box_size <= 4096, "box_size", self.box_size, "must be in [16, 4096]")?;
+        check(
+            (16..=MAX_BOX_SIZE).contains(&self.box_size),
+            "box_size",
+            self.box_size,
+            format!("must be in [16, {MAX_BOX_SIZE}]"),
+        )?;
         check(self.n_cells >= 1 && self.n_cells <= 100_000, "n_cells", self.n_cells, "must be in [1, 100000]")?;
         check(self.radius.is_finite() && self.radius >= 2.0, "radius", self.radius, "must be ≥ 2 sites")?;
         check(
@@ -318,11 +374,21 @@ impl Params {
         // Explicit diffusion of φ: J₀·2γλ·Δt·(max Laplacian eigenvalue 8) must stay below 2
         // (Heun's stability limit on the negative real axis is about 2).
         let diffusion = self.j0 * 2.0 * self.gamma * self.lambda * 8.0 * self.dt;
+        let (name, value) = self.furthest_above_default(&[
+            ("j0", self.j0),
+            ("gamma", self.gamma),
+            ("lambda", self.lambda),
+            ("dt", self.dt),
+        ]);
         check(
             diffusion < 2.0,
-            "dt",
-            self.dt,
-            format!("J₀·2γλ·8·Δt = {diffusion:.2} must be < 2 for the explicit scheme to be stable: lower dt"),
+            name,
+            value,
+            format!(
+                "J₀·2γλ·8·Δt = {} must be < 2 for the explicit scheme to be stable: lower {name} (or another of j0, \
+                 gamma, lambda, dt)",
+                number_text(diffusion)
+            ),
         )?;
         check(
             self.friction_tolerance > 0.0 && self.friction_tolerance <= 1e-2,
@@ -441,8 +507,18 @@ mod tests {
         let e = p.validate().unwrap_err();
         assert!(e.name == "n_cells" && e.to_string().contains("apart"), "{e}");
 
+        // The stability bound names the factor given furthest above its default, printed short.
         let p = Params { gamma: 20.0, ..Params::default() };
         let e = p.validate().unwrap_err();
-        assert_eq!(e.name, "dt", "{e}");
+        assert_eq!(e.name, "gamma", "{e}");
+        let p = Params { gamma: 1e308, ..Params::default() };
+        let e = p.validate().unwrap_err().to_string();
+        assert!(e.starts_with("parameter `gamma` = 1e308: J₀·2γλ·8·Δt = inf must be < 2"), "{e}");
+        let p = Params { gamma: 0.2, dt: 0.5, ..Params::default() };
+        assert_eq!(p.validate().unwrap_err().name, "dt", "Δt is 5 times its default, γ 3.3 times");
+        assert_eq!(number_text(0.06), "0.06");
+        assert_eq!(number_text(-1e-300), "-1e-300");
+        assert_eq!(number_text(1e15), "1e15");
+        assert_eq!(number_text(123456.5), "123456.5");
     }
 }

@@ -13,6 +13,7 @@ use std::time::Instant;
 use crate::analysis::Analysis;
 use crate::formats::{snapshot, RunRecord};
 use crate::model::{Monolayer, Params};
+use crate::run::console::out;
 use crate::run::error::RunError;
 use crate::run::files::{frame_path, write_frame};
 use crate::run::offline::analyze_run;
@@ -75,7 +76,7 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
     let pools = o.threads.iter().map(|&n| pool(n)).collect::<Result<Vec<_>, _>>()?;
     let ceiling = o.threads.contains(&1) && o.threads.contains(&2);
     let p = &o.params;
-    println!(
+    out(format_args!(
         "N = {}, L = {}, friction weights {:?}, |Q̂| = {}, ζ = {}: {} relaxation steps, then {} timed active steps in {} blocks, thread(s): {:?}{}",
         p.n_cells,
         p.box_size,
@@ -87,12 +88,12 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
         o.blocks,
         o.threads,
         if ceiling { ", and two one-thread simulations side by side (the ceiling)" } else { "" }
-    );
+    ))?;
     let base = Params { relax_steps: o.relax_steps, ..p.clone() };
     let (relaxed, relax_ms) = match &o.from_relaxed {
         Some(file) => {
             let m = relaxed_start(file, &base, o.seed)?;
-            println!("relaxation: read from {} (step {}), not timed", file.display(), m.step_count());
+            out(format_args!("relaxation: read from {} (step {}), not timed", file.display(), m.step_count()))?;
             (m, None)
         }
         None => {
@@ -100,7 +101,11 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
             let t = Instant::now();
             pools[0].install(|| m.advance(o.relax_steps)).map_err(RunError::from)?;
             let relax_ms = 1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64;
-            println!("relaxation, {} thread(s): {relax_ms:.3} ms/step\n{}", o.threads[0], m.counters().report());
+            out(format_args!(
+                "relaxation, {} thread(s): {relax_ms:.3} ms/step\n{}",
+                o.threads[0],
+                m.counters().report()
+            ))?;
             (m, Some(relax_ms))
         }
     };
@@ -159,7 +164,7 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
         }
         for (((m, times), threads), total) in runs.iter().zip(&block_ms).zip(&o.threads).zip(&seconds) {
             let c = m.counters();
-            println!(
+            out(format_args!(
                 "χ = {chi}, ζ = {}, {threads} thread(s): {:.3} ms/step over {} steps; blocks: median {:.3}, best {:.3}\n{}",
                 m.params().zeta,
                 1e3 * total / c.steps.max(1) as f64,
@@ -167,19 +172,19 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
                 median(times),
                 best(times),
                 c.report()
-            );
+            ))?;
         }
         if let (Some(relax_ms), true) = (relax_ms.filter(|_| o.relax_steps > 0), !block_ms[0].is_empty()) {
-            println!("  {}", paper_length_line(o.threads[0], relax_ms, median(&block_ms[0])));
+            out(format_args!("  {}", paper_length_line(o.threads[0], relax_ms, median(&block_ms[0]))))?;
         }
         for (times, threads) in block_ms.iter().zip(&o.threads).skip(1) {
             let ratios: Vec<f64> = block_ms[0].iter().zip(times).map(|(t0, t)| t0 / t).collect();
-            println!(
+            out(format_args!(
                 "  speed-up of {threads} over {} thread(s): median block {:.2}×, best blocks {:.2}×",
                 o.threads[0],
                 median(&ratios),
                 best(&block_ms[0]) / best(times)
-            );
+            ))?;
         }
         if ceiling && pair_ms.len() == block_ms[0].len() {
             let i1 = o.threads.iter().position(|&n| n == 1).expect("checked");
@@ -189,11 +194,11 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
             let ceilings: Vec<f64> = block_ms[i1].iter().zip(&pair_ms).map(|(t1, tp)| 2.0 * t1 / tp).collect();
             let speedups: Vec<f64> = block_ms[i1].iter().zip(&block_ms[i2]).map(|(t1, t2)| t1 / t2).collect();
             let fractions: Vec<f64> = speedups.iter().zip(&ceilings).map(|(s, c)| s / c).collect();
-            println!(
+            out(format_args!(
                 "  ceiling (two one-thread simulations side by side): median block {:.2}×; two threads reach {:.2} of it (median block)",
                 median(&ceilings),
                 median(&fractions)
-            );
+            ))?;
         }
         if let Some(e) = stopped {
             return Err(e.context(format!("χ = {chi}: stopped")));
@@ -215,7 +220,7 @@ pub fn relaxed_start(file: &Path, params: &Params, seed: u64) -> Result<Monolaye
             file.display()
         ))
     })?;
-    Monolayer::from_state(params.clone(), seed, state)
+    Monolayer::from_saved(params.clone(), seed, state)
         .map_err(|e| RunError::from(e).context(format!("--from-relaxed {}", file.display())))
 }
 
@@ -257,7 +262,7 @@ pub fn bench_analysis(frames: u64) -> Result<(), RunError> {
         analysis.measure(&m);
     }
     let ms = 1e3 * t.elapsed().as_secs_f64() / reps as f64;
-    println!("measurements of one full-size frame (N = {}, L = {}): {ms:.2} ms", p.n_cells, p.box_size);
+    out(format_args!("measurements of one full-size frame (N = {}, L = {}): {ms:.2} ms", p.n_cells, p.box_size))?;
     let dir = std::env::temp_dir().join(format!("monolayer-analysis-bench-{}", std::process::id()));
     let result = write_and_analyze(&mut m, &dir, frames);
     let _ = fs::remove_dir_all(&dir);
@@ -275,11 +280,11 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), R
     }
     let t = Instant::now();
     let written = analyze_run(dir, None, None, Background::StrainRate)?;
-    println!(
+    out(format_args!(
         "analyze over {frames} full-size frames: {:.2} s ({} files written)",
         t.elapsed().as_secs_f64(),
         written.len()
-    );
+    ))?;
     Ok(())
 }
 
@@ -294,9 +299,9 @@ fn write_and_analyze(m: &mut Monolayer, dir: &Path, frames: u64) -> Result<(), R
 pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, row_every: u64) -> Result<(), RunError> {
     use crate::gpu::{GpuContext, GpuMonolayer, Kernel};
     let ctx = GpuContext::new().map_err(RunError::gpu)?;
-    println!("adapter: {}", ctx.describe());
+    out(format_args!("adapter: {}", ctx.describe()))?;
     if ctx.runs_on_cpu() {
-        println!("a CPU device: every time below is a CPU figure, not a GPU's");
+        out(format_args!("a CPU device: every time below is a CPU figure, not a GPU's"))?;
     }
     let p = Params { relax_steps, ..params.clone() };
     let mut m = Monolayer::new(p.clone(), seed).map_err(RunError::from)?;
@@ -315,13 +320,18 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
             .collect();
         median(&times)
     };
-    println!(
+    out(format_args!(
         "N = {}, L = {}, {relax_steps} relaxation steps and 5 active on the CPU, then the median of {repeats} dispatches:",
         p.n_cells, p.box_size
-    );
+    ))?;
     for k in Kernel::ALL {
         let b = k.compulsory_bytes(gpu.state());
-        println!("  {:<18} {:>8.3} ms/dispatch  {:>6.2} MB", format!("{k:?}"), time(&gpu, &[k]), b as f64 / 1e6);
+        out(format_args!(
+            "  {:<18} {:>8.3} ms/dispatch  {:>6.2} MB",
+            format!("{k:?}"),
+            time(&gpu, &[k]),
+            b as f64 / 1e6
+        ))?;
     }
     let bytes = |gpu: &GpuMonolayer, kernels: &[Kernel]| {
         kernels.iter().map(|k| k.compulsory_bytes(gpu.state())).sum::<u64>() as f64 / 1e6
@@ -335,12 +345,12 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
         ("up to the friction solve's right-hand side", &Kernel::FRICTION_SUMS[..]),
         ("one Heun step without a friction solve", &Kernel::step(None)[..]),
     ] {
-        println!(
+        out(format_args!(
             "{what}: {} dispatches, {:.3} ms in one submission, {:.2} MB at the least",
             kernels.len(),
             time(&gpu, kernels),
             bytes(&gpu, kernels)
-        );
+        ))?;
     }
     // Steps with the friction solve and the patches following the cells (`Monolayer::step`),
     // from the uploaded state on (each timed step is a step of the same run); the iterations the
@@ -354,7 +364,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
     // recorded ones after them return at once), which is also what the recorded count tends to.
     let working_kernels = Kernel::whole_step(Some((gpu.preconditioner, taken)));
     let working = working_kernels.len();
-    println!(
+    out(format_args!(
         "one step with the friction solve and the patches following: {} dispatches recorded ({} CG iterations per solve), {ms:.3} ms in one submission; \
          the last solve took {taken} iterations (residual {:.2e}{}), so about {working} dispatches worked, {:.2} MB at the least",
         step.len(),
@@ -362,7 +372,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
         solve.residual(),
         if solve.converged() { "" } else { ", NOT CONVERGED" },
         bytes(&gpu, &working_kernels)
-    );
+    ))?;
     let working_bytes = bytes(&gpu, &working_kernels);
 
     // A run as the page's GPU engine takes it (gpu::stepper::GpuRun): submissions of 50 steps,
@@ -387,28 +397,28 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
     let adapted = run.gpu().solve_iterations;
     let recorded_list = run.gpu().step_kernels();
     let recorded_now = recorded_list.len();
-    println!(
+    out(format_args!(
         "a GPU run (GpuRun, checked every {} steps, {} submissions under way): {per_step:.3} ms per step over 2 × {steps} \
          steps ({one_at_a_time:.3} ms over 2 × {steps} alternated with them, one submission at a time); the recorded CG iterations went \
          from {recorded} to {adapted} per solve, {recorded_now} dispatches recorded per step",
         run.check_every,
         crate::gpu::IN_FLIGHT
-    );
+    ))?;
     let stages: Vec<String> =
         by_stage(&recorded_list, &vec![1.0; recorded_now]).iter().map(|(f, n)| format!("{f} {n}")).collect();
-    println!("dispatches recorded per step by stage (shaders/): {}", stages.join(", "));
+    out(format_args!("dispatches recorded per step by stage (shaders/): {}", stages.join(", ")))?;
     let coarse: u64 = recorded_list
         .iter()
         .filter(|&&k| matches!(k, Kernel::MgCoarseCycle | Kernel::MgSetUpCoarse))
         .map(|k| k.serial_steps(run.gpu().state()))
         .sum();
-    println!(
+    out(format_args!(
         "at the {taken} iterations the solve took: {} dispatches per step; longest serial chain per step (loop \
          iterations one after another on one invocation, Kernel::serial_steps): {} as recorded, {coarse} of them in \
          the coarse levels",
         working,
         crate::gpu::serial_chain(&recorded_list, run.gpu().state())
-    );
+    ))?;
     // Each dispatch timed on the device, in its own pass between two timestamps: one step from
     // the uploaded state, the recorded list.
     gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
@@ -416,19 +426,19 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
         Some(ms) => {
             let stages: Vec<String> =
                 by_stage(&recorded_list, &ms).iter().map(|(f, t)| format!("{f} {t:.3}")).collect();
-            println!(
+            out(format_args!(
                 "device time of one step by stage (timestamps around each dispatch), ms: {}; {:.3} in all",
                 stages.join(", "),
                 ms.iter().sum::<f64>()
-            );
+            ))?;
         }
-        None => println!("device time by stage: timestamps unsupported on this adapter"),
+        None => out(format_args!("device time by stage: timestamps unsupported on this adapter"))?,
     }
     // Every recorded dispatch is launched, the ones after convergence too; the bytes and the
     // serial steps are those of the dispatches that work.
     let working_chain = crate::gpu::serial_chain(&working_kernels, gpu.state());
-    println!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, working_chain)));
-    println!("{}", hand_off_line(&time_hand_off(&ctx, &run, repeats)?, row_every));
+    out(format_args!("{}", projection_line(&LaptopProjection::of(recorded_now, working_bytes, working_chain))))?;
+    out(format_args!("{}", hand_off_line(&time_hand_off(&ctx, &run, repeats)?, row_every)))?;
     Ok(())
 }
 

@@ -45,7 +45,7 @@ fn split<'a>(flag: &str, arg: &'a str, what: &str) -> Result<(String, &'a str), 
 fn show(v: &toml::Value) -> String {
     match v {
         toml::Value::String(s) => format!("\"{s}\""),
-        toml::Value::Float(x) => format!("{x}"),
+        toml::Value::Float(x) => crate::model::number_text(*x),
         other => other.to_string(),
     }
 }
@@ -148,8 +148,36 @@ pub fn number(key: &str, v: &toml::Value) -> Result<f64, RunError> {
     }
 }
 
-/// Parameters from an optional TOML file and `KEY=VALUE` overrides (later ones win).
+/// Refuses a parameter given twice among the `KEY=VALUE`s of `flag` (`--set gamma=0.06 --set
+/// gamma=0.07`): one of the two would be dropped unsaid.
+pub fn check_distinct(flag: &str, sets: &[String]) -> Result<(), RunError> {
+    let mut seen: Vec<(String, &String)> = Vec::new();
+    for s in sets {
+        let (k, _) = parse_assignment(flag, s)?;
+        if let Some((_, first)) = seen.iter().find(|(key, _)| *key == k) {
+            return Err(RunError::Options(format!("{flag} {first} and {flag} {s} both set `{k}`: give one of them")));
+        }
+        seen.push((k, s));
+    }
+    Ok(())
+}
+
+/// Parameters from an optional TOML file and `KEY=VALUE` overrides of its values, each
+/// parameter given once among them ([`check_distinct`]).
 pub fn load_params(config: Option<&Path>, overrides: &[String]) -> Result<Params, RunError> {
+    check_distinct("--set", overrides)?;
+    load_layers(config, overrides)
+}
+
+/// [`load_params`] of the user's `overrides` over `base` assignments a command sets itself (a
+/// figures scale's), which they replace.
+pub fn load_params_over(base: &[String], overrides: &[String]) -> Result<Params, RunError> {
+    check_distinct("--set", overrides)?;
+    load_layers(None, &[base, overrides].concat())
+}
+
+/// Parameters from an optional TOML file and `KEY=VALUE` overrides (later ones win).
+fn load_layers(config: Option<&Path>, overrides: &[String]) -> Result<Params, RunError> {
     // Where each key of the file is: a wrong value is named by its line and column.
     let mut places = std::collections::BTreeMap::new();
     let (mut table, origin) = match config {

@@ -127,6 +127,13 @@ pub enum RunError {
         first_five(missing)
     )]
     Unfinished { missing: Vec<String>, total: usize, dir: PathBuf },
+    /// A forecast over runs in which no hole nucleates after their first frame: nothing to fit.
+    #[error(
+        "no hole nucleates after the first frame of any of the {runs} run(s) given ({nucleations} nucleation(s) in \
+         all, none with a frame before it): there is nothing to fit or score, and nothing is written; give runs \
+         in which holes open (a lower χ or a higher ζ: the regime map, docs/calibration.md)"
+    )]
+    NothingToForecast { runs: usize, nucleations: usize },
     /// A held-out forecast over runs of fewer than two seeds.
     #[error("the runs have {0} seed(s): leaving one seed out needs runs of at least two seeds")]
     TooFewSeeds(usize),

@@ -78,10 +78,11 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         return draw_figures(&plan, &o.out, o.jobs);
     }
     // 2. The runs: what they will cost, then here or on Slurm.
-    runs::check_memory(&plan)?;
     let share = runs::Share::of(&plan, &o.out, o.shard);
+    // On Slurm each task runs one; here `--jobs` at a time.
+    runs::check_memory(&plan, &share, if o.slurm { 1 } else { o.jobs })?;
     let ids: Vec<&str> = figures.iter().map(|f| f.id()).collect();
-    eprintln!(
+    crate::run::console::note(format_args!(
         "figures (scale {}): {} need {} runs{}; {} to run, {} steps",
         o.scale.name(),
         ids.join(", "),
@@ -89,14 +90,14 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         o.shard.map(|s| format!(" ({} in shard {}/{})", share.mine.len(), s.index, s.count)).unwrap_or_default(),
         share.todo.len(),
         share.steps()
-    );
+    ));
     // The longest run and the whole plan, for the estimate and for Slurm's time limits.
     let sample: Vec<&Job> = if share.todo.is_empty() && !o.slurm { Vec::new() } else { plan.jobs.iter().collect() };
     let speed = Speed::measure(&sample, 100, 30)?;
     for ((l, n), (r, a)) in &speed.sizes {
-        eprintln!(
+        crate::run::console::note(format_args!(
             "  measured on one thread at L = {l}, N = {n}: {r:.2} ms/step relaxing, {a:.2} ms/step active (χ = 0.001)"
-        );
+        ));
     }
     if o.slurm {
         if o.stage != Stage::All || o.shard.is_some() {
@@ -116,15 +117,15 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
     let core_seconds = share.core_seconds(&speed);
     let workers = o.jobs.min(share.todo.len().max(1));
     if !share.todo.is_empty() {
-        eprintln!(
+        crate::run::console::note(format_args!(
             "  estimate: {:.2} core-hours, about {} on {} core(s) (measured before the tissue is confluent: runs with holes cost more)",
             core_seconds / 3600.0,
             runs::hours(core_seconds / workers as f64),
             workers
-        );
+        ));
     }
     if o.dry_run {
-        eprintln!("dry run: nothing run or written");
+        crate::run::console::note(format_args!("dry run: nothing run or written"));
         return Ok(());
     }
     // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
@@ -154,16 +155,43 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
 }
 
 /// Stages 2 (the runs, all finished) to 5 from the runs in `out/runs`: the figures, their CSVs,
-/// `plan.csv` and `figures.md` into `out`, each file's path printed.
+/// `plan.csv` and `figures.md` into `out` as one set (a full disk or a signal leaves the previous
+/// set as it was), each file's path printed. SIGTERM or SIGINT stops it between runs measured and
+/// before the set is moved in.
 fn draw_figures(plan: &Plan, out: &Path, workers: usize) -> Result<(), RunError> {
     let t = Instant::now();
+    crate::run::files::check_output_dir("--out", out)?;
     let finished = runs::finished(plan, out)?;
     let measured = measures::measure(finished, workers)?;
-    let drawn = draw::draw(measured, out)?;
-    let md = report::write(&drawn, out)?;
-    for path in drawn.files.iter().chain([&md]) {
-        println!("{}", path.display());
+    let files = crate::run::files::write_set(
+        out,
+        |_| false,
+        |stage| {
+            let drawn = draw::draw(measured, stage)?;
+            let md = report::write(&drawn, stage)?;
+            stop_if_signalled()?;
+            Ok(drawn.files.into_iter().chain([md]).collect())
+        },
+    )?;
+    for path in &files {
+        crate::run::console::out(path.display())?;
     }
-    eprintln!("figures drawn in {:.1} s: {}", t.elapsed().as_secs_f64(), out.join("figures.md").display());
+    crate::run::console::note(format!(
+        "figures drawn in {:.1} s: {}",
+        t.elapsed().as_secs_f64(),
+        out.join("figures.md").display()
+    ));
     Ok(())
+}
+
+/// The error of a stop asked for by SIGTERM or SIGINT while the figures are drawn: nothing is
+/// moved into place, and the same command again draws them.
+pub(crate) fn stop_if_signalled() -> Result<(), RunError> {
+    match crate::run::runner::stop_signal() {
+        Some((signal, _)) => Err(RunError::Interrupted {
+            signal,
+            detail: ": no figure was written; the same command again draws them".into(),
+        }),
+        None => Ok(()),
+    }
 }

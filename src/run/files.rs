@@ -14,8 +14,8 @@ use ndarray::{arr0, Array1, Array2, Array3};
 use ndarray_npy::{NpzReader, NpzWriter};
 use num_complex::Complex64 as C64;
 
-use crate::formats::{self, frame_file_name, FrameData, RunRecord, FORMAT, FORMAT_VERSION};
-use crate::model::{Monolayer, Params, Patch, State};
+use crate::formats::{self, frame_file_name, Engine, FrameData, RunRecord, FORMAT, FORMAT_VERSION};
+use crate::model::{Monolayer, Params, Patch, State, MAX_BOX_SIZE};
 use crate::run::error::RunError;
 
 pub type IoResult<T> = Result<T, RunError>;
@@ -75,7 +75,7 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path.file_name().ok_or_else(|| err(path, "not a file name"))?.to_string_lossy();
     let call = CALLS.fetch_add(1, Ordering::Relaxed);
-    let tmp = dir.join(format!(".{name}.{}.{call}.tmp", std::process::id()));
+    let tmp = dir.join(temporary_name(&name, call));
     let file = File::create(&tmp).map_err(|e| io(&tmp, e))?;
     let mut w = BufWriter::new(file);
     let result = write(&mut w).and_then(|_| {
@@ -92,33 +92,19 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> IoR
     })
 }
 
-/// Writes a set of files into `out` (created) as one: `write(stage)` writes them into a hidden
-/// directory in `out` and returns their paths; they are moved in only when every one is
-/// complete and every target can be replaced, so that a full disk or a killed process leaves the
-/// previous set whole, never a mix. Returns the files' paths in `out`.
-pub fn write_set(out: &Path, write: impl FnOnce(&Path) -> IoResult<Vec<PathBuf>>) -> IoResult<Vec<PathBuf>> {
-    static CALLS: AtomicU64 = AtomicU64::new(0);
-    let call = CALLS.fetch_add(1, Ordering::Relaxed);
-    fs::create_dir_all(out).map_err(|e| io(out, e))?;
-    remove_dead_temporaries(out);
-    let stage = out.join(format!(".staging.{}.{call}", std::process::id()));
-    let staged = fs::create_dir_all(&stage).map_err(|e| io(&stage, e)).and_then(|_| write(&stage));
-    let moved = staged.and_then(|files| {
-        let targets = files
-            .iter()
-            .map(|f| {
-                let to = out.join(f.file_name().expect("a file"));
-                replaceable(&to).map(|target| (to, target))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        files
-            .iter()
-            .zip(targets)
-            .map(|(f, (to, target))| fs::rename(f, &target).map(|_| to.clone()).map_err(|e| io(&to, e)))
-            .collect::<Result<Vec<_>, _>>()
-    });
-    let _ = fs::remove_dir_all(&stage);
-    moved
+/// The most bytes of a file name (Linux's NAME_MAX, and most file systems').
+const NAME_MAX: usize = 255;
+
+/// The temporary name [`write_atomic`] writes `name` under: `.NAME.PID.CALL.tmp`, this process's
+/// and this call's own, with `NAME` shortened (at a character boundary) where the whole would
+/// exceed [`NAME_MAX`]: an output name near the limit is written, not refused on its temporary.
+fn temporary_name(name: &str, call: u64) -> String {
+    let suffix = format!(".{}.{call}.tmp", std::process::id());
+    let mut room = NAME_MAX - 1 - suffix.len();
+    while room < name.len() && !name.is_char_boundary(room) {
+        room -= 1;
+    }
+    format!(".{}{suffix}", &name[..room.min(name.len())])
 }
 
 /// Writes `text` to `path` atomically ([`write_atomic`]): the tables, reports and scripts.
@@ -131,6 +117,7 @@ pub fn write_text(path: &Path, text: &str) -> IoResult<()> {
 /// whatever is at its target, so anything else (a device such as `/dev/null`, a FIFO, a
 /// directory, a link to one of those or to nothing) is refused before a byte is written.
 pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
+    check_output_name(path)?;
     let link = match fs::symlink_metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
         Err(e) => return Err(io(path, e)),
@@ -160,6 +147,32 @@ pub fn replaceable(path: &Path) -> IoResult<PathBuf> {
     Ok(path.to_path_buf())
 }
 
+/// Checks what an output path's name and directory allow before anything is computed for it:
+/// a name of at most [`NAME_MAX`] bytes in a directory that exists (else the write would fail
+/// only at the end, naming its temporary file).
+fn check_output_name(path: &Path) -> IoResult<()> {
+    let name = path.file_name().ok_or_else(|| err(path, "not a file name: give the path of a file"))?;
+    if name.len() > NAME_MAX {
+        return Err(err(
+            path,
+            format!("a file name of {} bytes: longer than the {NAME_MAX} a file name may have", name.len()),
+        ));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    match fs::metadata(dir) {
+        Ok(m) if m.is_dir() => Ok(()),
+        Ok(_) => Err(err(dir, format!("not a directory, so {} cannot be written in it", path.display()))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(err(
+            dir,
+            format!("no such directory, so {} cannot be written: create it first, or write elsewhere", path.display()),
+        )),
+        Err(e) => Err(io(dir, e)),
+    }
+}
+
 fn file_kind(t: &fs::FileType) -> &'static str {
     #[cfg(unix)]
     {
@@ -182,6 +195,82 @@ fn file_kind(t: &fs::FileType) -> &'static str {
     } else {
         "not a regular file"
     }
+}
+
+/// Checks, before anything is computed, that `out` (given as `flag`) can be the directory of a
+/// set of outputs: a directory, or nothing yet (it is created). A file there would fail only at
+/// the end, on the name of a temporary.
+pub fn check_output_dir(flag: &str, out: &Path) -> IoResult<()> {
+    match fs::metadata(out) {
+        Ok(m) if m.is_dir() => Ok(()),
+        Ok(m) => Err(err(
+            out,
+            format!(
+                "{flag}: is {}, not a directory: give {flag} a directory (new or existing) to write into",
+                file_kind(&m.file_type()).replace("not a regular file", "a file")
+            ),
+        )),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(io(out, e)),
+    }
+}
+
+/// Writes a set of outputs (the tables and plots of `analyze`, `forecast` or `figures`) into
+/// `out`, created, as one: `write` puts every file into a hidden staging directory in `out`,
+/// which it is given, and only once all are complete are they moved in, each over the file of
+/// its name, every target checked before the first is moved. A failure anywhere (a full disk, a
+/// signal, a target that cannot be replaced) leaves the previous set as it was, not a mix.
+/// `stale(name)` says which files of `out` are of the set though their names vary (a snapshot
+/// of another step): those the new set does not hold are removed once it is in. Returns the
+/// files written, in `out`.
+pub fn write_set(
+    out: &Path,
+    stale: impl Fn(&str) -> bool,
+    write: impl FnOnce(&Path) -> IoResult<Vec<PathBuf>>,
+) -> IoResult<Vec<PathBuf>> {
+    static CALLS: AtomicU64 = AtomicU64::new(0);
+    check_output_dir("--out", out)?;
+    let call = CALLS.fetch_add(1, Ordering::Relaxed);
+    fs::create_dir_all(out).map_err(|e| io(out, e))?;
+    remove_dead_temporaries(out);
+    let stage = out.join(format!(".staging.{}.{call}", std::process::id()));
+    let staged = fs::create_dir(&stage).map_err(|e| io(&stage, e)).and_then(|_| write(&stage));
+    let moved = staged.and_then(|files| move_set_in(out, &files));
+    let _ = fs::remove_dir_all(&stage);
+    let moved = moved?;
+    remove_stale(out, &moved, stale)?;
+    Ok(moved)
+}
+
+/// Moves the staged `files` into `out`, every target checked before the first is moved: one that
+/// cannot be replaced leaves the previous set whole.
+fn move_set_in(out: &Path, files: &[PathBuf]) -> IoResult<Vec<PathBuf>> {
+    let targets = files
+        .iter()
+        .map(|f| {
+            let to = out.join(f.file_name().ok_or_else(|| err(f, "not a file name"))?);
+            replaceable(&to).map(|target| (to, target))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    files
+        .iter()
+        .zip(targets)
+        .map(|(f, (to, target))| fs::rename(f, &target).map(|_| to.clone()).map_err(|e| io(&to, e)))
+        .collect()
+}
+
+/// Removes the files of `out` that `stale` says are of the set and that the set just moved in
+/// (`kept`) does not hold.
+fn remove_stale(out: &Path, kept: &[PathBuf], stale: impl Fn(&str) -> bool) -> IoResult<()> {
+    let entries = fs::read_dir(out).map_err(|e| io(out, e))?;
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let path = entry.path();
+        if stale(&name) && !kept.contains(&path) && entry.file_type().is_ok_and(|t| t.is_file()) {
+            fs::remove_file(&path).map_err(|e| io(&path, e))?;
+        }
+    }
+    Ok(())
 }
 
 /// The largest text file read as input: a config file, a sweep file or a `run.json` holds a
@@ -353,9 +442,23 @@ impl RunRecord {
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
             return Err(err(&path, format!("not a record of this program (no \"format\": \"{FORMAT}\")")));
         }
-        let v = value.get("format_version").and_then(|v| v.as_u64());
-        if v != Some(FORMAT_VERSION as u64) {
-            return Err(err(&path, format!("format_version {v:?}, this program reads {FORMAT_VERSION}")));
+        match value.get("format_version") {
+            Some(v) if v.as_u64() == Some(FORMAT_VERSION as u64) => {}
+            Some(v) => {
+                return Err(err(
+                    &path,
+                    format!(
+                        "`format_version` = {v}: this program reads format_version {FORMAT_VERSION} (a run written \
+                         by another version of it: read it with that version)"
+                    ),
+                ))
+            }
+            None => {
+                return Err(err(
+                    &path,
+                    format!("no `format_version`: not a complete run record (this program writes {FORMAT_VERSION})"),
+                ))
+            }
         }
         // A run continues with the parameters it was started with, never with a default: a record
         // without one (hand-edited, or of an older version that lacked it) is refused by name.
@@ -436,7 +539,8 @@ pub fn write_frame(m: &mut Monolayer, path: &Path) -> IoResult<()> {
 }
 
 /// The array of a checkpoint that holds the seed and parameters it was stepped with (JSON text as
-/// bytes): a resume under other ones would continue another trajectory from this state.
+/// bytes), and for a run's own checkpoints its engine and frame interval: a resume under other
+/// ones would continue another trajectory from this state.
 const RUN_PARAMS: &str = "run_params";
 
 fn run_params_json(params: &Params, seed: u64) -> serde_json::Value {
@@ -446,6 +550,27 @@ fn run_params_json(params: &Params, seed: u64) -> serde_json::Value {
 /// Writes the exact state (f64 bits, padded patches, the solver's warm start and corrector
 /// shift), and the seed and parameters it belongs to.
 pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
+    write_state(m, path, run_params_json(m.params(), m.seed()))
+}
+
+/// [`write_checkpoint`] of a run's state: with the engine that stepped it and the run's frame
+/// interval from its `record`, so that a resume under another (run.json edited) is refused by name.
+pub fn write_run_checkpoint(m: &Monolayer, path: &Path, record: &RunRecord) -> IoResult<()> {
+    let mut key = run_params_json(m.params(), m.seed());
+    key["engine"] = engine_name(&record.engine).into();
+    key["frame_interval"] = record.frame_interval.into();
+    write_state(m, path, key)
+}
+
+/// The engine a record names, as `run.json` writes it (an unknown name as it is, for the error).
+fn engine_name(recorded: &str) -> String {
+    match Engine::parse(if recorded.is_empty() { "cpu" } else { recorded }) {
+        Ok(e) => e.name().to_string(),
+        Err(_) => recorded.to_string(),
+    }
+}
+
+fn write_state(m: &Monolayer, path: &Path, key: serde_json::Value) -> IoResult<()> {
     let s = m.state();
     let l = m.params().box_size;
     let n = s.cells.len();
@@ -459,7 +584,7 @@ pub fn write_checkpoint(m: &Monolayer, path: &Path) -> IoResult<()> {
     let warm = complex_field(&s.warm_start, l);
     let shift = complex_field(&s.corrector_shift, l);
     let substrate = Array2::from_shape_vec((l, l), s.substrate.clone()).expect("L×L");
-    let key = run_params_json(m.params(), m.seed()).to_string().into_bytes();
+    let key = key.to_string().into_bytes();
     write_npz(path, |z| {
         z.add_array(RUN_PARAMS, &Array1::from(key))?;
         z.add_array("step", &arr0(s.step as i64))?;
@@ -561,12 +686,16 @@ pub fn read_checkpoint(path: &Path, l: usize) -> IoResult<State> {
     })
 }
 
-/// Checks that the checkpoint at `path` was written with the seed and parameters of `record`,
-/// naming the first that differs: `run.json` edited after the run started would otherwise
-/// continue one trajectory under another's parameters. Checkpoints written before they held
-/// their parameters are not checked.
+/// Checks that the checkpoint at `path` was written with the seed and parameters of `record`
+/// (and, where it records them, its engine and frame interval), naming the first that differs:
+/// `run.json` edited after the run started would otherwise continue one trajectory under
+/// another's parameters, or be blamed on the checkpoint. Read before the state itself, whose
+/// arrays are checked against the record's lattice. Checkpoints written before they held their
+/// parameters are not checked.
 pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> {
-    check_npz_file_headers(path, formats::max_array_values(record.params.box_size))?;
+    // Bounded by the largest lattice a run may have, not the record's: an edited box_size is
+    // named below, not taken for a damaged checkpoint.
+    check_npz_file_headers(path, formats::max_array_values(MAX_BOX_SIZE))?;
     let file = File::open(path).map_err(|e| io(path, e))?;
     let mut z = NpzReader::new(BufReader::new(file)).map_err(|e| err(path, e))?;
     let has_key = z.names().map_err(|x| err(path, x))?.iter().any(|n| n.trim_end_matches(".npy") == RUN_PARAMS);
@@ -576,30 +705,36 @@ pub fn check_checkpoint_params(path: &Path, record: &RunRecord) -> IoResult<()> 
     let bytes: Array1<u8> = z.by_name(RUN_PARAMS).map_err(|x| err(path, format!("array `{RUN_PARAMS}`: {x}")))?;
     let stored: serde_json::Value = serde_json::from_slice(&bytes.to_vec())
         .map_err(|x| err(path, format!("array `{RUN_PARAMS}`: not the JSON of a run's parameters: {x}")))?;
+    let step: ndarray::Array0<i64> = z.by_name("step").map_err(|x| err(path, format!("array `step`: {x}")))?;
     let given = run_params_json(&record.params, record.seed);
-    let mut pairs = vec![("seed".to_string(), stored.get("seed"), given.get("seed"))];
+    let mut pairs = vec![("seed".to_string(), stored.get("seed").cloned(), given.get("seed").cloned())];
     if let Some(table) = given.get("params").and_then(|p| p.as_object()) {
         // `active_steps` says only where the trajectory ends: raising it extends the same run.
         for (k, v) in table.iter().filter(|(k, _)| *k != "active_steps") {
-            pairs.push((k.clone(), stored.get("params").and_then(|p| p.get(k)), Some(v)));
+            pairs.push((k.clone(), stored.get("params").and_then(|p| p.get(k)).cloned(), Some(v.clone())));
         }
+    }
+    pairs.push(("frame_interval".into(), stored.get("frame_interval").cloned(), Some(record.frame_interval.into())));
+    // The state of step 0 is the random disks, which every engine starts from (a new run takes
+    // its engine after its first checkpoint); from the first step on, it is the engine's.
+    if step.into_scalar() > 0 {
+        let engine = engine_name(&record.engine);
+        pairs.push(("engine".into(), stored.get("engine").cloned(), Some(engine.into())));
     }
     // A parameter newer than the checkpoint is not in it, and has its default there.
     let differs = pairs.into_iter().find(|(_, s, g)| s.is_some() && s != g);
     match differs {
         None => Ok(()),
         Some((k, s, g)) => {
-            let show = |v: Option<&serde_json::Value>| v.map(|v| v.to_string()).unwrap_or_default();
+            let show = |v: Option<serde_json::Value>| v.map(|v| v.to_string()).unwrap_or_default();
+            let (s, g) = (show(s), show(g));
             Err(err(
                 &RunRecord::path(path.parent().unwrap_or(Path::new("."))),
                 format!(
-                    "`{k}` = {} there, but the checkpoint {} was written with {k} = {}: a run continues only with \
-                     the parameters it started with (was run.json edited?); restore `{k}` to {}, or start a new run \
-                     with these parameters in another --out",
-                    show(g),
+                    "`{k}` = {g} there, but the checkpoint {} was written with {k} = {s}: a run continues only with \
+                     the parameters, frame interval and engine it started with (was run.json edited?); restore \
+                     `{k}` to {s}, or start a new run with these parameters in another --out",
                     path.display(),
-                    show(s),
-                    show(s)
                 ),
             ))
         }
@@ -615,7 +750,10 @@ pub struct Frame {
     pub data: FrameData,
 }
 
-/// A run directory checked for analysis: its record and its complete frames, in step order.
+/// A run directory checked for analysis: its record and every frame it has written, in step
+/// order, none missing. Every reader of a run's frames (`analyze`, the sweep's tables, the
+/// figures, the forecast) goes through it: a frame missing anywhere would be measured as a
+/// shorter run or a longer frame interval, and counted as a result that was never measured.
 #[derive(Clone, Debug)]
 pub struct RunFrames {
     pub dir: PathBuf,
@@ -625,40 +763,47 @@ pub struct RunFrames {
 }
 
 impl RunFrames {
-    /// Opens `dir` as a run: its `run.json` must be this program's, of this format version,
-    /// and it must have at least one frame. Frames are written by an atomic rename, so every
-    /// `frame_*.npz` present is complete (a frame being written is a hidden temporary file,
-    /// skipped): a run in progress is read up to its last complete frame.
+    /// Opens `dir` as a run with at least one frame: its `run.json` must be this program's, of
+    /// this format version, and its frames all there from the first ([`RunRecord::first_frame_step`])
+    /// to the last its record names, one every frame interval. Frames are written by an atomic
+    /// rename, so every `frame_*.npz` present is complete (a frame being written is a hidden
+    /// temporary file, skipped): a run in progress is read up to its last complete frame.
     pub fn open(dir: &Path) -> Result<Self, RunError> {
         let record = RunRecord::load(dir)?;
-        let frames_dir = dir.join("frames");
-        let entries = fs::read_dir(&frames_dir).map_err(|e| {
-            err(&frames_dir, format!("{e} (a run's frames are in DIR/frames; has this run written any yet?)"))
-        })?;
-        let mut frames = Vec::new();
-        for entry in entries {
-            let entry = entry.map_err(|e| io(&frames_dir, e))?;
-            let name = entry.file_name().to_string_lossy().into_owned();
-            if entry.file_type().is_ok_and(|t| t.is_dir()) {
-                continue;
-            }
-            if let Some(step) = name.strip_prefix("frame_").and_then(|s| s.strip_suffix(".npz")) {
-                // A FIFO or a device would block the reader, or never end.
-                if !fs::metadata(entry.path()).is_ok_and(|m| m.is_file()) {
-                    return Err(err(&entry.path(), "not a regular file: not a frame"));
-                }
-                let step: u64 = step.parse().map_err(|_| err(&entry.path(), "not a frame name (frame_<step>.npz)"))?;
-                frames.push((step, entry.path()));
-            }
-        }
-        if frames.is_empty() {
-            return Err(err(
-                &frames_dir,
+        let (status, interval) = (record.status.to_string(), record.frame_interval);
+        Self::scan(dir, record)?.ok_or_else(|| {
+            err(
+                &dir.join("frames"),
                 format!(
-                    "no frames yet (status \"{}\"); frames are written every {} active steps",
-                    record.status, record.frame_interval
+                    "no frames yet (status \"{status}\"); frames are written every {interval} active steps (a run's \
+                     frames are in DIR/frames)"
                 ),
-            ));
+            )
+        })
+    }
+
+    /// [`RunFrames::open`], or None for a run whose record says it has written no frame yet (one
+    /// that failed or stopped before its first): the sweep's tables and the figures count such a
+    /// run by its status alone. Frames missing where the record says there are some are refused.
+    pub fn open_if_any(dir: &Path) -> Result<Option<Self>, RunError> {
+        Self::scan(dir, RunRecord::load(dir)?)
+    }
+
+    fn scan(dir: &Path, record: RunRecord) -> Result<Option<Self>, RunError> {
+        let frames_dir = dir.join("frames");
+        let mut frames = frame_files(&frames_dir)?;
+        if frames.is_empty() {
+            return match record.last_frame_step {
+                None => Ok(None),
+                Some(last) => Err(err(
+                    &frames_dir,
+                    format!(
+                        "no frame files, but run.json records frames from step {} to step {last} (last_frame_step): \
+                         they were removed or moved; restore them, or move the run out of where it is read",
+                        record.first_frame_step()
+                    ),
+                )),
+            };
         }
         frames.sort();
         if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
@@ -674,39 +819,128 @@ impl RunFrames {
                 own,
             });
         }
-        // A gap would be measured as one frame interval: holes would seem to open and close
-        // faster, and a lifetime would end early. The frames need not start at the end of the
-        // relaxation (a page's download holds only its last).
-        let fi = record.frame_interval;
-        if let Some(w) = frames.windows(2).find(|w| w[1].0 - w[0].0 != fi) {
-            let (a, b) = (w[0].0, w[1].0);
-            if (b - a) % fi != 0 {
-                return Err(err(
-                    &w[1].1,
-                    format!(
-                        "step {b} is not a frame interval after the frame before it ({}, step {a}; run.json: \
-                         frame_interval = {fi}): not a frame of this run",
-                        w[0].1.display()
-                    ),
-                ));
-            }
-            let missing: Vec<u64> = (1..(b - a) / fi).map(|k| a + k * fi).collect();
-            let shown: Vec<String> = missing.iter().take(10).map(u64::to_string).collect();
-            let more = if missing.len() > 10 { format!(" and {} more", missing.len() - 10) } else { String::new() };
+        check_frame_sequence(&frames_dir, &record, &frames)?;
+        Ok(Some(RunFrames { dir: dir.to_path_buf(), record, frames }))
+    }
+
+    /// Reads every frame in order, each checked against the run ([`read_run_frame`]).
+    pub fn read(&self) -> impl Iterator<Item = Result<Frame, RunError>> + '_ {
+        self.frames.iter().map(|(step, path)| read_run_frame(path, *step, &self.record.params))
+    }
+}
+
+/// (step, path) of every `frame_<step>.npz` in `frames_dir`, unsorted; none where the directory
+/// does not exist. Anything named like a frame that is not a regular file is refused: a FIFO
+/// or a device would block the reader or never end, and a directory would be a frame skipped.
+fn frame_files(frames_dir: &Path) -> IoResult<Vec<(u64, PathBuf)>> {
+    let entries = match fs::read_dir(frames_dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(err(frames_dir, format!("{e} (a run's frames are in DIR/frames)"))),
+        Ok(entries) => entries,
+    };
+    let mut frames = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| io(frames_dir, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(step) = name.strip_prefix("frame_").and_then(|s| s.strip_suffix(".npz")) else { continue };
+        let meta = fs::metadata(entry.path()).map_err(|e| io(&entry.path(), e))?;
+        if !meta.is_file() {
+            let kind = file_kind(&meta.file_type());
             return Err(err(
-                &frames_dir,
+                &entry.path(),
+                format!("is {kind}, not a regular file: not a frame; move it out of frames/"),
+            ));
+        }
+        let step: u64 = step.parse().map_err(|_| err(&entry.path(), "not a frame name (frame_<step>.npz)"))?;
+        frames.push((step, entry.path()));
+    }
+    Ok(frames)
+}
+
+/// The steps `from`, `from + every`, … up to `to` as a list for a message: the first ten, then
+/// how many more (a gap may span millions of frames).
+fn steps_text(from: u64, to: u64, every: u64) -> String {
+    let count = (to - from) / every + 1;
+    let shown: Vec<String> = (0..count.min(10)).map(|k| (from + k * every).to_string()).collect();
+    let more = if count > 10 { format!(" and {} more", count - 10) } else { String::new() };
+    format!("step{} {}{more}", if count == 1 { "" } else { "s" }, shown.join(", "))
+}
+
+/// Checks that `frames` (sorted, of distinct steps) are every frame of the run from its first
+/// to the last its record names, one every frame interval: a frame missing at the start would
+/// be measured as a shorter run, one in the middle as one long frame interval (holes would seem
+/// to open and close faster), one at the end as a run that ended early.
+fn check_frame_sequence(frames_dir: &Path, record: &RunRecord, frames: &[(u64, PathBuf)]) -> IoResult<()> {
+    let fi = record.frame_interval;
+    let first = record.first_frame_step();
+    let (start, start_path) = (frames[0].0, &frames[0].1);
+    let restore = "restore them, or move the run out of where it is read";
+    if start < first || !(start - first).is_multiple_of(fi) {
+        return Err(err(
+            start_path,
+            format!(
+                "step {start} is not a step this run writes a frame at (from step {first}, every frame_interval = \
+                 {fi} steps: run.json): not a frame of this run"
+            ),
+        ));
+    }
+    if start > first {
+        return Err(err(
+            frames_dir,
+            format!(
+                "frames missing at {} before {} (the run's frames start at step {first}, the end of its \
+                 relaxation, one every frame_interval = {fi} steps: run.json): {restore}",
+                steps_text(first, start - fi, fi),
+                start_path.display()
+            ),
+        ));
+    }
+    if let Some(w) = frames.windows(2).find(|w| w[1].0 - w[0].0 != fi) {
+        let (a, b) = (w[0].0, w[1].0);
+        if !(b - a).is_multiple_of(fi) {
+            return Err(err(
+                &w[1].1,
                 format!(
-                    "frames missing at step{} {}{more}, between {} and {} (run.json: a frame every frame_interval = \
-                     {fi} steps): restore them, or move the frames after the gap out of the run to measure up to it",
-                    if missing.len() == 1 { "" } else { "s" },
-                    shown.join(", "),
-                    w[0].1.display(),
-                    w[1].1.display()
+                    "step {b} is not a frame interval after the frame before it ({}, step {a}; run.json: \
+                     frame_interval = {fi}): not a frame of this run",
+                    w[0].1.display()
                 ),
             ));
         }
-        Ok(RunFrames { dir: dir.to_path_buf(), record, frames })
+        return Err(err(
+            frames_dir,
+            format!(
+                "frames missing at {}, between {} and {} (run.json: a frame every frame_interval = {fi} steps): \
+                 {restore}, or move the frames after the gap out of the run to measure up to it",
+                steps_text(a + fi, b - fi, fi),
+                w[0].1.display(),
+                w[1].1.display()
+            ),
+        ));
     }
+    let end = frames[frames.len() - 1].0;
+    if let Some(last) = record.last_frame_step.filter(|&last| last > end) {
+        return Err(err(
+            frames_dir,
+            format!(
+                "frames missing at {} after {} (run.json records frames up to last_frame_step = {last}): {restore}",
+                steps_text(end + fi, last, fi),
+                frames[frames.len() - 1].1.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Reads the frame of `step` of a run at `path` and checks it against the run: its size, its
+/// cells, its φ and the step it holds ([`read_frame`], [`check_frame`]).
+pub fn read_run_frame(path: &Path, step: u64, params: &Params) -> IoResult<Frame> {
+    let frame = read_frame(path, params.box_size)?;
+    check_frame(&frame, params)?;
+    if frame.data.step != step {
+        return Err(err(path, format!("holds step {}, its name says {step}", frame.data.step)));
+    }
+    Ok(frame)
 }
 
 /// The largest frame file read: the arrays of a 2,048² run with the cells' φ, deflated, are far

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
-use super::files::{check_frame, read_frame, write_atomic, RunFrames};
+use super::files::{check_output_dir, read_run_frame, write_atomic, write_set, RunFrames};
 use super::plots::{both_of, plot_err, Draw, FONT, PALETTE};
 use crate::analysis::{
     caught_in_top, forecast_samples, matched_baseline, roc_auc, roc_curve, Analysis, BaselineRow, Features,
@@ -74,12 +74,12 @@ fn measure_run(dir: &Path, partial: bool) -> Result<RunData, RunError> {
     let mut a = Analysis::new(params);
     let mut tracker = HoleTracker::new(params.radius);
     let mut history = RunHistory::new(params.box_size, params.radius);
-    for (step, path) in &run.frames {
-        let frame = read_frame(path, params.box_size)?;
-        check_frame(&frame, params)?;
+    for frame in run.read() {
+        let frame = frame?;
+        let step = frame.data.step;
         a.measure_cells(frame.data.cell_views(), &frame.data.velocity);
         tracker.update(&a.voids, frame.data.time);
-        history.push(&a, &tracker, *step);
+        history.push(&a, &tracker, step);
     }
     let thinning = crate::analysis::thinning_before(&history, DEPTH);
     let baseline = matched_baseline(&history, DEPTH);
@@ -467,18 +467,21 @@ impl Draw for RocFigure<'_> {
 
 /// `monolayer forecast DIR… --out OUT`: measures every run (all frames read before anything is
 /// written), scores the forecast leaving one seed out, and writes the tables and the ROC figure
-/// to `out`. `progress` is told each run as it is read. Returns the files written.
+/// to `out` as one set. `progress` is told each run as it is read, `warn` what is left out (a
+/// run given twice). Returns the files written.
 pub fn forecast(
     dirs: &[PathBuf],
     out: &Path,
     partial: bool,
     progress: impl Fn(&str),
+    warn: impl Fn(&str),
 ) -> Result<Vec<PathBuf>, RunError> {
     if dirs.is_empty() {
         return Err(RunError::Empty { name: "RUN_DIR", need: "run directory" });
     }
+    check_output_dir("--out", out)?;
     let mut runs = Vec::with_capacity(dirs.len());
-    for d in dirs {
+    for d in distinct_runs(dirs, &warn)? {
         let r = measure_run(d, partial)?;
         progress(&format!(
             "{}: seed {}, {} nucleations, {} scored sites",
@@ -493,19 +496,56 @@ pub fn forecast(
     if seeds.len() < 2 {
         return Err(RunError::TooFewSeeds(seeds.len()));
     }
+    check_something_to_fit(&runs)?;
     let (scores, pooled) = cross_validate(&runs);
     let all: Vec<&RunData> = runs.iter().collect();
     let model = fit(&all, SHOWN_HORIZON, Subset::All);
-    std::fs::create_dir_all(out).map_err(|e| RunError::io(out, e))?;
-    let mut written = Vec::new();
-    for (name, text) in tables(&runs, &scores, model.as_ref()) {
-        let path = out.join(name);
-        write_atomic(&path, |w| w.write_all(text.as_bytes()).map_err(|e| RunError::io(&path, e)))?;
-        written.push(path);
+    let is_fig1b = |name: &str| name.starts_with("fig1b_");
+    write_set(out, is_fig1b, |stage| {
+        let mut written = Vec::new();
+        for (name, text) in tables(&runs, &scores, model.as_ref()) {
+            let path = stage.join(name);
+            write_atomic(&path, |w| w.write_all(text.as_bytes()).map_err(|e| RunError::io(&path, e)))?;
+            written.push(path);
+        }
+        let roc = RocFigure { pooled: &pooled, scores: &scores };
+        written.extend(both_of(&stage.join("forecast_roc"), (1400, 650), &roc)?);
+        written.extend(fig1b(&runs, stage)?);
+        Ok(written)
+    })
+}
+
+/// The run directories given, each once: two names of one directory (`a` and `./a/`, a symbolic
+/// link to it) would count its nucleations, and its seed, twice. A directory given again is
+/// left out, and `warn` told so.
+fn distinct_runs<'a>(dirs: &'a [PathBuf], warn: &impl Fn(&str)) -> Result<Vec<&'a PathBuf>, RunError> {
+    let mut seen: Vec<(PathBuf, &PathBuf)> = Vec::new();
+    for d in dirs {
+        let real = std::fs::canonicalize(d).map_err(|e| RunError::io(d, e))?;
+        match seen.iter().find(|(r, _)| *r == real) {
+            Some((_, first)) => warn(&format!(
+                "{} is the run {} again (both are {}): counted once",
+                d.display(),
+                first.display(),
+                real.display()
+            )),
+            None => seen.push((real, d)),
+        }
     }
-    written.extend(both_of(&out.join("forecast_roc"), (1400, 650), &RocFigure { pooled: &pooled, scores: &scores })?);
-    written.extend(fig1b(&runs, out)?);
-    Ok(written)
+    Ok(seen.into_iter().map(|(_, d)| d).collect())
+}
+
+/// Refuses runs in which no hole nucleates with a frame before it: no site would be labelled as
+/// tearing, so there would be nothing to fit and nothing to score, only empty tables.
+fn check_something_to_fit(runs: &[RunData]) -> Result<(), RunError> {
+    let tearing = runs.iter().flat_map(|r| &r.samples).any(|s| s.labels.iter().any(|&l| l));
+    if tearing {
+        return Ok(());
+    }
+    Err(RunError::NothingToForecast {
+        runs: runs.len(),
+        nucleations: runs.iter().map(|r| r.history.nucleations.len()).sum(),
+    })
 }
 
 /// Nucleations drawn as the paper's Fig. 1b.
@@ -528,7 +568,7 @@ fn fig1b(runs: &[RunData], out: &Path) -> Result<Vec<PathBuf>, RunError> {
     for (i, (r, t)) in chosen.into_iter().enumerate() {
         let n = r.history.nucleations.iter().find(|n| n.hole == t.hole).expect("a nucleation of the run");
         let (step, path) = &r.frames[n.frame - 1];
-        let frame = read_frame(path, r.params.box_size)?;
+        let frame = read_run_frame(path, *step, &r.params)?;
         let mut a = Analysis::new(&r.params);
         a.measure_cells(frame.data.cell_views(), &frame.data.velocity);
         let caption = format!(

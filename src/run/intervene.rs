@@ -956,20 +956,25 @@ fn score_and_write(
     outcomes.sort_by_key(|x| (x.case, x.arm, x.replica, x.site));
     trace.sort_by_key(|x| (x.case, x.arm, x.replica, x.offset));
     let shares = summarise(plan, &outcomes, o);
-    super::files::write_set(&o.out, |stage| {
-        let mut written = Vec::new();
-        for (name, text) in [
-            ("intervention.csv", summary_csv(&shares)),
-            ("intervention_cases.csv", cases_csv(plan)),
-            ("intervention_outcomes.csv", outcomes_csv(plan, &outcomes)),
-            ("intervention_traces.csv", traces_csv(plan, &trace)),
-            ("intervention_trace_summary.csv", trace_summary_csv(plan, &trace, o)),
-        ] {
-            let path = stage.join(name);
-            write_text(&path, &text)?;
-            written.push(path);
-        }
-        written.extend(both_of(&stage.join("intervention"), (1400, 620), &SharesFigure(&shares, &o.arms))?);
-        Ok(written)
-    })
+    // Every output is rewritten whole each time: none is left over from an earlier set.
+    super::files::write_set(
+        &o.out,
+        |_| false,
+        |stage| {
+            let mut written = Vec::new();
+            for (name, text) in [
+                ("intervention.csv", summary_csv(&shares)),
+                ("intervention_cases.csv", cases_csv(plan)),
+                ("intervention_outcomes.csv", outcomes_csv(plan, &outcomes)),
+                ("intervention_traces.csv", traces_csv(plan, &trace)),
+                ("intervention_trace_summary.csv", trace_summary_csv(plan, &trace, o)),
+            ] {
+                let path = stage.join(name);
+                write_text(&path, &text)?;
+                written.push(path);
+            }
+            written.extend(both_of(&stage.join("intervention"), (1400, 620), &SharesFigure(&shares, &o.arms))?);
+            Ok(written)
+        },
+    )
 }

@@ -1,6 +1,8 @@
 //! Native only (feature `cli`): everything that touches files, clocks and the terminal.
 //!
 //! - `bench`: `monolayer bench`, stage by stage, and the two-thread ceiling ([`bench()`]);
+//! - `console`: every line printed, a closed stdout or stderr a stop and not a panic ([`out`],
+//!   [`note`]);
 //! - `config`: parameters from config files, `--set` and `--grid`, the one KEY=VALUE parser
 //!   ([`load_params`]);
 //! - `error`: the errors of this layer, by cause ([`RunError`]);
@@ -26,6 +28,7 @@
 mod bench;
 mod branch;
 mod config;
+mod console;
 mod error;
 pub mod figures;
 mod files;
@@ -41,19 +44,20 @@ mod sweep;
 pub use bench::bench_gpu;
 pub use bench::{bench, bench_analysis, BenchOptions};
 pub use branch::{branch_params, create_branch, BranchOptions};
-pub use config::{load_params, parse_assignment};
+pub use config::{check_distinct, load_params, load_params_over, parse_assignment};
+pub use console::{note, out, out_text, output_closed};
 pub use error::{RunError, RunResult};
 pub use files::{
-    checkpoint_path, frame_path, kept_checkpoint_path, read_checkpoint, read_frame, replaceable, write_atomic,
-    write_checkpoint, write_frame, Frame, RunFrames, RunLock,
+    checkpoint_path, frame_path, kept_checkpoint_path, read_checkpoint, read_frame, read_run_frame, replaceable,
+    write_atomic, write_checkpoint, write_frame, write_run_checkpoint, Frame, RunFrames, RunLock,
 };
 pub use forecast::forecast;
 pub use intervene::{intervene, Arm, InterveneOptions, Report, FRICTION_FACTOR, LOCAL_CHI};
 pub use offline::analyze_run;
 pub use plots::Background;
 pub use runner::{
-    cgroup_room, check_frame_interval, check_memory, check_memory_of, memory_estimate, parse_memory_limit_mb,
-    stop_gracefully_on_signals, stop_signal, Event, RunDir,
+    cgroup_room, check_frame_interval, check_memory, check_memory_of, check_memory_of_jobs, memory_estimate,
+    parse_memory_limit_mb, stop_gracefully_on_signals, stop_signal, Event, RunDir,
 };
 pub use sweep::{
     jobs_of_runs, measure_existing, run_sweep, steps_to_run, tables, write_tables, Job, Output, RunSummary, Shard,

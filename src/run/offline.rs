@@ -5,11 +5,10 @@
 //! analysed (missing, foreign, another format version, a damaged frame) leaves no output.
 
 use std::fmt::Write as _;
-use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::files::{check_frame, read_frame, Frame, RunFrames};
+use super::files::{read_run_frame, Frame, RunFrames};
 use super::plots::{self, Background};
 use crate::analysis::{
     boundary_sites, correlation_length, tangential_angles, Analysis, FrameSummary, HoleProbability, HoleTracker,
@@ -17,7 +16,7 @@ use crate::analysis::{
 };
 use crate::model::{Monolayer, Params};
 use crate::run::error::RunError;
-use crate::run::files::{frame_path, write_atomic};
+use crate::run::files::{check_output_dir, frame_path, write_atomic, write_set};
 
 /// What a frame contributes to the tables.
 #[derive(Clone, Debug)]
@@ -258,10 +257,9 @@ impl RunAnalysis {
         (cv, cq)
     }
 
-    /// Writes the tables and plots into `out` (created) as one set: all of them are written into
-    /// a hidden directory in `out` first and moved in only when every one is complete, so that a
-    /// full disk leaves the previous set, not a mix. `snapshot` is the frame to draw over
-    /// `field`, measured afresh.
+    /// Writes the tables and plots into `out` (created) as one set ([`write_set`]): a full disk
+    /// leaves the previous set, not a mix, and the snapshot of another step it held is removed.
+    /// `snapshot` is the frame to draw over `field`, measured afresh.
     pub fn write(
         &self,
         out: &Path,
@@ -269,31 +267,9 @@ impl RunAnalysis {
         field: Background,
         params: &Params,
     ) -> Result<Vec<PathBuf>, RunError> {
-        static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        super::files::remove_dead_temporaries(out);
-        let stage = out.join(format!(".staging.{}.{call}", std::process::id()));
-        let staged = fs::create_dir_all(&stage)
-            .map_err(|e| RunError::io(&stage, e))
-            .and_then(|_| self.write_into(&stage, snapshot, field, params));
-        let moved = staged.and_then(|files| {
-            // Every target checked before the first is moved: one that cannot be replaced leaves
-            // the previous set whole.
-            let targets = files
-                .iter()
-                .map(|f| {
-                    let to = out.join(f.file_name().expect("a file"));
-                    super::files::replaceable(&to).map(|target| (to, target))
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            files
-                .iter()
-                .zip(targets)
-                .map(|(f, (to, target))| fs::rename(f, &target).map(|_| to.clone()).map_err(|e| RunError::io(&to, e)))
-                .collect::<Result<Vec<_>, _>>()
-        });
-        let _ = fs::remove_dir_all(&stage);
-        moved
+        let is_snapshot =
+            |name: &str| name.starts_with("snapshot_") && (name.ends_with(".png") || name.ends_with(".svg"));
+        write_set(out, is_snapshot, |stage| self.write_into(stage, snapshot, field, params))
     }
 
     fn write_into(
@@ -332,34 +308,26 @@ pub fn analyze_run(
     snapshot_step: Option<u64>,
     field: Background,
 ) -> Result<Vec<PathBuf>, RunError> {
+    let out = out.map(Path::to_path_buf).unwrap_or_else(|| dir.join("analysis"));
+    check_output_dir("--out", &out)?;
     let run = RunFrames::open(dir)?;
     let params = &run.record.params;
     let mut ra = RunAnalysis::new(params);
-    let kept = measure_frames(&mut ra, &run.frames, params, snapshot_step)?;
+    let kept = measure_frames(&mut ra, &run, snapshot_step)?;
     let chosen = match snapshot_step {
         Some(s) => kept.ok_or_else(|| RunError::NoFrame { step: s, frames: dir.join("frames") })?,
-        None => snapshot_frame(&ra, dir, params.box_size)?.expect("at least one frame"),
+        None => snapshot_frame(&ra, dir, params)?.expect("at least one frame"),
     };
-    let out = out.map(Path::to_path_buf).unwrap_or_else(|| dir.join("analysis"));
     ra.write(&out, Some(&chosen), field, params)
 }
 
-/// Measures the frame files in order; returns the frame of `keep` if it was among them.
-fn measure_frames(
-    ra: &mut RunAnalysis,
-    frames: &[(u64, PathBuf)],
-    params: &Params,
-    keep: Option<u64>,
-) -> Result<Option<Frame>, RunError> {
+/// Measures the run's frames in order; returns the frame of `keep` if it was among them.
+fn measure_frames(ra: &mut RunAnalysis, run: &RunFrames, keep: Option<u64>) -> Result<Option<Frame>, RunError> {
     let mut kept = None;
-    for (step, path) in frames {
-        let frame = read_frame(path, params.box_size)?;
-        check_frame(&frame, params)?;
-        if frame.data.step != *step {
-            return Err(RunError::file(path, format!("holds step {}, its name says {step}", frame.data.step)));
-        }
+    for frame in run.read() {
+        let frame = frame?;
         ra.push_frame(&frame);
-        if Some(*step) == keep {
+        if Some(frame.data.step) == keep {
             kept = Some(frame);
         }
     }
@@ -367,8 +335,8 @@ fn measure_frames(
 }
 
 /// The frame [`RunAnalysis::snapshot_step`] chooses, read from the run's directory.
-fn snapshot_frame(ra: &RunAnalysis, dir: &Path, l: usize) -> Result<Option<Frame>, RunError> {
-    ra.snapshot_step().map(|s| read_frame(&frame_path(dir, s), l)).transpose()
+fn snapshot_frame(ra: &RunAnalysis, dir: &Path, params: &Params) -> Result<Option<Frame>, RunError> {
+    ra.snapshot_step().map(|s| read_run_frame(&frame_path(dir, s), s, params)).transpose()
 }
 
 /// `run --analyze`: the analysis kept up to date as frames are written.
@@ -377,8 +345,6 @@ pub struct LiveRun {
     ra: RunAnalysis,
     dir: PathBuf,
     params: Params,
-    /// The step of the snapshot this run wrote last (replaced when the chosen frame changes).
-    snapshot: Option<u64>,
 }
 
 impl LiveRun {
@@ -387,38 +353,20 @@ impl LiveRun {
     /// their checkpoint: the run writes them again, and measures them then.
     pub fn start(dir: &Path, params: &Params, step: u64) -> Result<Self, RunError> {
         let mut ra = RunAnalysis::new(params);
-        let mut frames = match RunFrames::open(dir) {
-            Ok(run) => run.frames,
-            Err(_) if !dir.join("frames").read_dir().is_ok_and(|mut d| d.next().is_some()) => Vec::new(),
-            Err(e) => return Err(e),
-        };
-        frames.retain(|(s, _)| *s <= step);
-        measure_frames(&mut ra, &frames, params, None)?;
-        // A resumed `run --analyze` wrote the snapshot of this step last.
-        let snapshot = ra.snapshot_step();
-        Ok(LiveRun { ra, dir: dir.to_path_buf(), params: params.clone(), snapshot })
+        if let Some(mut run) = RunFrames::open_if_any(dir)? {
+            run.frames.retain(|(s, _)| *s <= step);
+            measure_frames(&mut ra, &run, None)?;
+        }
+        Ok(LiveRun { ra, dir: dir.to_path_buf(), params: params.clone() })
     }
 
-    /// Measures the state whose frame was just written and rewrites `DIR/analysis`.
+    /// Measures the state whose frame was just written and rewrites `DIR/analysis` (the snapshot
+    /// follows the last frame until a hole nucleates; the one it replaces goes with the old set).
     pub fn frame(&mut self, m: &Monolayer) -> Result<(), RunError> {
         self.ra.push_monolayer(m);
-        let snapshot = snapshot_frame(&self.ra, &self.dir, self.params.box_size)?;
+        let snapshot = snapshot_frame(&self.ra, &self.dir, &self.params)?;
         let out = self.dir.join("analysis");
         self.ra.write(&out, snapshot.as_ref(), Background::StrainRate, &self.params)?;
-        let now = snapshot.map(|f| f.data.step);
-        if let Some(old) = self.snapshot.filter(|&old| Some(old) != now) {
-            // The snapshot follows the last frame until a hole nucleates: drop the one it replaces.
-            for ext in ["png", "svg"] {
-                let path = out.join(format!("{}.{ext}", snapshot_name(old)));
-                match fs::remove_file(&path) {
-                    Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                        return Err(RunError::io(&path, e));
-                    }
-                    _ => {}
-                }
-            }
-        }
-        self.snapshot = now;
         Ok(())
     }
 }

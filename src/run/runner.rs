@@ -11,7 +11,7 @@ use crate::model::{Monolayer, Params, STORE_NAME};
 use crate::run::error::RunError;
 use crate::run::files::{
     check_checkpoint_params, checkpoint_path, frame_path, keep_checkpoint, read_checkpoint, remove_stale_temporaries,
-    write_checkpoint, write_frame, RunLock, KEPT_CHECKPOINTS, LAST_GOOD_STATE,
+    write_frame, write_run_checkpoint, RunLock, CHECKPOINT, KEPT_CHECKPOINTS, LAST_GOOD_STATE,
 };
 use crate::run::offline::LiveRun;
 
@@ -58,12 +58,16 @@ fn signal_handler(e: std::io::Error) -> RunError {
     RunError::SignalHandler(e)
 }
 
-/// The signal that asked this process to stop, if one did: (name, number).
+/// The signal that asked this process to stop, if one did: (name, number). A closed stdout or
+/// stderr is SIGPIPE's ([`crate::run::console`]): Rust ignores the signal, and the write that
+/// found the pipe closed asks for the stop instead.
 pub fn stop_signal() -> Option<(&'static str, i32)> {
     if SIGTERM_SEEN.load(Ordering::SeqCst) {
         Some(("SIGTERM", 15))
     } else if SIGINT_SEEN.load(Ordering::SeqCst) {
         Some(("SIGINT", 2))
+    } else if crate::run::console::output_closed() {
+        Some(("SIGPIPE", 13))
     } else {
         None
     }
@@ -200,6 +204,29 @@ pub fn check_memory(params: &Params) -> Result<(), RunError> {
 pub fn check_memory_of(params: &Params, copies: u64) -> Result<(), RunError> {
     let need = memory_estimate(params).saturating_mul(copies.max(1));
     let held = if copies > 1 { format!(" for the {copies} simulations held at once") } else { String::new() };
+    check_need(params, need, held)
+}
+
+/// [`check_memory`] for the simulations a sweep (or `figures`) runs at once, `workers` at a
+/// time: the sum of the `workers` largest of `params`, the runs with steps left.
+pub fn check_memory_of_jobs<'a>(params: impl IntoIterator<Item = &'a Params>, workers: usize) -> Result<(), RunError> {
+    let mut largest: Vec<(u64, &Params)> = params.into_iter().map(|p| (memory_estimate(p), p)).collect();
+    largest.sort_by_key(|(need, _)| std::cmp::Reverse(*need));
+    largest.truncate(workers.max(1));
+    let Some(&(_, first)) = largest.first() else { return Ok(()) };
+    let need = largest.iter().fold(0u64, |sum, (n, _)| sum.saturating_add(*n));
+    let at_once = largest.len();
+    let held = if at_once > 1 {
+        format!(" for the {at_once} simulations run at once (--jobs {workers}; fewer at a time need less)")
+    } else {
+        String::new()
+    };
+    check_need(first, need, held)
+}
+
+/// Refuses `need` bytes beyond the memory this process may use, naming the largest simulation
+/// (`params`) and what the bytes are for (`held`).
+fn check_need(params: &Params, need: u64, held: String) -> Result<(), RunError> {
     match memory_limit()? {
         Some((limit, what)) if need > limit => Err(RunError::Memory {
             box_size: params.box_size,
@@ -247,9 +274,7 @@ impl RunDir {
         }
         params.validate()?;
         check_memory(&params)?;
-        if RunRecord::path(dir).exists() {
-            return Err(already_a_run(dir));
-        }
+        check_new_run_dir(dir)?;
         let monolayer = Monolayer::new(params, seed)?;
         fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
         let lock = RunLock::acquire(dir)?;
@@ -277,9 +302,7 @@ impl RunDir {
         mut record: RunRecord,
     ) -> Result<Self, RunError> {
         // Checked again under the lock: another writer may have started here meanwhile.
-        if RunRecord::path(dir).exists() {
-            return Err(already_a_run(dir));
-        }
+        check_new_run_dir(dir)?;
         fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
         remove_stale_temporaries(dir);
         remove_stale_temporaries(&dir.join("frames"));
@@ -292,7 +315,7 @@ impl RunDir {
         }
         // A checkpoint of the start, before the record: a run killed at any point after its
         // record exists can be resumed.
-        write_checkpoint(&monolayer, &checkpoint_path(dir))?;
+        write_run_checkpoint(&monolayer, &checkpoint_path(dir), &record)?;
         if record.keep_checkpoints {
             keep_checkpoint(dir, step)?;
         }
@@ -333,8 +356,9 @@ impl RunDir {
                 ),
             ));
         }
-        let state = read_checkpoint(&checkpoint, record.params.box_size)?;
+        // The record's parameters first: an edited key is named, not blamed on the checkpoint.
         check_checkpoint_params(&checkpoint, &record)?;
+        let state = read_checkpoint(&checkpoint, record.params.box_size)?;
         let (p, fi, step) = (&record.params, record.frame_interval, state.step);
         let scheduled =
             step == 0 || step == p.relax_steps || (step > p.relax_steps && (step - p.relax_steps).is_multiple_of(fi));
@@ -343,7 +367,8 @@ impl RunDir {
                 &checkpoint,
                 format!(
                     "step {step} is not a step this run writes a checkpoint at (0, then relax_steps = {}, then \
-                     every {fi} to {}): not this run's checkpoint",
+                     every frame_interval = {fi} to {}, as run.json says): not this run's checkpoint, or run.json \
+                     edited",
                     p.relax_steps,
                     p.total_steps()
                 ),
@@ -362,7 +387,7 @@ impl RunDir {
         if step >= p.relax_steps && frame_path(dir, step).exists() {
             record.last_frame_step = Some(step);
         }
-        let monolayer = Monolayer::from_state(record.params.clone(), record.seed, state)
+        let monolayer = Monolayer::from_saved(record.params.clone(), record.seed, state)
             .map_err(|e| RunError::from(e).context(checkpoint.display().to_string()))?;
         fs::create_dir_all(dir.join("frames")).map_err(|e| RunError::io(dir, e))?;
         remove_stale_temporaries(dir);
@@ -461,9 +486,11 @@ impl RunDir {
         let p = self.monolayer.params().clone();
         let total = p.total_steps();
         let fi = self.record.frame_interval;
-        let gpu = |e: crate::gpu::GpuError| Stop::Simulation(RunError::gpu(e).context("--engine gpu"));
-        let ctx = crate::gpu::GpuContext::new().map_err(gpu)?;
-        let mut run = GpuRun::new(&ctx, &self.monolayer).map_err(gpu)?;
+        // No adapter, a device refused or too small: the machine's lack, not the run's; the run
+        // is stopped, and continues where a GPU is.
+        let machine = |e: crate::gpu::GpuError| Stop::Io(RunError::gpu(e).context("--engine gpu"));
+        let ctx = crate::gpu::GpuContext::new().map_err(machine)?;
+        let mut run = GpuRun::new(&ctx, &self.monolayer).map_err(machine)?;
         self.drive(live, watch, |m| {
             let s = run.step_count();
             // The next step that writes, at most one check's worth of steps ahead (so that a
@@ -493,7 +520,7 @@ impl RunDir {
                 return Err(Stop::Signal(name));
             }
             if let Err(e) = advance(m) {
-                return Err(unstable(m, dir, e));
+                return Err(unstable(m, dir, record, e));
             }
             watch(m, &Event::Step);
             write_scheduled(m, dir, record, live.as_deref_mut(), watch)?;
@@ -501,17 +528,19 @@ impl RunDir {
         Ok(())
     }
 
+    /// A run of the GPU engine in a build without it: the build's lack, not the run's; the run
+    /// is stopped, and continues in a build with the GPU kernels.
     #[cfg(not(feature = "gpu"))]
     fn protocol_gpu(&mut self, _: Option<&mut LiveRun>, _: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), Stop> {
-        Err(Stop::Simulation(no_gpu()))
+        Err(Stop::Io(no_gpu()))
     }
 }
 
 /// A run that went unstable: `m` (its last good state) is written to `last_good_state.npz`
 /// and the error names it beside the last periodic checkpoint.
-fn unstable(m: &Monolayer, dir: &Path, e: RunError) -> Stop {
+fn unstable(m: &Monolayer, dir: &Path, record: &RunRecord, e: RunError) -> Stop {
     let last_good = dir.join(LAST_GOOD_STATE);
-    if let Err(io) = write_checkpoint(m, &last_good) {
+    if let Err(io) = write_run_checkpoint(m, &last_good, record) {
         return Stop::Io(io);
     }
     Stop::Simulation(RunError::Unstable { source: Box::new(e), last_good, checkpoint: checkpoint_path(dir) })
@@ -538,7 +567,7 @@ fn write_scheduled(
         }
     }
     if frame || s == p.relax_steps {
-        write_checkpoint(m, &checkpoint_path(dir)).map_err(Stop::Io)?;
+        write_run_checkpoint(m, &checkpoint_path(dir), record).map_err(Stop::Io)?;
         if record.keep_checkpoints {
             keep_checkpoint(dir, s).map_err(Stop::Io)?;
         }
@@ -554,6 +583,54 @@ fn write_scheduled(
         }
     }
     Ok(())
+}
+
+/// Refuses to start a new run in `dir` unless it is new, empty, or holds only what a start that
+/// wrote nothing leaves (a `.lock`, an empty `frames/`, temporaries): a new run would replace the
+/// checkpoint and the first frames of whatever is there and leave the rest mixed in. The error
+/// says how to continue the run that is there, or where to write instead.
+fn check_new_run_dir(dir: &Path) -> Result<(), RunError> {
+    if RunRecord::path(dir).exists() {
+        return Err(already_a_run(dir));
+    }
+    let held = match fs::read_dir(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(RunError::io(dir, e)),
+        Ok(entries) => entries.flatten().map(|e| e.path()).filter(|p| !left_by_an_empty_start(p)).collect::<Vec<_>>(),
+    };
+    if held.is_empty() {
+        return Ok(());
+    }
+    let mut names: Vec<String> =
+        held.iter().filter_map(|p| p.file_name()).map(|n| n.to_string_lossy().into()).collect();
+    names.sort();
+    let shown = if names.len() > 5 { format!("{}, …", names[..5].join(", ")) } else { names.join(", ") };
+    let of_a_run = names.iter().any(|n| n == CHECKPOINT || n == "frames" || n == LAST_GOOD_STATE);
+    let why = if of_a_run {
+        format!(
+            "holds the files of a run ({shown}) but no run.json: a run killed before it wrote its record, which \
+             cannot be resumed without it; nothing here was changed: delete {} to start it again, or choose \
+             another --out",
+            dir.display()
+        )
+    } else {
+        format!("is not empty ({shown}): a new run is written into a new or empty directory; choose another --out")
+    };
+    Err(RunError::OtherRun { dir: dir.to_path_buf(), why })
+}
+
+/// What a start that wrote nothing leaves in a run directory: its lock file, temporaries of
+/// writes it did not finish, and a `frames/` holding nothing else.
+fn left_by_an_empty_start(path: &Path) -> bool {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let temporary = |n: &str| n.starts_with('.') && n.ends_with(".tmp");
+    match name.as_str() {
+        RunLock::FILE => true,
+        n if temporary(n) => true,
+        "frames" => fs::read_dir(path)
+            .is_ok_and(|entries| entries.flatten().all(|e| temporary(&e.file_name().to_string_lossy()))),
+        _ => false,
+    }
 }
 
 fn already_a_run(dir: &Path) -> RunError {

@@ -30,8 +30,8 @@ use crate::formats::{RunRecord, RunStatus};
 use crate::model::Params;
 use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
 use crate::run::error::RunError;
-use crate::run::files::{check_frame, read_frame, RunFrames};
-use crate::run::files::{checkpoint_path, write_atomic, RunLock};
+use crate::run::files::RunFrames;
+use crate::run::files::{checkpoint_path, read_checkpoint, write_atomic, RunLock};
 use crate::run::offline::RunAnalysis;
 use crate::run::runner::{Event, RunDir};
 
@@ -393,7 +393,9 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
     (n > 0).then(|| s / n as f64)
 }
 
-/// Measures the frames of the run in `dir`.
+/// Measures the frames of the run in `dir`: every frame its record says it wrote, or none for a
+/// run that wrote none (it failed or stopped before its first). A frame missing anywhere is
+/// refused, naming the run, rather than counted as a run that ended there.
 pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, RunError> {
     let record = RunRecord::load(dir)?;
     let mut s = RunSummary {
@@ -403,13 +405,13 @@ pub fn summarize(job: &Job, dir: &Path) -> Result<RunSummary, RunError> {
         status: record.status.clone(),
         ..RunSummary::default()
     };
-    let Ok(run) = RunFrames::open(dir) else { return Ok(s) };
-    let p = &record.params;
+    let Some(run) = RunFrames::open_if_any(dir)? else { return Ok(s) };
+    let p = &run.record.params;
+    s.status = run.record.status.clone();
     s.microns_per_hour = p.microns_per_hour();
     let mut ra = RunAnalysis::new(p);
-    for (_, path) in &run.frames {
-        let frame = read_frame(path, p.box_size)?;
-        check_frame(&frame, p)?;
+    for frame in run.read() {
+        let frame = frame?;
         ra.push_frame(&frame);
         s.steps = frame.data.step;
     }
@@ -476,7 +478,10 @@ fn existing_record(job: &Job, dir: &Path, frame_interval: u64) -> Result<Option<
 }
 
 fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, RunError> {
-    let Some(record) = existing_record(job, dir, frame_interval)? else { return Ok(Start::Fresh) };
+    let Some(record) = existing_record(job, dir, frame_interval)? else {
+        clear_an_unrecorded_start(job, dir)?;
+        return Ok(Start::Fresh);
+    };
     if record.status.is_complete() {
         Ok(Start::Done)
     } else if checkpoint_path(dir).exists() {
@@ -486,6 +491,19 @@ fn start_of(job: &Job, dir: &Path, frame_interval: u64) -> Result<Start, RunErro
         fs::remove_file(RunRecord::path(dir)).map_err(|e| RunError::io(dir, e))?;
         Ok(Start::Fresh)
     }
+}
+
+/// A run of the sweep killed between the checkpoint of its start and its record leaves that
+/// checkpoint alone: the state of step 0, the random disks, which the run writes again as it
+/// starts. It is removed; anything more in a directory without a record is left for
+/// [`RunDir::create_locked`] to refuse, naming it.
+fn clear_an_unrecorded_start(job: &Job, dir: &Path) -> Result<(), RunError> {
+    let checkpoint = checkpoint_path(dir);
+    let at_start = checkpoint.is_file() && read_checkpoint(&checkpoint, job.params.box_size).is_ok_and(|s| s.step == 0);
+    if at_start {
+        fs::remove_file(&checkpoint).map_err(|e| RunError::io(&checkpoint, e))?;
+    }
+    Ok(())
 }
 
 /// Why a job of a sweep did not run.
@@ -502,11 +520,14 @@ impl From<RunError> for JobError {
 }
 
 /// Runs (or resumes, or skips when done) one job in `OUT/runs/NAME`, single-threaded, holding
-/// the directory's lock from before it looks at the directory.
-fn execute_job(job: &Job, dir: &Path, output: Output, on_step: &(dyn Fn() + Sync)) -> Result<(), JobError> {
+/// the directory's lock from before it looks at the directory (taken as `lock` says).
+fn execute_job(job: &Job, dir: &Path, output: Output, lock: Lock, on_step: &(dyn Fn() + Sync)) -> Result<(), JobError> {
     let frame_interval = output.frame_interval;
     fs::create_dir_all(dir).map_err(|e| RunError::io(dir, e))?;
-    let lock = RunLock::try_acquire(dir)?.map_err(JobError::Held)?;
+    let lock = match lock {
+        Lock::IfFree => RunLock::try_acquire(dir)?.map_err(JobError::Held)?,
+        Lock::Wait => wait_for_lock(dir, &job.name)?,
+    };
     let run = match start_of(job, dir, frame_interval)? {
         Start::Done => return Ok(()),
         Start::Resume => RunDir::resume_locked(lock, dir)?,
@@ -552,6 +573,106 @@ impl From<u64> for Output {
     }
 }
 
+/// How a worker takes a run's lock.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Lock {
+    /// At once, or the run is left for later (another writer has it).
+    IfFree,
+    /// Once its holder lets go of it, however long that takes (a signal stops the wait).
+    Wait,
+}
+
+/// The workers of a sweep and what they share: the progress counters, the errors, the runs
+/// found held by another writer, and each run's wall time.
+struct Crew<'a> {
+    runs_dir: &'a Path,
+    output: Output,
+    workers: usize,
+    total: usize,
+    progress: &'a (dyn Fn(u64, usize, usize) + Sync),
+    done: AtomicUsize,
+    steps: AtomicUsize,
+    errors: Mutex<Vec<String>>,
+    held: Mutex<Vec<&'a Job>>,
+    seconds: Mutex<std::collections::HashMap<String, f64>>,
+}
+
+impl<'a> Crew<'a> {
+    /// Runs `jobs` on the workers, each on one thread; the runs another writer holds are set
+    /// aside in `held` when `lock` is [`Lock::IfFree`].
+    fn run(&self, jobs: &[&'a Job], lock: Lock) {
+        let next = AtomicUsize::new(0);
+        std::thread::scope(|scope| {
+            for _ in 0..self.workers.max(1).min(jobs.len().max(1)) {
+                scope.spawn(|| {
+                    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a one-thread pool");
+                    // After SIGTERM or SIGINT no run starts; those under way stop after their step.
+                    while crate::run::runner::stop_signal().is_none() {
+                        let Some(&job) = jobs.get(next.fetch_add(1, Ordering::SeqCst)) else { break };
+                        self.run_one(&pool, job, lock);
+                    }
+                });
+            }
+        });
+    }
+
+    fn run_one(&self, pool: &rayon::ThreadPool, job: &'a Job, lock: Lock) {
+        let dir = self.runs_dir.join(&job.name);
+        let on_step = || {
+            let s = self.steps.fetch_add(1, Ordering::Relaxed) as u64 + 1;
+            if s.is_multiple_of(100) {
+                (self.progress)(s, self.done.load(Ordering::Relaxed), self.total);
+            }
+        };
+        let t = std::time::Instant::now();
+        match pool.install(|| execute_job(job, &dir, self.output, lock, &on_step)) {
+            Ok(()) => {}
+            Err(JobError::Held(_)) if lock == Lock::IfFree => {
+                self.held.lock().expect("no panics hold it").push(job);
+                return;
+            }
+            Err(JobError::Held(pid)) => self.errors.lock().expect("no panics hold it").push(format!(
+                "{}: stopped while waiting for {} to let go of it; the same command again takes it up",
+                job.name,
+                holder(pid)
+            )),
+            Err(JobError::Other(e)) => {
+                self.errors.lock().expect("no panics hold it").push(format!("{}: {e}", job.name))
+            }
+        }
+        self.seconds.lock().expect("no panics hold it").insert(job.name.clone(), t.elapsed().as_secs_f64());
+        let d = self.done.fetch_add(1, Ordering::SeqCst) + 1;
+        (self.progress)(self.steps.load(Ordering::Relaxed) as u64, d, self.total);
+    }
+}
+
+/// The writer holding a lock, as the error names it.
+fn holder(pid: Option<u32>) -> String {
+    pid.map(|p| format!("process {p}")).unwrap_or_else(|| "another process".into())
+}
+
+/// Takes the lock of the run in `dir` once its holder lets go of it (said once, on stderr), or
+/// gives up on SIGTERM or SIGINT with the holder as the error.
+fn wait_for_lock(dir: &Path, name: &str) -> Result<RunLock, JobError> {
+    let mut said = false;
+    loop {
+        match RunLock::try_acquire(dir)? {
+            Ok(lock) => return Ok(lock),
+            Err(pid) if crate::run::runner::stop_signal().is_some() => return Err(JobError::Held(pid)),
+            Err(pid) if !said => {
+                said = true;
+                crate::run::console::note(format_args!(
+                    "waiting for {} to let go of run {name} (another sweep of this --out, it seems): the tables \
+                     are written once every run is in",
+                    holder(pid)
+                ));
+            }
+            Err(_) => {}
+        }
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+}
+
 /// Runs every job of `shard` (all by default) on `workers` threads, one simulation each, then
 /// summarises every job of the sweep that has output. `progress(steps_done, runs_done)`.
 pub fn run_sweep(
@@ -572,66 +693,31 @@ pub fn run_sweep(
     }
     let mine: Vec<&Job> =
         jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).map(|(_, j)| j).collect();
-    let next = AtomicUsize::new(0);
-    let done = AtomicUsize::new(0);
-    let steps = AtomicUsize::new(0);
-    let errors = Mutex::new(Vec::new());
-    let held: Mutex<Vec<(String, Option<u32>)>> = Mutex::new(Vec::new());
-    let seconds = Mutex::new(std::collections::HashMap::new());
-    let total = mine.len();
-    std::thread::scope(|scope| {
-        for _ in 0..workers.max(1).min(total.max(1)) {
-            scope.spawn(|| {
-                let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a one-thread pool");
-                // After SIGTERM or SIGINT no run starts; those under way stop after their step.
-                while crate::run::runner::stop_signal().is_none() {
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(job) = mine.get(i) else { break };
-                    let dir = runs_dir.join(&job.name);
-                    let on_step = || {
-                        let s = steps.fetch_add(1, Ordering::Relaxed) as u64 + 1;
-                        if s.is_multiple_of(100) {
-                            progress(s, done.load(Ordering::Relaxed), total);
-                        }
-                    };
-                    let t = std::time::Instant::now();
-                    match pool.install(|| execute_job(job, &dir, output, &on_step)) {
-                        Ok(()) => {}
-                        Err(JobError::Held(pid)) => {
-                            held.lock().expect("no panics hold it").push((job.name.clone(), pid))
-                        }
-                        Err(JobError::Other(e)) => {
-                            errors.lock().expect("no panics hold it").push(format!("{}: {e}", job.name))
-                        }
-                    }
-                    seconds.lock().expect("no panics hold it").insert(job.name.clone(), t.elapsed().as_secs_f64());
-                    let d = done.fetch_add(1, Ordering::SeqCst) + 1;
-                    progress(steps.load(Ordering::Relaxed) as u64, d, total);
-                }
-            });
-        }
-    });
-    let mut errors = errors.into_inner().expect("no panics hold it");
-    let held = held.into_inner().expect("no panics hold it");
-    if !held.is_empty() {
-        // Tables written now would leave out the runs another writer has under way.
-        let mut holders: Vec<String> = held
-            .iter()
-            .map(|(_, pid)| pid.map(|p| format!("process {p}")).unwrap_or_else(|| "another process".into()))
-            .collect();
-        holders.sort();
-        holders.dedup();
-        let names: Vec<&str> = held.iter().map(|(n, _)| n.as_str()).collect();
-        errors.push(format!(
-            "{} run(s) of this sweep are being written by {} (another sweep of {}, it seems): {}; summary.csv and \
-             the regime map are not written, as they would leave those runs out. Once it has ended, the same \
-             command again writes them (and runs what is left)",
-            held.len(),
-            holders.join(", "),
-            out.display(),
-            names.join(", ")
-        ));
+    // What the workers hold at once, before any starts: the largest runs left, one per worker.
+    let left = mine.iter().filter(|j| remaining_steps(j, &runs_dir.join(&j.name)) > 0).map(|j| &j.params);
+    crate::run::runner::check_memory_of_jobs(left, workers)?;
+    let crew = Crew {
+        runs_dir: &runs_dir,
+        output,
+        workers,
+        total: mine.len(),
+        progress,
+        done: AtomicUsize::new(0),
+        steps: AtomicUsize::new(0),
+        errors: Mutex::new(Vec::new()),
+        held: Mutex::new(Vec::new()),
+        seconds: Mutex::new(std::collections::HashMap::new()),
+    };
+    crew.run(&mine, Lock::IfFree);
+    // Runs another writer (another sweep of OUT) had under way are taken up once it lets go of
+    // them: done by then, they are only measured; left part way, they are continued here. So
+    // two sweeps of one OUT both end with the tables of every run.
+    let held: Vec<&Job> = std::mem::take(&mut *crew.held.lock().expect("no panics hold it"));
+    if crate::run::runner::stop_signal().is_none() {
+        crew.run(&held, Lock::Wait);
     }
+    let Crew { errors, seconds, .. } = crew;
+    let errors = errors.into_inner().expect("no panics hold it");
     if !errors.is_empty() {
         return Err(RunError::Jobs(errors));
     }
@@ -652,7 +738,8 @@ pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, Run
     for job in jobs {
         let dir = runs_dir.join(&job.name);
         if RunRecord::path(&dir).exists() {
-            summaries.push(summarize(job, &dir)?);
+            summaries
+                .push(summarize(job, &dir).map_err(|e| e.context(format!("run {} (no table written)", job.name)))?);
         }
     }
     Ok(summaries)
@@ -915,11 +1002,19 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
 }
 
 /// Writes `OUT/summary.csv`, `OUT/regimes.csv` (and the regime map plot where the grid has χ
-/// and ζ); returns the files written.
+/// and ζ); returns the files written. Refused for no run at all.
 pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, RunError> {
     // A sweep takes no lock on OUT (several shards write these tables), so only the temporaries
     // of writers no longer alive are taken.
     crate::run::files::remove_dead_temporaries(out);
+    // Tables of no run would replace the tables of the runs measured before with headers.
+    if summaries.is_empty() {
+        return Err(RunError::file(
+            &out.join("runs"),
+            "no run of this sweep is there to measure: summary.csv and the regime map are left as they are (is \
+             --out the sweep's, with its grid?)",
+        ));
+    }
     let (runs, regimes) = tables(summaries);
     let mut written = Vec::new();
     for (name, text) in [("summary.csv", runs), ("regimes.csv", regimes)] {

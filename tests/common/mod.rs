@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod faults;
 pub mod npz;
 
 use std::sync::OnceLock;
@@ -175,4 +176,24 @@ pub fn quick_run(
     ];
     args.extend_from_slice(extra);
     monolayer(&args)
+}
+
+/// Opens a hole by hand in the run in `run`: cell `cell` is taken out (its φ set to 0) of every
+/// frame from `from_step` on, so that a void of about a cell's area appears in that frame, with
+/// frames before it: what `forecast` needs to fit and score, which the small runs here do not
+/// tear open by themselves in so few steps.
+pub fn tear_open_a_hole(run: &std::path::Path, cell: usize, from_step: u64) {
+    let record = monolayer::formats::RunRecord::load(run).expect("a run");
+    let last = record.last_frame_step.expect("frames");
+    for step in (from_step..=last).step_by(record.frame_interval as usize) {
+        let path = monolayer::run::frame_path(run, step);
+        let offsets = match &npz::read_npz(&path).into_iter().find(|(n, _)| n == "phi_offsets").expect("offsets").1 {
+            npz::Npy::I(o) => (o[[cell]] as usize, o[[cell + 1]] as usize),
+            _ => panic!("phi_offsets are integers"),
+        };
+        npz::edit_npz(&path, "phi", |a| match a {
+            npz::Npy::F(phi) => phi.as_slice_mut().expect("contiguous")[offsets.0..offsets.1].fill(0.0),
+            _ => panic!("φ is real"),
+        });
+    }
 }

@@ -12,7 +12,7 @@ use super::runs::Runs;
 use crate::analysis::{counted_holes, CountedHole, HoleCounting, Precursor};
 use crate::formats::{RunRecord, RunStatus};
 use crate::run::error::RunError;
-use crate::run::files::{read_frame, RunFrames};
+use crate::run::files::RunFrames;
 use crate::run::offline::RunAnalysis;
 
 /// What the figures need of one run.
@@ -73,6 +73,7 @@ pub fn measure<'p>(runs: Runs<'p>, workers: usize) -> Result<Measures<'p>, RunEr
 }
 
 fn measure_run(dir: &Path, record: &RunRecord) -> Result<RunData, RunError> {
+    super::stop_if_signalled()?;
     let p = &record.params;
     let mut data = RunData {
         status: record.status.clone(),
@@ -87,10 +88,11 @@ fn measure_run(dir: &Path, record: &RunRecord) -> Result<RunData, RunError> {
         correlations: (Vec::new(), Vec::new()),
     };
     // A run that failed before its first frame has nothing to measure; it still counts as run.
-    let Ok(run) = RunFrames::open(dir) else { return Ok(data) };
+    // Frames missing where its record says there are some are refused, naming the run.
+    let Some(run) = RunFrames::open_if_any(dir)? else { return Ok(data) };
     let mut ra = RunAnalysis::new(p);
-    for (_, path) in &run.frames {
-        ra.push_frame(&read_frame(path, p.box_size)?);
+    for frame in run.read() {
+        ra.push_frame(&frame?);
     }
     let (first, last) = (ra.frames.first().map_or(0.0, |f| f.time), ra.frames.last().map_or(0.0, |f| f.time));
     data.frames = ra.frames.len();

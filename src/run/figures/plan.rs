@@ -9,7 +9,7 @@
 use std::collections::BTreeSet;
 
 use crate::model::Params;
-use crate::run::config::load_params;
+use crate::run::config::load_params_over;
 use crate::run::error::RunError;
 use crate::run::sweep::Job;
 
@@ -249,10 +249,9 @@ impl Plan {
     /// Every run's parameters are validated here, before anything runs.
     pub fn new(scale: Scale, figures: &[Figure], sets: &[String]) -> Result<Plan, RunError> {
         let spec = scale.spec();
-        let mut all: Vec<String> = vec![format!("zeta={UNSTATED_ZETA}")];
-        all.extend(spec.overrides.iter().map(|s| s.to_string()));
-        all.extend(sets.iter().cloned());
-        let base = load_params(None, &all)?;
+        let mut scale_sets: Vec<String> = vec![format!("zeta={UNSTATED_ZETA}")];
+        scale_sets.extend(spec.overrides.iter().map(|s| s.to_string()));
+        let base = load_params_over(&scale_sets, sets)?;
         base.validate().map_err(|e| RunError::from(e).context("--set"))?;
         let zeta0 = base.zeta;
         let gamma0 = base.gamma;

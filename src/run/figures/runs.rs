@@ -54,14 +54,15 @@ impl<'p> Share<'p> {
     }
 }
 
-/// Before the estimate, which steps a simulation of every size in the plan (and would abort
-/// where one does not fit): the largest must fit, as every run must.
-pub fn check_memory(plan: &Plan) -> Result<(), RunError> {
+/// Before the estimate, which steps a simulation of every size in the plan one at a time (and
+/// would abort where one does not fit): the largest must fit, as every run must; and the runs
+/// the share has left, `workers` at a time, must fit together.
+pub fn check_memory(plan: &Plan, share: &Share, workers: usize) -> Result<(), RunError> {
     if let Some(job) = plan.jobs.iter().max_by_key(|j| crate::run::runner::memory_estimate(&j.params)) {
         job.params.validate().map_err(RunError::from)?;
         crate::run::runner::check_memory(&job.params)?;
     }
-    Ok(())
+    crate::run::runner::check_memory_of_jobs(share.todo.iter().map(|(job, _)| &job.params), workers)
 }
 
 /// A duration of core time in the unit that reads best.
@@ -196,18 +197,18 @@ pub fn execute(plan: &Plan, share: &Share, out: &Path, workers: usize, quiet: bo
         bar.set_position(s);
         bar.set_message(format!("runs {done}/{total}"));
         if quiet && reported.fetch_max(done, Ordering::Relaxed) < done {
-            eprintln!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64());
+            crate::run::console::note(format_args!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64()));
         }
     })?;
     bar.finish();
     let wall = start.elapsed().as_secs_f64();
     let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
     let failed: Vec<&str> = summaries.iter().filter(|s| s.blew_up()).map(|s| s.name.as_str()).collect();
-    eprintln!(
+    crate::run::console::note(format_args!(
         "runs done in {wall:.0} s ({:.2} core-hours of runs){}",
         run_time / 3600.0,
         if failed.is_empty() { String::new() } else { format!("; unstable, stopped early: {}", failed.join(", ")) }
-    );
+    ));
     Ok(())
 }
 

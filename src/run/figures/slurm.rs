@@ -62,32 +62,32 @@ pub fn run_on_slurm(plan: &Plan, r: &SlurmRequest, speed: &Speed) -> Result<(), 
         longest_run_seconds: longest,
         total_seconds: total,
     };
-    eprintln!(
+    crate::run::console::note(format_args!(
         "  estimate: {:.2} core-hours in all, the longest run {}; {} array task(s), {} at a time",
         total / 3600.0,
         hours(longest),
         array_tasks(plan),
         r.throttle
-    );
+    ));
     if r.dry_run {
         let (runs, figures, submit) = scripts(plan, &out, &opts);
-        println!("# ---- {}/slurm/runs.sbatch\n{runs}", out.display());
-        println!("# ---- {}/slurm/figures.sbatch\n{figures}", out.display());
-        println!("# ---- {}/slurm/submit.sh\n{submit}", out.display());
-        eprintln!("dry run: nothing written or submitted");
+        crate::run::console::out(format_args!("# ---- {}/slurm/runs.sbatch\n{runs}", out.display()))?;
+        crate::run::console::out(format_args!("# ---- {}/slurm/figures.sbatch\n{figures}", out.display()))?;
+        crate::run::console::out(format_args!("# ---- {}/slurm/submit.sh\n{submit}", out.display()))?;
+        crate::run::console::note(format_args!("dry run: nothing written or submitted"));
         return Ok(());
     }
     for path in write_scripts(plan, &out, &opts)? {
-        println!("{}", path.display());
+        crate::run::console::out(format_args!("{}", path.display()))?;
     }
     let (runs, figures) = submit(&out)?;
-    eprintln!(
+    crate::run::console::note(format_args!(
         "submitted: job array {runs} (runs), job {figures} (figures, after the array succeeds); \
          `squeue -j {runs},{figures}` to watch; logs in {}/slurm/; figures.md appears in {} at the end",
         out.display(),
         out.display()
-    );
-    println!("runs_job_id={runs}\nfigures_job_id={figures}");
+    ));
+    crate::run::console::out(format_args!("runs_job_id={runs}\nfigures_job_id={figures}"))?;
     Ok(())
 }
 
