@@ -10,14 +10,14 @@ use std::time::Instant;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use monolayer::formats::{snapshot, Engine, RunStatus};
+use monolayer::formats::{snapshot, Engine};
 use monolayer::model::{number_text, Perturbation, MAX_STEPS};
 use monolayer::run::figures::{FiguresOptions, Scale, Stage};
 use monolayer::run::{
-    analyze_run, bench_analysis, check_distinct, check_frame_interval, check_memory, check_memory_of, create_branch,
-    jobs_of_runs, load_params, load_params_over, measure_existing, note, out, out_text, parse_assignment, replaceable,
-    run_sweep, steps_to_run, stop_gracefully_on_signals, stop_signal, write_atomic, write_tables, Arm, Background,
-    BenchOptions, BranchOptions, Event, InterveneOptions, Output, Report, RunDir, RunError, Shard, SweepSpec,
+    analyze_run, bench_analysis, check_frame_interval, check_memory, check_memory_of, create_branch, load_params,
+    load_params_over, note, out, out_text, parse_assignment, replaceable, stop_gracefully_on_signals, stop_signal,
+    write_atomic, Arm, Background, BenchOptions, BranchOptions, Event, InterveneOptions, Report, RunDir, RunError,
+    Shard, SweepOptions,
 };
 use monolayer::{Monolayer, Params, Phase};
 
@@ -648,142 +648,54 @@ fn progress_bar(total: u64, done: u64, quiet: bool) -> ProgressBar {
 }
 
 fn sweep(a: &SweepArgs) -> Result<(), RunError> {
-    let mut spec = match &a.file {
-        Some(f) => SweepSpec::from_file(f)?,
-        None => SweepSpec { seeds: vec![1], frame_interval: 1000, ..SweepSpec::default() },
+    let options = SweepOptions {
+        file: a.file.clone(),
+        out: a.out.clone(),
+        grid: a.grid.clone(),
+        points: a.point.clone(),
+        sets: a.set.clone(),
+        seeds: a.seeds.clone(),
+        frame_interval: a.frame_interval,
+        keep_checkpoints: a.keep_checkpoints,
+        tables_only: a.tables_only,
+        jobs: match a.jobs {
+            Some(n) => check_threads("--jobs", n)?,
+            None => cores(),
+        },
+        shard: match a.shard {
+            Some(s) => Some(s),
+            None => Shard::of_slurm_array()?,
+        },
     };
-    check_distinct("--set", &a.set)?;
-    for s in &a.set {
-        let (k, v) = parse_assignment("--set", s)?;
-        spec.base.insert(k, v);
-    }
-    for g in &a.grid {
-        spec.add_grid(g)?;
-    }
-    for p in &a.point {
-        spec.add_point(p)?;
-    }
-    if let Some(seeds) = &a.seeds {
-        spec.seeds = seeds.clone();
-    }
-    if let Some(fi) = a.frame_interval {
-        spec.frame_interval = fi;
-    }
-    spec.keep_checkpoints |= a.keep_checkpoints;
-    let no_sweep = a.file.is_none()
-        && a.grid.is_empty()
-        && a.point.is_empty()
-        && a.set.is_empty()
-        && a.seeds.is_none()
-        && a.frame_interval.is_none();
-    if a.tables_only && no_sweep {
-        let jobs = jobs_of_runs(&a.out)?;
-        let summaries = measure_existing(&jobs, &a.out)?;
-        let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
-        note(format_args!(
-            "sweep --tables-only: {} runs in {}, {complete} of them ended",
-            summaries.len(),
-            a.out.join("runs").display()
-        ));
-        return print_tables(&a.out, &summaries);
-    }
-    let jobs = spec.jobs()?;
-    if let Some(fi) = a.frame_interval {
-        for job in &jobs {
-            check_frame_interval("--frame-interval", fi, &job.params)
-                .map_err(|e| e.context(format!("run {}", job.name)))?;
-        }
-    }
-    if a.tables_only {
-        let summaries = measure_existing(&jobs, &a.out)?;
-        let complete = summaries.iter().filter(|s| s.status.is_complete()).count();
-        note(format_args!(
-            "sweep --tables-only: {} of {} runs have a directory in {}, {complete} of them ended",
-            summaries.len(),
-            jobs.len(),
-            a.out.join("runs").display()
-        ));
-        return print_tables(&a.out, &summaries);
-    }
-    let shard = match a.shard {
-        Some(s) => Some(s),
-        None => slurm_shard()?,
-    };
-    let workers = match a.jobs {
-        Some(n) => check_threads("--jobs", n)?,
-        None => cores(),
-    };
-    let mine = jobs.iter().enumerate().filter(|(i, _)| shard.is_none_or(|s| i % s.count == s.index)).count();
-    let todo = steps_to_run(&jobs, &a.out, shard);
-    note(format_args!(
-        "sweep: {} runs ({} in this shard), {} steps to run, {} at a time, into {}",
-        jobs.len(),
-        mine,
-        todo,
-        workers,
-        a.out.display()
-    ));
-    let bar = progress_bar(todo, 0, a.quiet);
-    bar.set_message(format!("runs 0/{mine}"));
+    let bar = progress_bar(0, 0, a.quiet || a.tables_only);
     let start = Instant::now();
     let reported = std::sync::atomic::AtomicUsize::new(0);
-    let output = Output { frame_interval: spec.frame_interval, keep_checkpoints: spec.keep_checkpoints };
-    let summaries = run_sweep(&jobs, output, &a.out, workers, shard, &|steps, done, total| {
-        bar.set_position(steps);
-        bar.set_message(format!("runs {done}/{total}"));
-        if a.quiet && reported.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done {
-            note(format_args!("{done}/{total} runs done, {:.0} s", start.elapsed().as_secs_f64()));
+    let written = monolayer::run::sweep(&options, &|r| match r {
+        Report::Progress { done, runs, .. }
+            if a.quiet && reported.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done =>
+        {
+            note(format_args!("{done}/{runs} runs done, {:.0} s", start.elapsed().as_secs_f64()))
         }
-    })?;
-    bar.finish();
-    // A shard's tables would hold its own runs only: the shard that ends the sweep writes them.
-    let ended = summaries.iter().filter(|s| s.status.is_complete()).count();
-    match shard {
-        Some(s) if ended < jobs.len() => note(format_args!(
-            "shard {}/{}: its runs are done; {ended} of the sweep's {} runs have ended, so summary.csv and the \
-             regime map are not written (they would leave the others out): the shard that ends the sweep writes \
-             them, or `sweep … --tables-only` once every shard is done",
-            s.index,
-            s.count,
-            jobs.len()
-        )),
-        _ => print_tables(&a.out, &summaries)?,
-    }
-    let stopped: Vec<String> = summaries
-        .iter()
-        .filter_map(|s| match &s.status {
-            RunStatus::Stopped(why) => Some(format!("  {}: {}", s.name, why.lines().next().unwrap_or(""))),
-            _ => None,
-        })
-        .collect();
-    if let Some((name, _)) = stop_signal() {
-        return Err(RunError::Interrupted {
-            signal: name,
-            detail: format!(
-                ": {} run(s) stopped part way; the same command again continues them from their checkpoints, and \
-                 the runs not yet started",
-                stopped.len()
-            ),
-        });
-    }
-    if !stopped.is_empty() {
-        return Err(RunError::Stopped(stopped));
-    }
-    let wall = start.elapsed().as_secs_f64();
-    let run_time: f64 = summaries.iter().map(|s| s.run_seconds).sum();
-    note(format_args!(
-        "sweep done in {wall:.0} s; runs took {run_time:.0} s together ({:.2} runs' worth of time per second of wall time)",
-        run_time / wall.max(1e-9)
-    ));
-    Ok(())
-}
-
-/// Writes a sweep's tables and prints their paths.
-fn print_tables(out_dir: &std::path::Path, summaries: &[monolayer::run::RunSummary]) -> Result<(), RunError> {
-    for path in write_tables(out_dir, summaries)? {
+        other => show(&bar, other, "runs"),
+    });
+    bar.finish_and_clear();
+    for path in written? {
         out(path.display())?;
     }
     Ok(())
+}
+
+/// Shows a long command's report: a line above the bar (or alone), its progress on the bar.
+fn show(bar: &ProgressBar, report: Report, what: &str) {
+    match report {
+        Report::Line(line) if bar.is_hidden() => note(line),
+        Report::Line(line) => bar.println(line),
+        Report::Progress { steps, of, done, runs } => {
+            bar.set_length(of);
+            bar.set_position(steps);
+            bar.set_message(format!("{what} {done}/{runs}"));
+        }
+    }
 }
 
 fn figures(a: FiguresArgs) -> Result<(), RunError> {
@@ -808,34 +720,6 @@ fn figures(a: FiguresArgs) -> Result<(), RunError> {
         throttle: a.throttle,
         partition: a.partition,
     })
-}
-
-/// The shard of a Slurm job array, when run as one.
-/// The task's index counts from the array's first (`SLURM_ARRAY_TASK_MIN`), so that
-/// `--array=1-N` runs every shard as `--array=0-N-1` does.
-fn slurm_shard() -> Result<Option<Shard>, RunError> {
-    let var = |name: &str| std::env::var(name).ok();
-    let (Some(id), Some(count)) = (var("SLURM_ARRAY_TASK_ID"), var("SLURM_ARRAY_TASK_COUNT")) else {
-        return Ok(None);
-    };
-    let number = |name: &str, v: &str| {
-        v.trim()
-            .parse::<usize>()
-            .map_err(|_| RunError::Parse(format!("{name} = {v:?}: not a task number (from Slurm's environment)")))
-    };
-    let (id, count) = (number("SLURM_ARRAY_TASK_ID", &id)?, number("SLURM_ARRAY_TASK_COUNT", &count)?);
-    let min = var("SLURM_ARRAY_TASK_MIN").map(|m| number("SLURM_ARRAY_TASK_MIN", &m)).transpose()?.unwrap_or(0);
-    let max = var("SLURM_ARRAY_TASK_MAX").map(|m| number("SLURM_ARRAY_TASK_MAX", &m)).transpose()?;
-    let contiguous = max.is_none_or(|max| max.checked_sub(min).map(|d| d + 1) == Some(count));
-    match id.checked_sub(min) {
-        Some(index) if index < count && count > 0 && contiguous => Ok(Some(Shard { index, count })),
-        _ => Err(RunError::Options(format!(
-            "this Slurm array task (SLURM_ARRAY_TASK_ID = {id}, MIN = {min}, MAX = {}, COUNT = {count}) is not one of \
-             a contiguous array such as --array=0-{}: give each task its share with --shard K/N",
-            max.map(|m| m.to_string()).unwrap_or_else(|| "unset".into()),
-            count.saturating_sub(1)
-        ))),
-    }
 }
 
 fn fingerprint(a: &FingerprintArgs) -> Result<(), RunError> {
@@ -958,15 +842,7 @@ fn intervene(a: &InterveneArgs) -> Result<(), RunError> {
         tables_only: a.tables_only,
     };
     let bar = progress_bar(0, 0, a.quiet || a.dry_run || a.tables_only);
-    let written = monolayer::run::intervene(&options, &|r| match r {
-        Report::Line(line) if bar.is_hidden() => note(line),
-        Report::Line(line) => bar.println(line),
-        Report::Progress { steps, of, done, branches } => {
-            bar.set_length(of);
-            bar.set_position(steps);
-            bar.set_message(format!("branches {done}/{branches}"));
-        }
-    });
+    let written = monolayer::run::intervene(&options, &|r| show(&bar, r, "branches"));
     bar.finish_and_clear();
     for path in written? {
         out(path.display())?;

@@ -13,6 +13,20 @@ use crate::run::error::RunError;
 
 static CLOSED: AtomicBool = AtomicBool::new(false);
 
+/// What a long command (`sweep`, `intervene`) reports as it goes, for the binary to show: a line,
+/// or its progress.
+pub enum Report {
+    Line(String),
+    /// `steps` of the `of` steps to run have run, and `done` of the `runs` runs (or branches)
+    /// have ended.
+    Progress {
+        steps: u64,
+        of: u64,
+        done: usize,
+        runs: usize,
+    },
+}
+
 /// Whether a write to stdout or stderr found it closed (EPIPE): the process is to stop.
 pub fn output_closed() -> bool {
     CLOSED.load(Ordering::SeqCst)

@@ -20,6 +20,7 @@ use rand_chacha::rand_core::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::branch::{create_branch, BranchOptions};
+use super::console::Report;
 use super::files::{check_frame, read_frame, write_text, RunFrames};
 use super::plots::{both_of, plot_err, Draw, FONT, PALETTE};
 use super::pool::each_on_one_core;
@@ -761,18 +762,6 @@ impl Draw for SharesFigure<'_> {
     }
 }
 
-/// What `intervene` reports as it goes.
-pub enum Report {
-    Line(String),
-    /// Steps run so far of those to run, branches done of all.
-    Progress {
-        steps: u64,
-        of: u64,
-        done: usize,
-        branches: usize,
-    },
-}
-
 /// `monolayer intervene`: plans, runs the branches (unless `tables_only` or `dry_run`), scores
 /// them and writes the tables and the figure into `out` as one set. Returns the files written.
 pub fn intervene(o: &InterveneOptions, report: &(dyn Fn(Report) + Sync)) -> Result<Vec<PathBuf>, RunError> {
@@ -904,7 +893,7 @@ fn run_branches(
             let s = steps.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             if s.is_multiple_of(200) {
                 let done = done.load(std::sync::atomic::Ordering::Relaxed);
-                report(Report::Progress { steps: s, of: total, done, branches: order.len() });
+                report(Report::Progress { steps: s, of: total, done, runs: order.len() });
             }
         };
         let r = run_job(job, &plan.parents[job.parent], &dirs[i], &on_step);

@@ -45,14 +45,14 @@ pub use bench::bench_gpu;
 pub use bench::{bench, bench_analysis, BenchOptions};
 pub use branch::{branch_params, create_branch, BranchOptions};
 pub use config::{check_distinct, load_params, load_params_over, parse_assignment};
-pub use console::{note, out, out_text, output_closed};
+pub use console::{note, out, out_text, output_closed, Report};
 pub use error::{RunError, RunResult};
 pub use files::{
     checkpoint_path, frame_path, kept_checkpoint_path, read_checkpoint, read_frame, read_run_frame, replaceable,
     write_atomic, write_checkpoint, write_frame, write_run_checkpoint, Frame, RunFrames, RunLock,
 };
 pub use forecast::forecast;
-pub use intervene::{intervene, Arm, InterveneOptions, Report, FRICTION_FACTOR, LOCAL_CHI};
+pub use intervene::{intervene, Arm, InterveneOptions, FRICTION_FACTOR, LOCAL_CHI};
 pub use offline::analyze_run;
 pub use plots::Background;
 pub use runner::{
@@ -60,6 +60,6 @@ pub use runner::{
     parse_memory_limit_mb, stop_gracefully_on_signals, stop_signal, Event, RunDir,
 };
 pub use sweep::{
-    jobs_of_runs, measure_existing, run_sweep, steps_to_run, tables, write_tables, Job, Output, RunSummary, Shard,
-    SweepSpec,
+    jobs_of_runs, measure_existing, run_sweep, steps_to_run, sweep, tables, write_tables, Job, Output, RunSummary,
+    Shard, SweepOptions, SweepSpec,
 };
