@@ -247,7 +247,7 @@ fn matched_pool(
     pool.len()
 }
 
-/// Up to `count` matched sites ([`matched_pool`]) of frame `frame` for a site whose least Σφ
+/// Up to `count` matched sites (`matched_pool`) of frame `frame` for a site whose least Σφ
 /// within R is `least`, among those `keep` keeps (lattice indices), drawn without replacement
 /// from `rng`, as (x, y): the matched chance the forecast compares a nucleation site with.
 pub fn matched_sites(

@@ -62,7 +62,7 @@ pub fn void_share_within(phi_sum: &[f64], l: usize, cx: f64, cy: f64, radius: f6
 }
 
 /// Whether the tissue is still covered about (cx, cy): the least Σφ within R/2 is at least ½
-/// ([`COVERED_CORE_FRACTION`] of R, [`COVERED_THRESHOLD`] of Σφ).
+/// (`COVERED_CORE_FRACTION` of R, `COVERED_THRESHOLD` of Σφ).
 pub fn covered_about(phi_sum: &[f64], l: usize, cx: f64, cy: f64, radius: f64) -> bool {
     least_within(phi_sum, l, cx, cy, COVERED_CORE_FRACTION * radius) >= COVERED_THRESHOLD
 }

@@ -152,7 +152,7 @@ pub struct State {
 }
 
 impl State {
-    /// Checks each cell's φ as every step leaves it ([`check_saved_phi`]): a state read from a
+    /// Checks each cell's φ as every step leaves it (`check_saved_phi`): a state read from a
     /// file (a checkpoint, a relaxed state) beyond that is damaged. A cell whose φ does not fit
     /// its patch is left to [`Monolayer::from_state`], which refuses it.
     pub fn check(&self, params: &Params) -> Result<(), SimError> {

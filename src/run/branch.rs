@@ -54,7 +54,7 @@ const FIXED: [(&str, &str); 8] = [
 ];
 
 /// The parent's parameters with `sets` applied, and each change as the record keeps it. Every
-/// key is checked as `--set` checks it; a key given twice, an unknown one and one of [`FIXED`]
+/// key is checked as `--set` checks it; a key given twice, an unknown one and one of `FIXED`
 /// are refused by name.
 pub fn branch_params(parent: &Params, sets: &[String]) -> Result<(Params, Vec<ParamChange>), RunError> {
     let mut table = toml::Table::try_from(parent).expect("parameters serialise");

@@ -933,7 +933,7 @@ fn check_frame_sequence(frames_dir: &Path, record: &RunRecord, frames: &[(u64, P
 }
 
 /// Reads the frame of `step` of a run at `path` and checks it against the run: its size, its
-/// cells, its φ and the step it holds ([`read_frame`], [`check_frame`]).
+/// cells, its φ and the step it holds ([`read_frame`], `check_frame`).
 pub fn read_run_frame(path: &Path, step: u64, params: &Params) -> IoResult<Frame> {
     let frame = read_frame(path, params.box_size)?;
     check_frame(&frame, params)?;

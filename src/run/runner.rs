@@ -59,7 +59,7 @@ fn signal_handler(e: std::io::Error) -> RunError {
 }
 
 /// The signal that asked this process to stop, if one did: (name, number). A closed stdout or
-/// stderr is SIGPIPE's ([`crate::run::console`]): Rust ignores the signal, and the write that
+/// stderr is SIGPIPE's (`run::console`): Rust ignores the signal, and the write that
 /// found the pipe closed asks for the stop instead.
 pub fn stop_signal() -> Option<(&'static str, i32)> {
     if SIGTERM_SEEN.load(Ordering::SeqCst) {

@@ -169,7 +169,7 @@ pub fn measure_existing(jobs: &[Job], out: &Path) -> Result<Vec<RunSummary>, Run
 
 /// The runs in `OUT/runs/` as jobs, for `sweep --tables-only` given no grid: each run with the
 /// seed and parameters its `run.json` records, and the grid values its directory name carries
-/// (`chi0.1_zeta0.5_seed1`, as [`SweepSpec::jobs`] names runs) where every name reads so with the
+/// (`chi0.1_zeta0.5_seed1`, as [`SweepSpec::jobs`](super::SweepSpec::jobs) names runs) where every name reads so with the
 /// same keys; otherwise the parameters in which the runs differ.
 pub fn jobs_of_runs(out: &Path) -> Result<Vec<Job>, RunError> {
     let runs_dir = out.join("runs");
