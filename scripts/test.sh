@@ -5,7 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-step() { printf '\n== %s\n' "$*"; }
+# Each step's header says when it began (seconds into the suite), so a slow step shows in the log.
+step() { printf '\n== [%ss] %s\n' "$SECONDS" "$*"; }
 
 step "format"
 cargo fmt --all -- --check

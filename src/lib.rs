@@ -27,6 +27,24 @@
 //! use (`monolayer::model::FrictionSolver`, `monolayer::analysis::HoleTracker`,
 //! `monolayer::run::RunDir`), so a file can move inside its layer without breaking a caller.
 //! The core's few types are re-exported here too.
+//!
+//! A tissue relaxed, made active and measured (a small box; the paper's is
+//! [`Params::default`]); `examples/` has longer programs:
+//!
+//! ```
+//! use monolayer::analysis::Analysis;
+//! use monolayer::{Monolayer, Params};
+//!
+//! let p = Params { box_size: 40, n_cells: 8, relax_steps: 100, active_steps: 20, ..Params::default() };
+//! let mut m = Monolayer::new(p.clone(), 1)?;
+//! m.advance(p.total_steps())?;
+//! m.evaluate_now()?; // velocities for this φ, not the last step's
+//! let mut a = Analysis::new(&p);
+//! a.measure(&m);
+//! let s = a.summary();
+//! assert!(s.packing_fraction > 0.5 && s.mean_speed > 0.0);
+//! # Ok::<(), monolayer::SimError>(())
+//! ```
 
 pub mod analysis;
 pub mod formats;

@@ -185,7 +185,7 @@ pub struct BaselineRow {
 
 /// For every nucleation and k = 0..=`depth` frames before it, the measures at the site and at
 /// its matched and random sites (drawn from a ChaCha8 generator seeded with
-/// [`BASELINE_SEED`], so the same run gives the same sites).
+/// `BASELINE_SEED`, so the same run gives the same sites).
 pub fn matched_baseline(h: &RunHistory, depth: usize) -> Vec<BaselineRow> {
     let mut rng = ChaCha8Rng::seed_from_u64(BASELINE_SEED);
     let thinning = thinning_before(h, depth);
@@ -599,7 +599,7 @@ pub fn roc_curve(sorted: &[(f64, bool)], points: usize) -> Vec<(f64, f64)> {
 
 /// How many nucleations a forecast catches `horizon` frames ahead: a nucleation is caught when,
 /// in the frame `horizon` frames before it, a scored site within R of its site is among the
-/// [`TOP_SHARE`] highest scores of that frame. `samples` are one run's, in frame order, with
+/// `TOP_SHARE` highest scores of that frame. `samples` are one run's, in frame order, with
 /// their `scores`; `keep` selects the subset scored (all sites, or the covered ones), and only
 /// nucleations whose own site is in the subset at that frame count. Returns (caught, counted).
 pub fn caught_in_top(

@@ -148,6 +148,25 @@ pub struct HoleTracker {
 
 impl HoleTracker {
     /// A tracker for cells of radius R: nucleation above πR²/4, matching within R.
+    ///
+    /// ```
+    /// use monolayer::analysis::{Analysis, HoleTracker};
+    /// use monolayer::{Monolayer, Params};
+    ///
+    /// let p = Params { box_size: 40, n_cells: 8, relax_steps: 100, ..Params::default() };
+    /// let mut m = Monolayer::new(p.clone(), 1)?;
+    /// let (mut a, mut holes) = (Analysis::new(&p), HoleTracker::new(p.radius));
+    /// for _ in 0..2 {
+    ///     m.advance(50)?;
+    ///     a.measure(&m);
+    ///     holes.update(&a.voids, m.step_count() as f64 * p.dt);
+    /// }
+    /// // Early in relaxation the seeded disks do not yet cover the box: the gap between them is
+    /// // larger than πR²/4, so it counts as a hole, followed from its first frame.
+    /// let first = holes.holes[0].history[0];
+    /// assert!(first.1 as f64 > std::f64::consts::PI * p.radius * p.radius / 4.0);
+    /// # Ok::<(), monolayer::SimError>(())
+    /// ```
     pub fn new(radius: f64) -> Self {
         HoleTracker {
             nucleation_area: nucleation_area(radius),

@@ -51,7 +51,7 @@ pub use fields::{divergence, window_mean, CoarseFields};
 pub use forecast::{
     caught_in_top, forecast_samples, matched_baseline, matched_sites, roc_auc, roc_curve, score_field, thinning_before,
     BaselineRow, Features, FrameFeatures, Logistic, Nucleation, Predictor, RunHistory, Sample, ThinningRow,
-    BASELINE_SEED, BASELINE_SITES, HORIZONS, LOOKAHEAD, SHIPPED_MODEL, TOP_SHARE,
+    BASELINE_SITES, HORIZONS, LOOKAHEAD, SHIPPED_MODEL,
 };
 pub use frame::{Analysis, Detail, FrameSummary};
 pub use holes::{

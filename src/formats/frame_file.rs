@@ -19,8 +19,7 @@ use ndarray_npy::{NpzReader, NpzWriter, ReadNpzError, WriteNpzError};
 use num_complex::Complex64 as C64;
 
 use super::error::{FormatError, FormatResult};
-use crate::model::Patch;
-use crate::Monolayer;
+use crate::model::{Monolayer, Patch};
 
 /// The name of the frame file of `step` in a run's `frames/` directory: `frame_0011000.npz`.
 pub fn frame_file_name(step: u64) -> String {
@@ -270,7 +269,7 @@ fn decode(bytes: &[u8], expect_l: Option<usize>, expect_n: Option<usize>) -> For
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Params;
+    use crate::model::Params;
 
     fn small() -> Monolayer {
         let p = Params { box_size: 40, n_cells: 4, relax_steps: 10, ..Params::default() };

@@ -12,9 +12,9 @@ use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use crate::gpu::context::{GpuContext, GpuError};
+use crate::model::multigrid::level_sides;
 use crate::model::{
-    level_sides, load, Advection, FreeEnergy, FrictionWeights, Laplacian, Monolayer, Params, PassiveForce, Patch,
-    Phase, Real,
+    load, Advection, FreeEnergy, FrictionWeights, Laplacian, Monolayer, Params, PassiveForce, Patch, Phase, Real,
 };
 
 /// The buffers of the GPU state, each with the binding number every kernel gives it

@@ -284,7 +284,7 @@ impl Kernel {
     pub fn wgsl(self) -> String {
         let (stage, _) = self.source();
         if stage == MULTIGRID_WGSL {
-            use crate::model::{COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
+            use crate::model::multigrid::{COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
             let cycle = format!(
                 "const COARSEST_SIDE: u32 = {COARSEST_SIDE}u;\nconst OMEGA: f32 = {:?};\n\
                  const OVER_CORRECTION: f32 = {:?};\nconst COARSE_CORRECTIONS: u32 = {COARSE_CORRECTIONS}u;\n\
@@ -507,7 +507,7 @@ fn row_lanes(n: usize) -> usize {
 /// visit of the coarsest level its share of a row's n products and the tree over the row's
 /// lanes ([`row_lanes`]).
 fn coarse_cycle_steps(sides: &[usize]) -> u64 {
-    use crate::model::COARSE_CORRECTIONS;
+    use crate::model::multigrid::COARSE_CORRECTIONS;
     let share = |k: usize| sides[k - 1].pow(2).div_ceil(LATTICE_GROUP) as u64;
     let last = sides.len();
     if last == 0 {

@@ -75,7 +75,7 @@ impl Counters {
     }
 
     /// Runs `f`, a parallel loop that runs the `stages` cell by cell, each timed through
-    /// [`Laps`], and shares its wall time between them in proportion to the time each took
+    /// `Laps`, and shares its wall time between them in proportion to the time each took
     /// on its threads.
     pub fn time_laps<R, const N: usize>(&mut self, stages: [Stage; N], f: impl FnOnce(&Laps<N>) -> R) -> R {
         let laps = Laps::default();

@@ -29,7 +29,8 @@ mod init;
 mod lattice;
 mod monolayer;
 mod motion;
-mod multigrid;
+// Crate-visible for the GPU kernels, which write its constants into their WGSL.
+pub(crate) mod multigrid;
 mod par;
 mod params;
 mod perturb;
@@ -38,7 +39,7 @@ mod shape;
 mod sum;
 
 pub use cell::{Cell, PatchField};
-pub use counters::{Counters, Laps, Stage};
+pub use counters::{Counters, Stage};
 pub use error::SimError;
 pub use forces::force_density;
 pub use free_energy::FreeEnergy;
@@ -47,7 +48,7 @@ pub(crate) use hash::fnv1a;
 pub use lattice::{row_neighbourhood, Neighbourhood, Patch, Run, Runs};
 pub use monolayer::{LatticeFields, Monolayer, Phase, State};
 pub use motion::friction_weight;
-pub use multigrid::{level_sides, CycleWork, Multigrid, COARSEST_SIDE, COARSE_CORRECTIONS, OMEGA, OVER_CORRECTION};
+pub use multigrid::Multigrid;
 pub use params::{
     number_text, Advection, FrictionWeights, Laplacian, ParamError, Params, PassiveForce, MAX_BOX_SIZE, MAX_STEPS,
 };

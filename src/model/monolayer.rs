@@ -246,7 +246,21 @@ fn add_each<T: Copy + std::ops::AddAssign>(out: &mut [T], values: impl Iterator<
 }
 
 impl Monolayer {
-    /// The protocol's start: random disks of radius R/2, seeded.
+    /// The protocol's start: random disks of radius R/2, seeded. Invalid parameters are
+    /// refused by name:
+    ///
+    /// ```
+    /// use monolayer::{Monolayer, Params};
+    ///
+    /// let p = Params { box_size: 40, n_cells: 8, ..Params::default() };
+    /// let m = Monolayer::new(p.clone(), 7)?;
+    /// assert_eq!(m.step_count(), 0);
+    /// // The same seed, the same bits.
+    /// assert_eq!(m.fingerprint(), Monolayer::new(p.clone(), 7)?.fingerprint());
+    /// let err = Monolayer::new(Params { n_cells: 0, ..p }, 7).err().unwrap();
+    /// assert!(err.to_string().contains("n_cells"));
+    /// # Ok::<(), monolayer::SimError>(())
+    /// ```
     pub fn new(params: Params, seed: u64) -> Result<Self, SimError> {
         params.validate()?;
         let cells = random_disks(&params, seed)?;

@@ -722,8 +722,8 @@ impl Multigrid {
         dot
     }
 
-    /// z = M r for the r in `work` ([`CycleWork::residual_mut`]): one symmetric cycle from
-    /// zero, left in `work` ([`CycleWork::preconditioned`]) in the cycle's precision, which CG
+    /// z = M r for the r in `work` (`CycleWork::residual_mut`): one symmetric cycle from
+    /// zero, left in `work` (`CycleWork::preconditioned`) in the cycle's precision, which CG
     /// reads as it updates its direction (a copy in f64 would only add a pass). Returns ⟨r, z⟩
     /// (summed in f64), which CG needs next.
     pub fn precondition(&self, work: &mut CycleWork) -> f64 {

@@ -52,7 +52,7 @@ pub use files::{
     write_atomic, write_checkpoint, write_frame, write_run_checkpoint, Frame, RunFrames, RunLock,
 };
 pub use forecast::forecast;
-pub use intervene::{intervene, Arm, InterveneOptions, FRICTION_FACTOR, LOCAL_CHI};
+pub use intervene::{intervene, Arm, InterveneOptions};
 pub use offline::analyze_run;
 pub use plots::Background;
 pub use runner::{

@@ -268,6 +268,20 @@ pub struct RunDir {
 
 impl RunDir {
     /// Starts a new run in `dir` (created), refusing a directory that holds a run already.
+    ///
+    /// ```
+    /// use monolayer::run::{RunDir, RunFrames};
+    /// use monolayer::Params;
+    ///
+    /// let dir = std::env::temp_dir().join(format!("monolayer-doc-run-{}", std::process::id()));
+    /// let p = Params { box_size: 40, n_cells: 8, relax_steps: 100, active_steps: 100, ..Params::default() };
+    /// RunDir::create(&dir, p.clone(), 1, 50)?.execute(false, &mut |_, _| {})?;
+    /// // Frames from the end of relaxation: steps 100, 150 and 200, read back whole.
+    /// assert_eq!(RunFrames::open(&dir)?.frames.len(), 3);
+    /// assert!(RunDir::create(&dir, p, 1, 50).is_err()); // never written over
+    /// # std::fs::remove_dir_all(&dir).ok();
+    /// # Ok::<(), monolayer::run::RunError>(())
+    /// ```
     pub fn create(dir: &Path, params: Params, seed: u64, frame_interval: u64) -> Result<Self, RunError> {
         if frame_interval == 0 {
             return Err(RunError::invalid("frame interval", 0, "≥ 1"));
