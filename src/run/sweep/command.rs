@@ -2,17 +2,19 @@
 //! measured, `--tables-only`), and its tables written; the binary only parses the arguments and
 //! shows what this reports.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::map::plot_regime_map;
 use super::pool::{run_sweep, steps_to_run, Output};
 use super::spec::{Shard, SweepSpec};
 use super::summary::{jobs_of_runs, measure_existing, RunSummary};
-use super::tables::write_tables;
+use super::tables::{regime_map, tables};
 use crate::formats::RunStatus;
 use crate::run::config::{check_distinct, parse_assignment};
 use crate::run::console::Report;
 use crate::run::error::RunError;
+use crate::run::files::write_atomic;
 use crate::run::runner::{check_frame_interval, stop_signal};
 
 /// What `monolayer sweep` was asked for.
@@ -177,4 +179,32 @@ fn stopped_runs(summaries: &[RunSummary]) -> Result<(), RunError> {
         return Err(RunError::Stopped(stopped));
     }
     Ok(())
+}
+
+/// Writes `OUT/summary.csv`, `OUT/regimes.csv` (and the regime map plot where the grid has χ
+/// and ζ); returns the files written. Refused for no run at all.
+pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, RunError> {
+    // A sweep takes no lock on OUT (several shards write these tables), so only the temporaries
+    // of writers no longer alive are taken.
+    crate::run::files::remove_dead_temporaries(out);
+    // Tables of no run would replace the tables of the runs measured before with headers.
+    if summaries.is_empty() {
+        return Err(RunError::file(
+            &out.join("runs"),
+            "no run of this sweep is there to measure: summary.csv and the regime map are left as they are (is \
+             --out the sweep's, with its grid?)",
+        ));
+    }
+    let (runs, regimes) = tables(summaries);
+    let mut written = Vec::new();
+    for (name, text) in [("summary.csv", runs), ("regimes.csv", regimes)] {
+        let path = out.join(name);
+        write_atomic(&path, |w| {
+            use std::io::Write;
+            w.write_all(text.as_bytes()).map_err(|e| RunError::io(&path, e))
+        })?;
+        written.push(path);
+    }
+    written.extend(plot_regime_map(&out.join("regime_map"), &regime_map(summaries))?);
+    Ok(written)
 }

@@ -1,14 +1,10 @@
 //! The sweep's tables: `summary.csv` (a row per run) and `regimes.csv` (a row per grid point, the
-//! paper's Fig. 3d criterion), written as one set with the regime map.
+//! paper's Fig. 3d criterion), as text; `command` writes them with the regime map.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
 
-use super::map::plot_regime_map;
 use super::summary::RunSummary;
 use crate::analysis::{classify, fitted_lifetime, Regime};
-use crate::run::error::RunError;
-use crate::run::files::write_atomic;
 
 /// A grid point (all seeds pooled) and its regime.
 #[derive(Clone, Debug)]
@@ -148,34 +144,6 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
         );
     }
     (runs, regimes)
-}
-
-/// Writes `OUT/summary.csv`, `OUT/regimes.csv` (and the regime map plot where the grid has χ
-/// and ζ); returns the files written. Refused for no run at all.
-pub fn write_tables(out: &Path, summaries: &[RunSummary]) -> Result<Vec<PathBuf>, RunError> {
-    // A sweep takes no lock on OUT (several shards write these tables), so only the temporaries
-    // of writers no longer alive are taken.
-    crate::run::files::remove_dead_temporaries(out);
-    // Tables of no run would replace the tables of the runs measured before with headers.
-    if summaries.is_empty() {
-        return Err(RunError::file(
-            &out.join("runs"),
-            "no run of this sweep is there to measure: summary.csv and the regime map are left as they are (is \
-             --out the sweep's, with its grid?)",
-        ));
-    }
-    let (runs, regimes) = tables(summaries);
-    let mut written = Vec::new();
-    for (name, text) in [("summary.csv", runs), ("regimes.csv", regimes)] {
-        let path = out.join(name);
-        write_atomic(&path, |w| {
-            use std::io::Write;
-            w.write_all(text.as_bytes()).map_err(|e| RunError::io(&path, e))
-        })?;
-        written.push(path);
-    }
-    written.extend(plot_regime_map(&out.join("regime_map"), &regime_map(summaries))?);
-    Ok(written)
 }
 
 #[cfg(test)]
