@@ -310,8 +310,18 @@ impl Params {
         self.relax_steps + self.active_steps
     }
 
-    /// Checks every parameter against its allowed range and against the others.
+    /// Checks every parameter against its allowed range and against the others, in groups in
+    /// this order (the first error found is the one reported).
     pub fn validate(&self) -> Result<(), ParamError> {
+        self.check_tissue()?;
+        self.check_forces()?;
+        self.check_friction_and_time_step()?;
+        self.check_patches_and_guards()?;
+        self.check_protocol()
+    }
+
+    /// The lattice and the cells on it: the box, their number, size and cover.
+    fn check_tissue(&self) -> Result<(), ParamError> {
         check(
             (16..=MAX_BOX_SIZE).contains(&self.box_size),
             "box_size",
@@ -338,6 +348,11 @@ impl Params {
                 self.box_size * self.box_size
             ),
         )?;
+        Ok(())
+    }
+
+    /// The free energy and the activity: λ, γ, κ, μ, the repulsion, J₀, ζ and Q.
+    fn check_forces(&self) -> Result<(), ParamError> {
         positive("lambda", self.lambda)?;
         non_negative("gamma", self.gamma)?;
         non_negative("kappa", self.kappa)?;
@@ -362,6 +377,11 @@ impl Params {
             "must be in (0, 4] (½, 1 or 2 are the readings of the paper)",
         )?;
         positive("q_epsilon", self.q_epsilon)?;
+        Ok(())
+    }
+
+    /// The frictions, the time step and the explicit scheme's stability, the friction solve.
+    fn check_friction_and_time_step(&self) -> Result<(), ParamError> {
         friction("xi_substrate", self.xi_substrate, false)?;
         friction("xi_cell", self.xi_cell, true)?;
         check(
@@ -402,6 +422,11 @@ impl Params {
             self.friction_max_iterations,
             "must be in [1, 100000]",
         )?;
+        Ok(())
+    }
+
+    /// The patches, the φ guards and the relaxation's friction.
+    fn check_patches_and_guards(&self) -> Result<(), ParamError> {
         // patch_margin first: relax_patch_size's range is computed from it.
         check(
             self.patch_margin >= 2 && self.patch_margin <= 32,
@@ -419,6 +444,11 @@ impl Params {
         check(self.phi_min < 0.0 && self.phi_min.is_finite(), "phi_min", self.phi_min, "must be a finite number < 0")?;
         check(self.phi_max > 1.0 && self.phi_max.is_finite(), "phi_max", self.phi_max, "must be a finite number > 1")?;
         friction("xi_relax", self.xi_relax, false)?;
+        Ok(())
+    }
+
+    /// The protocol: its steps, the initial placement and the time unit.
+    fn check_protocol(&self) -> Result<(), ParamError> {
         // A billion steps is months of computing; the bound keeps their sum far from overflow.
         for (name, steps) in [("relax_steps", self.relax_steps), ("active_steps", self.active_steps)] {
             check(steps <= MAX_STEPS, name, steps, "must be in [0, 1000000000]")?;
