@@ -58,7 +58,7 @@ impl GpuRunError {
 /// The sticky faults of one submission, read back together.
 #[derive(Clone, Debug)]
 pub struct Faults {
-    /// The submission they are of ([`Submitted::id`]).
+    /// The submission they are of (`Pending::id`).
     pub submission: u64,
     /// Per cell, the first padded index where φ left its range, or [`NO_FAULT`].
     pub range: Vec<u32>,
@@ -440,7 +440,7 @@ impl GpuRun {
     /// rounded from f32), at [`Self::submitted_to`]: one readback, queued now. With
     /// submissions under way it is their end, to be used once they are accepted. An error if
     /// the device failed, or if what it returned is not a state as every accepted step leaves
-    /// one ([`downloaded_state`]).
+    /// one (`downloaded_state`).
     pub fn download(&self, ctx: &GpuContext) -> impl Future<Output = Result<Monolayer, GpuError>> + 'static {
         let s = self.gpu.state();
         let words = read_words(ctx, &[s.buffer(Slot::Patches), s.buffer(Slot::Phi), s.buffer(Slot::MeanVelocity)]);
