@@ -92,15 +92,13 @@ impl Faults {
 }
 
 /// The CPU monolayer at `step` of a download's words: each cell's patch and its φ (the storage
-/// the patch names within the per-cell array, rounded from f32), and the warm start. Checked as
-/// a state read from a file is (`Monolayer::from_saved`: φ within [phi_min, phi_max] and 0 on
-/// the ring around each patch, as every accepted step leaves it, the kernels' range check being
-/// the same), and the warm start finite (a solve that met a NaN is never accepted). A device
-/// that failed can return anything: what is not a state is refused, saying why, rather than
-/// made into one or met by a panic (a patch pointing past the array).
-///
-/// Not recorded as the device's fault: in a browser a download may be queued behind a
-/// submission that is then put back, its φ out of range, and it is simply never used.
+/// the patch names within the per-cell array, rounded from f32), and the warm start. What is
+/// not a state (a patch outside the box or pointing past the array, what `Monolayer::from_state`
+/// refuses) is an error saying why, not a panic: a device that failed can return anything.
+/// Values are not checked: the kernels check φ at every step (a fault puts the state back),
+/// and a download is the state as it is on the device, which may hold φ out of range (one
+/// uploaded so, as a test does; in a browser, one queued behind a submission that is then put
+/// back, and never used).
 fn downloaded_state(
     params: Params,
     seed: u64,
@@ -131,14 +129,11 @@ fn downloaded_state(
         cells.push((patch, patch_storage(*p, phi).iter().map(|&v| f32::from_bits(v) as f64).collect()));
     }
     let u: Vec<f32> = u.iter().map(|&w| f32::from_bits(w)).collect();
-    if let Some(site) = u.iter().position(|v| !v.is_finite()) {
-        return Err(format!("the warm start of the friction solve is {} at site {}", u[site], site / 2));
-    }
     let warm_start: Vec<C64> = u.chunks_exact(2).map(|c| C64::new(c[0] as f64, c[1] as f64)).collect();
     // The GPU's corrector starts from its predictor's solution alone (docs/gpu.md).
     let corrector_shift = vec![C64::new(0.0, 0.0); warm_start.len()];
     let state = State { step, cells, warm_start, corrector_shift, substrate };
-    Monolayer::from_saved(params, seed, state).map_err(|e| e.to_string())
+    Monolayer::from_state(params, seed, state).map_err(|e| e.to_string())
 }
 
 /// The per-cell and lattice buffers a step changes, of which a copy keeps the state at the
