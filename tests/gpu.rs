@@ -27,7 +27,7 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use monolayer::gpu::{
-    patch_storage, GpuContext, GpuMonolayer, GpuRun, GpuRunError, Kernel, Layout, PatchFault, Pipelines,
+    patch_storage, GpuContext, GpuError, GpuMonolayer, GpuRun, GpuRunError, Kernel, Layout, PatchFault, Pipelines,
     Preconditioner, Slot, NO_FAULT,
 };
 use monolayer::model::{
@@ -146,7 +146,7 @@ fn gpu_fields(ctx: &GpuContext, m: &Monolayer) -> (GpuMonolayer, GpuFields) {
     // The stages up to n and F, then v and the rate (which are the CPU's only where it has no
     // friction solve; `compare_stages` checks them there).
     gpu.run(ctx, &[&Kernel::FRICTION_SUMS[..], &[Kernel::VelocityAndRate]].concat());
-    let read = |s| gpu.read(ctx, s);
+    let read = |s| gpu.read(ctx, s).unwrap();
     let fields = GpuFields {
         sum_phi: read(Slot::SumPhi),
         sum_phi2: read(Slot::SumPhi2),
@@ -591,7 +591,7 @@ fn one_relaxation_step_matches_the_cpu() {
     // 1. The predictor.
     let mut gpu = GpuMonolayer::new(&ctx, r).expect("the monolayer fits the device");
     gpu.run(&ctx, &[&Kernel::RATE[..], &[Kernel::Predict]].concat());
-    let g_pred = gpu.read(&ctx, Slot::Phi);
+    let g_pred = gpu.read(&ctx, Slot::Phi).unwrap();
     let layout = gpu.state().layout.clone();
     let mut predicted = Worst::default();
     let mut cpu_pred = Vec::new();
@@ -625,7 +625,7 @@ fn one_relaxation_step_matches_the_cpu() {
     cpu.step_on_fixed_patches().expect("the CPU steps");
     gpu.upload(&ctx, r).expect("the monolayer fits the device");
     gpu.step_on_fixed_patches(&ctx);
-    let (g_phi, faults) = (gpu.read(&ctx, Slot::Phi), gpu.read_u32(&ctx, Slot::Fault));
+    let (g_phi, faults) = (gpu.read(&ctx, Slot::Phi).unwrap(), gpu.read_u32(&ctx, Slot::Fault).unwrap());
     let mut stepped = Worst::default();
     for (i, cell) in cpu.cells().iter().enumerate() {
         assert_eq!((cell.fault(), faults[i]), (None, NO_FAULT), "cell {i}: φ out of range");
@@ -652,7 +652,7 @@ fn one_relaxation_step_matches_the_cpu() {
     let again = GpuMonolayer::new(&ctx, r).expect("the monolayer fits the device");
     again.step_on_fixed_patches(&ctx);
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    assert_eq!(bits(&again.read(&ctx, Slot::Phi)), bits(&g_phi), "two GPU steps differ");
+    assert_eq!(bits(&again.read(&ctx, Slot::Phi).unwrap()), bits(&g_phi), "two GPU steps differ");
     eprintln!(
         "one step: {:.3} ms in one submission of {} dispatches (median of 21)",
         median_ms(&ctx, &again, &Kernel::step(None)),
@@ -725,8 +725,8 @@ fn assert_repeats(ctx: &GpuContext, m: &Monolayer) {
     assert_eq!(bits(&first), bits(&second), "two GPU runs differ");
     // And a third evaluation of the same device state, after the second.
     gpu.evaluate(ctx);
-    assert_eq!(gpu.read(ctx, Slot::Mu), second.mu);
-    assert_eq!(gpu.read(ctx, Slot::QHat), second.q_hat);
+    assert_eq!(gpu.read(ctx, Slot::Mu).unwrap(), second.mu);
+    assert_eq!(gpu.read(ctx, Slot::QHat).unwrap(), second.q_hat);
 }
 
 /// The paper's size (100 cells on 140², relaxed, then 20 active steps): every stage against
@@ -805,12 +805,12 @@ fn bench_gpu_names_the_adapter_and_times_every_kernel() {
 /// The median wall time of submitting `kernels` and waiting for them, after one warm-up.
 fn median_ms(ctx: &GpuContext, gpu: &GpuMonolayer, kernels: &[Kernel]) -> f64 {
     gpu.run(ctx, kernels);
-    ctx.wait();
+    ctx.wait().unwrap();
     let mut times: Vec<f64> = (0..21)
         .map(|_| {
             let t = Instant::now();
             gpu.run(ctx, kernels);
-            ctx.wait();
+            ctx.wait().unwrap();
             t.elapsed().as_secs_f64() * 1e3
         })
         .collect();
@@ -836,7 +836,7 @@ fn the_range_check_flags_the_cpus_sites() {
     let err = cpu.step_on_fixed_patches().expect_err("φ leaves its range");
     assert!(err.to_string().contains("phi"), "{err}");
     gpu.step_on_fixed_patches(&ctx);
-    let faults = gpu.read_u32(&ctx, Slot::Fault);
+    let faults = gpu.read_u32(&ctx, Slot::Fault).unwrap();
     for (i, c) in cpu.cells().iter().enumerate() {
         let want = c.fault().map_or(NO_FAULT, |(a, b, _)| c.patch().idx(a, b) as u32);
         assert_eq!(faults[i], want, "cell {i}: GPU fault at padded index {}, CPU {:?}", faults[i], c.fault());
@@ -914,8 +914,8 @@ fn a_multigrid_application_matches_the_cpus_cycle() {
     let mut kernels = vec![Kernel::CgStart];
     kernels.extend_from_slice(Preconditioner::Multigrid.first_application());
     gpu.run(&ctx, &[&Kernel::FRICTION_SUMS[..], &kernels].concat());
-    let n: Vec<f64> = gpu.read(&ctx, Slot::Weight).iter().map(|&v| v as f64).collect();
-    let vectors = gpu.read(&ctx, Slot::CgVectors);
+    let n: Vec<f64> = gpu.read(&ctx, Slot::Weight).unwrap().iter().map(|&v| v as f64).collect();
+    let vectors = gpu.read(&ctx, Slot::CgVectors).unwrap();
     let section = |k: usize| &vectors[2 * k * l * l..2 * (k + 1) * l * l];
     let (r, z_gpu) = (section(0), section(4));
 
@@ -984,12 +984,12 @@ fn check_friction_solve(ctx: &GpuContext, m: &Monolayer, pc: Preconditioner) -> 
         ctx,
         &[&Kernel::FRICTION_SUMS[..], &Kernel::friction_solve(gpu.preconditioner, gpu.solve_iterations)].concat(),
     );
-    let solve = gpu.read_solve(ctx);
+    let solve = gpu.read_solve(ctx).unwrap();
     eprintln!("GPU friction solve: {solve:?}");
     assert!(solve.converged(), "the GPU solve did not converge in {} iterations: {solve:?}", gpu.solve_iterations);
-    let n: Vec<f64> = gpu.read(ctx, Slot::Weight).iter().map(|&v| v as f64).collect();
-    let f = pairs(&gpu.read(ctx, Slot::Force));
-    let u = pairs(&gpu.read(ctx, Slot::MeanVelocity));
+    let n: Vec<f64> = gpu.read(ctx, Slot::Weight).unwrap().iter().map(|&v| v as f64).collect();
+    let f = pairs(&gpu.read(ctx, Slot::Force).unwrap());
+    let u = pairs(&gpu.read(ctx, Slot::MeanVelocity).unwrap());
     let xi_s = &m.lattice().xi_s;
     let residual = true_residual(&n, &f, &u, xi_s, xi_c, l);
     eprintln!(
@@ -1033,7 +1033,7 @@ fn check_friction_solve(ctx: &GpuContext, m: &Monolayer, pc: Preconditioner) -> 
     );
 
     // The mobility and the pull from the GPU's n and u, within f32 rounding.
-    let drag = gpu.read(ctx, Slot::Drag);
+    let drag = gpu.read(ctx, Slot::Drag).unwrap();
     let mut mobility = Worst::default();
     let mut pull = Worst::default();
     for x in 0..l * l {
@@ -1102,9 +1102,9 @@ fn one_active_step_with_friction_matches_the_cpu() {
         let (cpu, tight) = (step_cpu(m.params().friction_tolerance), step_cpu(1e-8));
         let gpu = GpuMonolayer::new(&ctx, m).expect("the monolayer fits the device");
         gpu.step_on_fixed_patches(&ctx);
-        let solve = gpu.read_solve(&ctx);
+        let solve = gpu.read_solve(&ctx).unwrap();
         assert!(solve.converged(), "{what}: the corrector's solve did not converge: {solve:?}");
-        let (g_phi, faults) = (gpu.read(&ctx, Slot::Phi), gpu.read_u32(&ctx, Slot::Fault));
+        let (g_phi, faults) = (gpu.read(&ctx, Slot::Phi).unwrap(), gpu.read_u32(&ctx, Slot::Fault).unwrap());
         assert!(faults.iter().all(|&f| f == NO_FAULT), "{what}: φ left its range on the GPU");
         let layout = &gpu.state().layout;
         let d_gpu = max_phi_difference(layout, &g_phi, &tight);
@@ -1131,8 +1131,8 @@ fn one_active_step_with_friction_matches_the_cpu() {
         let bits = |v: Vec<f32>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         for slot in [Slot::Phi, Slot::MeanVelocity, Slot::Drag] {
             assert_eq!(
-                bits(again.read(&ctx, slot)),
-                bits(gpu.read(&ctx, slot)),
+                bits(again.read(&ctx, slot).unwrap()),
+                bits(gpu.read(&ctx, slot).unwrap()),
                 "{what}: two GPU steps differ in {slot:?}"
             );
         }
@@ -1142,7 +1142,7 @@ fn one_active_step_with_friction_matches_the_cpu() {
 /// The GPU's φ of every cell on the lattice (0 where its patch does not reach), read with the
 /// patches as they are on the device.
 fn gpu_phi_on_lattice(ctx: &GpuContext, gpu: &GpuMonolayer, l: usize) -> Vec<Vec<f64>> {
-    let (patches, phi) = (gpu.read_patches(ctx), gpu.read(ctx, Slot::Phi));
+    let (patches, phi) = (gpu.read_patches(ctx).unwrap(), gpu.read(ctx, Slot::Phi).unwrap());
     patches.iter().map(|gp| on_lattice(gp.patch(), patch_storage(*gp, &phi), l)).collect()
 }
 
@@ -1240,9 +1240,9 @@ fn patches_follow_the_cells_as_on_the_cpu() {
         let before = gpu_phi_on_lattice(&ctx, &fixed, l);
         let moving = GpuMonolayer::new(&ctx, m).expect("the monolayer fits the device");
         moving.step(&ctx);
-        let patches = moving.read_patches(&ctx);
-        let faults = moving.read_u32(&ctx, Slot::PatchFault);
-        let phi = moving.read(&ctx, Slot::Phi);
+        let patches = moving.read_patches(&ctx).unwrap();
+        let faults = moving.read_u32(&ctx, Slot::PatchFault).unwrap();
+        let phi = moving.read(&ctx, Slot::Phi).unwrap();
         let mut moved = 0;
         // φ after the step, before the patches move: where the CPU's f64 decision is a tie
         // to within f32 rounding, the GPU may take the other side.
@@ -1300,16 +1300,16 @@ fn a_hundred_steps_at_full_size_stay_near_the_cpu() {
     for _ in 0..100 {
         gpu.step(&ctx);
     }
-    ctx.wait();
+    ctx.wait().unwrap();
     let gpu_ms = t.elapsed().as_secs_f64() * 10.0;
     cpu.advance(100).expect("the CPU steps");
-    let solve = gpu.read_solve(&ctx);
+    let solve = gpu.read_solve(&ctx).unwrap();
     assert!(solve.converged(), "the last solve did not converge: {solve:?}");
-    let faults = gpu.read_u32(&ctx, Slot::Fault);
+    let faults = gpu.read_u32(&ctx, Slot::Fault).unwrap();
     assert!(faults.iter().all(|&f| f == NO_FAULT), "φ left its range on the GPU");
-    let patch_faults = gpu.read_u32(&ctx, Slot::PatchFault);
+    let patch_faults = gpu.read_u32(&ctx, Slot::PatchFault).unwrap();
     assert!(patch_faults.iter().all(|&f| f == PatchFault::Moved as u32), "a patch fault: {patch_faults:?}");
-    let patches = gpu.read_patches(&ctx);
+    let patches = gpu.read_patches(&ctx).unwrap();
     let differ = patches.iter().zip(cpu.cells()).filter(|(g, c)| g.patch() != c.patch()).count();
     let (gpu_phi, cpu_phi) = (gpu_phi_on_lattice(&ctx, &gpu, l), phi_on_lattice(&cpu));
     let (worst, moved) = (max_distance(&gpu_phi, &cpu_phi), max_distance(&cpu_phi, &phi_on_lattice(&m)));
@@ -1337,7 +1337,7 @@ fn a_gpu_run_crosses_into_activity_as_the_cpu() {
     run.advance(&ctx, 60).expect("the GPU steps");
     let mut cpu = m.clone();
     cpu.advance(60).expect("the CPU steps");
-    let got = run.download_now(&ctx);
+    let got = run.download_now(&ctx).unwrap();
     assert_eq!((got.step_count(), got.phase()), (cpu.step_count(), cpu.phase()));
     assert_eq!(got.phase(), Phase::Active);
     let worst = max_distance(&phi_on_lattice(&got), &phi_on_lattice(&cpu));
@@ -1363,7 +1363,7 @@ fn a_gpu_run_regrows_its_storage_and_goes_on_as_the_cpu() {
     let regrown = run.gpu().state().layout.max_padded;
     let mut cpu = m.clone();
     cpu.advance(60).expect("the CPU steps");
-    let got = run.download_now(&ctx);
+    let got = run.download_now(&ctx).unwrap();
     let worst = max_distance(&phi_on_lattice(&got), &phi_on_lattice(&cpu));
     eprintln!("tight storage: capacity {capacity} → {regrown} values per cell; after 60 steps max |φ_GPU − φ_CPU| = {worst:.3e}");
     assert!(regrown > capacity, "the storage was never regrown ({capacity} values per cell): the test proves nothing");
@@ -1386,7 +1386,7 @@ fn the_recorded_iterations_adapt_without_changing_a_bit() {
         run.adapt_iterations = adapt;
         run.check_every = 10;
         run.advance(&ctx, 40).expect("the GPU steps");
-        (run.gpu().solve_iterations, run.download_now(&ctx))
+        (run.gpu().solve_iterations, run.download_now(&ctx).unwrap())
     };
     let (fixed, reference) = run(60, false);
     let (grown, from_few) = run(1, true);
@@ -1415,7 +1415,7 @@ fn a_gpu_run_stops_on_a_fault_and_keeps_the_last_good_state() {
     let bad = Monolayer::from_state(r.params().clone(), r.seed(), state).expect("the state loads");
     let mut run = GpuRun::new(&ctx, &bad).expect("the monolayer fits the device");
     run.check_every = 4;
-    let before = run.download_now(&ctx);
+    let before = run.download_now(&ctx).unwrap();
     let err = run.advance(&ctx, 10).expect_err("φ leaves its range");
     eprintln!("{err}");
     assert!(
@@ -1423,7 +1423,7 @@ fn a_gpu_run_stops_on_a_fault_and_keeps_the_last_good_state() {
         "{err:?}"
     );
     assert_eq!(run.step_count(), r.step_count());
-    let after = run.download_now(&ctx);
+    let after = run.download_now(&ctx).unwrap();
     for (a, b) in after.cells().iter().zip(before.cells()) {
         assert_eq!(a.patch(), b.patch());
     }
@@ -1457,12 +1457,12 @@ fn a_nan_in_the_friction_solve_is_not_convergence() {
     let m = reduced_tissue();
     let gpu = GpuMonolayer::new(&ctx, m).expect("the monolayer fits the device");
     gpu.run(&ctx, &Kernel::FRICTION_SUMS);
-    let n = gpu.read(&ctx, Slot::Weight);
+    let n = gpu.read(&ctx, Slot::Weight).unwrap();
     let site = (0..n.len()).max_by(|&a, &b| n[a].total_cmp(&n[b])).expect("sites");
     let nan = [f32::NAN, 0.0];
     ctx.queue.write_buffer(gpu.state().buffer(Slot::Force), (site * 8) as u64, bytemuck::cast_slice(&nan));
     gpu.run(&ctx, &Kernel::friction_solve(gpu.preconditioner, gpu.solve_iterations));
-    let solve = gpu.read_solve(&ctx);
+    let solve = gpu.read_solve(&ctx).unwrap();
     assert!(!solve.converged(), "a NaN in F converged: {solve:?}");
     assert!(solve.unconverged >= 1, "the unconverged solve was not counted: {solve:?}");
 }
@@ -1479,16 +1479,16 @@ fn the_true_residual_is_checked_after_the_solve() {
     let (iterate, check) = solve.split_at(solve.len() - 2);
     assert_eq!(check, [Kernel::FrictionPull, Kernel::FrictionCheck]);
     gpu.run(&ctx, &[&Kernel::FRICTION_SUMS[..], &solve].concat());
-    let clean = gpu.read_solve(&ctx);
+    let clean = gpu.read_solve(&ctx).unwrap();
     assert!(clean.converged() && clean.inaccurate == 0, "an undisturbed solve: {clean:?}");
     gpu.run(&ctx, &[&Kernel::FRICTION_SUMS[..], iterate].concat());
-    let n = gpu.read(&ctx, Slot::Weight);
+    let n = gpu.read(&ctx, Slot::Weight).unwrap();
     let site = (0..n.len()).max_by(|&a, &b| n[a].total_cmp(&n[b])).expect("sites");
-    let u = gpu.read(&ctx, Slot::MeanVelocity);
+    let u = gpu.read(&ctx, Slot::MeanVelocity).unwrap();
     let kicked = [u[2 * site] + 1.0, u[2 * site + 1]];
     ctx.queue.write_buffer(gpu.state().buffer(Slot::MeanVelocity), (site * 8) as u64, bytemuck::cast_slice(&kicked));
     gpu.run(&ctx, check);
-    let disturbed = gpu.read_solve(&ctx);
+    let disturbed = gpu.read_solve(&ctx).unwrap();
     assert!(disturbed.converged(), "the CG's own residual still met its target: {disturbed:?}");
     assert!(disturbed.inaccurate >= 1, "a u that misses the tolerance passed the true-residual check: {disturbed:?}");
 }
@@ -1585,7 +1585,7 @@ fn kernels_compiled_one_at_a_time_make_the_same_run() {
         run.check_every = 5;
         run.advance(&ctx, 10).expect("the GPU steps");
     }
-    let bits = |run: &GpuRun| phi_bits(&run.download_now(&ctx));
+    let bits = |run: &GpuRun| phi_bits(&run.download_now(&ctx).unwrap());
     assert!(bits(&one_by_one) == bits(&together), "the kernels compiled one at a time stepped otherwise");
 }
 
@@ -1603,7 +1603,81 @@ fn submissions_under_way_together_make_the_run_of_one_at_a_time() {
         let steps = r.params().relax_steps - r.step_count() + 20;
         run.advance(&ctx, steps).expect("the GPU steps");
         assert_eq!(run.step_count(), r.step_count() + steps);
-        phi_bits(&run.download_now(&ctx))
+        phi_bits(&run.download_now(&ctx).unwrap())
     };
     assert!(run(monolayer::gpu::IN_FLIGHT) == run(1), "submissions under way together changed the run");
+}
+
+/// A device lost under a run (destroyed, as a driver reset or an unplugged GPU would lose it)
+/// is an error of the device everywhere the native path meets it, never a panic: the steps
+/// under way are dropped, the steps taken stay those accepted before the loss, and every later
+/// readback, download and wait says the device was lost.
+#[test]
+fn a_lost_device_is_an_error_of_the_run_not_a_panic() {
+    let Some(ctx) = context() else { return };
+    let m = reduced_tissue();
+    let mut run = GpuRun::new(&ctx, m).expect("the monolayer fits the device");
+    run.check_every = 5;
+    run.advance(&ctx, 10).expect("the GPU steps");
+    let taken = run.step_count();
+    ctx.destroy();
+    let err = run.advance(&ctx, 10).expect_err("a lost device cannot step");
+    eprintln!("{err}");
+    assert!(
+        matches!(&err, GpuRunError::Device { from, reason } if *from == taken && reason.contains("lost")),
+        "{err:?}"
+    );
+    assert!(err.to_string().starts_with("GPU device failed"), "{err}");
+    assert_eq!((run.step_count(), run.in_flight()), (taken, 0));
+    let lost = |what: &str, e: Option<GpuError>| {
+        let e = e.unwrap_or_else(|| panic!("{what} of a lost device succeeded"));
+        assert!(matches!(&e, GpuError::Failed(why) if why.contains("lost")), "{what}: {e:?}");
+    };
+    lost("a download", run.download_now(&ctx).err());
+    lost("a wait", ctx.wait().err());
+    lost("a readback", run.gpu().read_solve(&ctx).err());
+    assert!(ctx.fault().is_some_and(|f| f.contains("lost")), "{:?}", ctx.fault());
+}
+
+/// `monolayer run --engine gpu` that loses its device, while it steps or as it reads the state
+/// of a frame back, is stopped, not failed and not a panic: exit status 2, the reason printed
+/// once, `stopped: GPU device failed …` in run.json, the checkpoint of its last frame kept;
+/// `run --resume` then takes it to its end.
+#[test]
+fn a_gpu_run_that_loses_its_device_is_stopped_and_resumes() {
+    let Some(_ctx) = context() else { return };
+    let tmp = tempfile::tempdir().expect("a temporary directory");
+    let args = ["--set", "box_size=60", "--set", "n_cells=18", "--relax-steps", "40", "--steps", "30"];
+    // Frames at 40, 50, 60 and 70: lost as the steps from 50 are submitted, or once the run
+    // stepped to 60 and before that state is read back; either way frame 50 is the last.
+    for loss in ["steps@50", "download@60"] {
+        let run = tmp.path().join(loss.replace('@', "-"));
+        let more = ["--frame-interval", "10", "--quiet", "--engine", "gpu", "--out", common::arg(&run)];
+        let out = common::command()
+            .args([&["run"][..], &args, &more].concat())
+            .env("MONOLAYER_TEST_LOSE_GPU", loss)
+            .output()
+            .expect("the binary runs");
+        let err = common::stderr(&out);
+        eprintln!("{loss}: {err}");
+        assert_eq!(out.status.code(), Some(2), "{loss}: {err}");
+        assert!(!err.contains("panicked"), "{loss}: {err}");
+        assert_eq!(err.matches("GPU device failed").count(), 1, "{loss}: {err}");
+        assert!(err.contains("--resume"), "{loss}: {err}");
+        let record = monolayer::formats::RunRecord::load(&run).expect("the record");
+        assert!(
+            matches!(&record.status, monolayer::formats::RunStatus::Stopped(why)
+                if why.starts_with("GPU device failed") && why.contains("lost")),
+            "{loss}: {:?}",
+            record.status
+        );
+        assert_eq!(record.last_frame_step, Some(50), "{loss}");
+        let state = monolayer::run::read_checkpoint(&run.join("checkpoint.npz"), 60).expect("a checkpoint");
+        assert_eq!(state.step, 50, "{loss}");
+        assert!(!run.join("frames/frame_0000060.npz").exists(), "{loss}: a frame of the lost device");
+        let out = common::monolayer(&["run", "--quiet", "--resume", common::arg(&run)]);
+        assert!(out.status.success(), "{loss}: {}", common::stderr(&out));
+        let record = monolayer::formats::RunRecord::load(&run).expect("the record");
+        assert_eq!((record.status, record.last_frame_step), (monolayer::formats::RunStatus::Finished, Some(70)));
+    }
 }

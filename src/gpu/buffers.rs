@@ -69,9 +69,9 @@ pub enum Slot {
     /// arena: with its own binding each, the fused kernels would bind more than 8 storage
     /// buffers, WebGPU's default): the residual r, the direction p, the next direction
     /// p′ = z + β p (while p is still read), the product q = C p′ and z = M r
-    /// ([`CG_VECTORS`]; `shaders/friction.wgsl`).
+    /// (`CG_VECTORS`; `shaders/friction.wgsl`).
     CgVectors = 21,
-    /// Per workgroup of the lattice, partial sums of the CG's inner products ([`PARTIAL_SUMS`]
+    /// Per workgroup of the lattice, partial sums of the CG's inner products (`PARTIAL_SUMS`
     /// vec4 each).
     Partials = 22,
     /// The CG's scalars, [`SolveScalars`].

@@ -16,6 +16,8 @@ pub enum GpuError {
     TooLarge { what: String, value: u64, limit: u64, limit_name: &'static str },
     #[error("the kernel {kernel} did not compile on this device: {reason}")]
     Kernel { kernel: &'static str, reason: String },
+    /// The device can no longer be trusted: lost, an error no scope caught, a readback that did
+    /// not map, or a state read back that is not one. Nothing it computed after that is used.
     #[error("the GPU device failed: {0}")]
     Failed(String),
 }
@@ -30,10 +32,152 @@ pub struct GpuContext {
     fault: Arc<Mutex<Option<String>>>,
 }
 
-/// Keeps the first fault only: later ones follow from it.
+/// Keeps the first fault only: later ones follow from it (a loss, reported later than the
+/// errors it causes, replaces it: [`GpuContext::request`]).
 pub(crate) fn record(fault: &Mutex<Option<String>>, why: String) {
     let mut f = fault.lock().unwrap_or_else(|e| e.into_inner());
     f.get_or_insert(why);
+}
+
+/// The fault recorded first, if any.
+fn first(fault: &Mutex<Option<String>>) -> Option<String> {
+    fault.lock().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
+/// Records `why` as a fault of the device and returns the error of the fault recorded: when a
+/// lost device makes a readback fail, the loss is what the error names, not the readback.
+/// wgpu reports a loss (a destroyed device's too) on the poll that finds the queue empty, so
+/// natively every submission is waited for first.
+pub(crate) fn fail(device: &wgpu::Device, fault: &Mutex<Option<String>>, why: String) -> GpuError {
+    record(fault, why.clone());
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        // Its own failure, if any, is the fault recorded already or the loss it reports.
+        let _ = caught::quietly(|| device.poll(wgpu::PollType::wait_indefinitely()));
+    }
+    #[cfg(target_arch = "wasm32")]
+    let _ = device;
+    GpuError::Failed(first(fault).unwrap_or(why))
+}
+
+/// The error of the fault recorded, if there is one: once the device failed, nothing it
+/// computes is used.
+pub(crate) fn check(fault: &Mutex<Option<String>>) -> Result<(), GpuError> {
+    first(fault).map_or(Ok(()), |why| Err(GpuError::Failed(why)))
+}
+
+/// Blocks until the submission (every one, with `None`) has finished on the device; an error
+/// if the device failed, now or before (native only: a browser cannot block).
+///
+/// wgpu 30's `Device::poll` panics, natively, when the driver reports the device lost while it
+/// waits (every device error there is fatal to wgpu; only a timeout or a wrong submission index
+/// is returned): that panic is caught here and becomes the device's fault.
+#[cfg(not(target_arch = "wasm32"))]
+pub(crate) fn wait_for(
+    device: &wgpu::Device,
+    fault: &Mutex<Option<String>>,
+    submission: Option<wgpu::SubmissionIndex>,
+) -> Result<(), GpuError> {
+    let poll = || device.poll(wgpu::PollType::Wait { submission_index: submission, timeout: None });
+    polled(device, fault, poll)
+}
+
+/// What [`wait_for`] makes of `poll`, a wait on `device`: its panic or its error is the
+/// device's fault. Apart so that a test can hand it the panic of a lost device, which a
+/// destroyed device does not raise (wgpu marks it lost without asking the driver).
+#[cfg(not(target_arch = "wasm32"))]
+fn polled(
+    device: &wgpu::Device,
+    fault: &Mutex<Option<String>>,
+    poll: impl FnOnce() -> Result<wgpu::PollStatus, wgpu::PollError>,
+) -> Result<(), GpuError> {
+    match caught::quietly(poll) {
+        Ok(Ok(_)) => check(fault),
+        Ok(Err(e)) => Err(fail(device, fault, format!("waiting for the device: {e}"))),
+        Err(panic) => Err(fail(device, fault, format!("waiting for the device: {panic}"))),
+    }
+}
+
+/// A wait that meets a lost device is an error and the device's fault, not a panic.
+#[cfg(all(test, not(target_arch = "wasm32")))]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_wait_that_panics_on_a_lost_device_is_its_fault() {
+        let ctx = match GpuContext::new() {
+            Ok(ctx) => ctx,
+            Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!("CI=true: no adapter: {e}"),
+            Err(_) => return,
+        };
+        ctx.wait().expect("a device that did not fail");
+        // What wgpu's `Device::poll` panics with when the driver reports the device lost.
+        let lost =
+            || -> Result<wgpu::PollStatus, wgpu::PollError> { panic!("Error in Device::poll: Parent device is lost") };
+        let error = polled(&ctx.device, &ctx.fault, lost).expect_err("a lost device");
+        assert!(matches!(&error, GpuError::Failed(why) if why.contains("Parent device is lost")), "{error}");
+        assert!(ctx.fault().is_some_and(|f| f.contains("Parent device is lost")), "{:?}", ctx.fault());
+        // Once failed, the device is not waited on as if it had not.
+        let again = ctx.wait().expect_err("a device that failed");
+        assert_eq!(again.to_string(), error.to_string());
+    }
+}
+
+/// Panics caught without a word on stderr: for wgpu's calls that panic where a device failed
+/// (`wait_for`), whose message becomes the device's fault, printed once by whoever reports it.
+#[cfg(not(target_arch = "wasm32"))]
+mod caught {
+    use std::cell::Cell;
+    use std::panic::{catch_unwind, AssertUnwindSafe};
+    use std::sync::Once;
+
+    thread_local! {
+        /// Whether this thread is inside [`quietly`], whose panics are not printed.
+        static QUIET: Cell<bool> = const { Cell::new(false) };
+    }
+
+    /// `f()`, or the message of its panic. The process's panic hook is wrapped once, the first
+    /// time: a panic on a thread inside `quietly` is not printed, every other one goes to the
+    /// hook that was there before, as it would have.
+    pub fn quietly<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+        static HOOK: Once = Once::new();
+        HOOK.call_once(|| {
+            let before = std::panic::take_hook();
+            std::panic::set_hook(Box::new(move |info| {
+                if !QUIET.with(Cell::get) {
+                    before(info)
+                }
+            }));
+        });
+        let was = QUIET.with(|q| q.replace(true));
+        // Unwind-safe in what matters: wgpu panics after its own call returned, holding no
+        // lock of ours or its own, and the device it panicked about is used no more.
+        let result = catch_unwind(AssertUnwindSafe(f));
+        QUIET.with(|q| q.set(was));
+        result.map_err(|payload| {
+            payload
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| payload.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "a panic without a message".into())
+                .trim()
+                .to_string()
+        })
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::quietly;
+
+        #[test]
+        fn a_panic_inside_is_its_message_and_a_value_passes_through() {
+            assert_eq!(quietly(|| 7), Ok(7));
+            let e = quietly(|| -> u32 { panic!("wgpu error: the device is lost") });
+            assert_eq!(e, Err("wgpu error: the device is lost".to_string()));
+            // Not left quiet: a later panic outside reaches the hook as before.
+            assert!(!super::QUIET.with(std::cell::Cell::get));
+        }
+    }
 }
 
 /// The backends the GPU stepper uses: Vulkan natively (the only native backend compiled in),
@@ -74,31 +218,31 @@ impl GpuContext {
             .map_err(|e| GpuError::NoDevice { adapter: info.name.clone(), reason: e.to_string() })?;
         let fault = Arc::new(Mutex::new(None));
         let lost = fault.clone();
+        // The loss replaces a fault recorded before it: wgpu reports it only once the queue is
+        // empty, so the errors of what was made on the lost device meanwhile (a readback's
+        // buffer that is invalid) come first, and the loss is what explains them.
         device.set_device_lost_callback(move |reason, message| {
-            record(
-                &lost,
-                format!(
-                    "the device was lost ({reason:?}{})",
-                    if message.is_empty() { String::new() } else { format!(": {message}") }
-                ),
-            )
+            let why = format!(
+                "the device was lost ({reason:?}{})",
+                if message.is_empty() { String::new() } else { format!(": {message}") }
+            );
+            *lost.lock().unwrap_or_else(|e| e.into_inner()) = Some(why);
         });
-        // In a browser an error no scope caught would only reach the console: it is a fault
-        // of the device for the page, which then steps on the CPU engine. Natively wgpu's own
-        // handler stays, which panics: a validation error there is a bug for the tests to show.
-        #[cfg(target_arch = "wasm32")]
-        {
-            let uncaptured = fault.clone();
-            device
-                .on_uncaptured_error(Arc::new(move |e: wgpu::Error| record(&uncaptured, format!("a GPU error: {e}"))));
-        }
+        // An error no scope caught is a fault of the device: in a browser it would only reach
+        // the console (the page then steps on the CPU engine); natively wgpu's own handler
+        // would panic, and a device destroyed or lost under a run raises one at its next
+        // readback (a staging buffer it can no longer make). Every readback after a fault
+        // fails with it (`readback::read_words`), so a validation error of a kernel still
+        // fails the test or stops the run that meets it, with its message.
+        let uncaptured = fault.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| record(&uncaptured, format!("a GPU error: {e}"))));
         Ok(GpuContext { device, queue, info, fault })
     }
 
-    /// Why the device can no longer be trusted, if it cannot: its loss, an uncaptured error (in
-    /// a browser), or a readback that failed.
+    /// Why the device can no longer be trusted, if it cannot: its loss, an uncaptured error, or
+    /// a readback that failed.
     pub fn fault(&self) -> Option<String> {
-        self.fault.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        first(&self.fault)
     }
 
     /// Where faults are recorded, for a future that outlives the borrow of the context (a
@@ -120,10 +264,11 @@ impl GpuContext {
     }
 
     /// Blocks until every submitted dispatch has finished (native only; for tests, diagnostics
-    /// and timing: the stepper itself never waits inside a step).
+    /// and timing: the stepper itself never waits inside a step). An error if the device
+    /// failed, now or before.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn wait(&self) {
-        self.device.poll(wgpu::PollType::wait_indefinitely()).expect("the device finishes its work");
+    pub fn wait(&self) -> Result<(), GpuError> {
+        wait_for(&self.device, &self.fault, None)
     }
 
     /// The adapter's name ("llvmpipe (LLVM 15.0.6, 256 bits)" on lavapipe).

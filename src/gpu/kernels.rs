@@ -718,11 +718,12 @@ impl GpuMonolayer {
 
     /// Runs the kernels, each in its own compute pass with a timestamp at its start and its end,
     /// and returns each one's time on the device in ms; `None` where the device writes no
-    /// timestamps ([`GpuContext::has_timestamps`]). Blocking, native only: `bench --gpu`.
+    /// timestamps ([`GpuContext::has_timestamps`]). Blocking, native only: `bench --gpu`. An
+    /// error if the device failed.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn time_kernels(&self, ctx: &GpuContext, kernels: &[Kernel]) -> Option<Vec<f64>> {
+    pub fn time_kernels(&self, ctx: &GpuContext, kernels: &[Kernel]) -> Result<Option<Vec<f64>>, GpuError> {
         if !ctx.has_timestamps() {
-            return None;
+            return Ok(None);
         }
         let period_ns = f64::from(ctx.queue.get_timestamp_period());
         let mut out = Vec::with_capacity(kernels.len());
@@ -754,11 +755,11 @@ impl GpuMonolayer {
             }
             encoder.resolve_query_set(&set, 0..count, &resolved, 0);
             ctx.queue.submit([encoder.finish()]);
-            let words = read_now(ctx, &resolved);
+            let words = read_now(ctx, &resolved)?;
             let tick = |i: usize| u64::from(words[2 * i]) | (u64::from(words[2 * i + 1]) << 32);
             out.extend((0..chunk.len()).map(|i| tick(2 * i + 1).saturating_sub(tick(2 * i)) as f64 * period_ns / 1e6));
         }
-        Some(out)
+        Ok(Some(out))
     }
 
     /// Encodes and submits the kernels; returns without waiting for them.
@@ -813,30 +814,32 @@ impl GpuMonolayer {
 
     /// The patches as they are on the device now (they move with every [`Self::step`]).
     /// Blocking, native only, as the three below: tests and diagnostics; a run reads its state
-    /// through `readback::read_words`, a future.
+    /// through `readback::read_words`, a future. Each is an error if the device failed.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn read_patches(&self, ctx: &GpuContext) -> Vec<GpuPatch> {
-        bytemuck::cast_slice(&read_now(ctx, self.state.buffer(Slot::Patches))).to_vec()
+    pub fn read_patches(&self, ctx: &GpuContext) -> Result<Vec<GpuPatch>, GpuError> {
+        Ok(bytemuck::cast_slice(&read_now(ctx, self.state.buffer(Slot::Patches))?).to_vec())
     }
 
     /// The friction solve's scalars after every submitted kernel has finished: its iterations,
     /// its residual and whether it converged.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn read_solve(&self, ctx: &GpuContext) -> SolveScalars {
-        *bytemuck::from_bytes(bytemuck::cast_slice(&read_now(ctx, self.state.buffer(Slot::Solve))))
+    pub fn read_solve(&self, ctx: &GpuContext) -> Result<SolveScalars, GpuError> {
+        // The buffer was made with the size of `SolveScalars` (`DeviceState::upload`), so the
+        // words read are one of them whatever the device wrote into it.
+        Ok(*bytemuck::from_bytes(bytemuck::cast_slice(&read_now(ctx, self.state.buffer(Slot::Solve))?)))
     }
 
     /// A buffer's contents as u32 (`Slot::Fault`), after every submitted kernel has finished.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn read_u32(&self, ctx: &GpuContext, slot: Slot) -> Vec<u32> {
+    pub fn read_u32(&self, ctx: &GpuContext, slot: Slot) -> Result<Vec<u32>, GpuError> {
         read_now(ctx, self.state.buffer(slot))
     }
 
     /// A buffer's contents as f32, after every submitted kernel has finished: a readback stalls
     /// the queue (milliseconds in a browser).
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn read(&self, ctx: &GpuContext, slot: Slot) -> Vec<f32> {
-        read_now(ctx, self.state.buffer(slot)).into_iter().map(f32::from_bits).collect()
+    pub fn read(&self, ctx: &GpuContext, slot: Slot) -> Result<Vec<f32>, GpuError> {
+        Ok(read_now(ctx, self.state.buffer(slot))?.into_iter().map(f32::from_bits).collect())
     }
 }
 

@@ -37,14 +37,28 @@ pub enum GpuRunError {
     Friction { from: u64, to: u64, count: u32 },
     #[error("in steps {from}..{to}: {count} friction solves met their tolerance on the CG's own residual but not on the true one, F − C u (f32 drift); the state is back at step {from}")]
     Inaccurate { from: u64, to: u64, count: u32 },
-    #[error("after step {from}: {reason}")]
+    /// The device failed (lost, an error no scope caught, a readback that did not map or a
+    /// state read back that is not one): the machine's problem, not the model's. Nothing it
+    /// computed after step `from` is used; the last state taken from it is the last good one.
+    #[error("GPU device failed after step {from}: {reason}")]
     Device { from: u64, reason: String },
+}
+
+impl GpuRunError {
+    /// The device's failure `e`, met after step `from`.
+    pub fn device(from: u64, e: GpuError) -> Self {
+        let reason = match e {
+            GpuError::Failed(why) => why,
+            other => other.to_string(),
+        };
+        GpuRunError::Device { from, reason }
+    }
 }
 
 /// The sticky faults of one submission, read back together.
 #[derive(Clone, Debug)]
 pub struct Faults {
-    /// The submission they are of ([`Submitted::id`]).
+    /// The submission they are of (`Pending::id`).
     pub submission: u64,
     /// Per cell, the first padded index where φ left its range, or [`NO_FAULT`].
     pub range: Vec<u32>,
@@ -75,6 +89,51 @@ impl Faults {
         }
         (self.solve.inaccurate > 0).then_some(GpuRunError::Inaccurate { from, to, count: self.solve.inaccurate })
     }
+}
+
+/// The CPU monolayer at `step` of a download's words: each cell's patch and its φ (the storage
+/// the patch names within the per-cell array, rounded from f32), and the warm start. What is
+/// not a state (a patch outside the box or pointing past the array, what `Monolayer::from_state`
+/// refuses) is an error saying why, not a panic: a device that failed can return anything.
+/// Values are not checked: the kernels check φ at every step (a fault puts the state back),
+/// and a download is the state as it is on the device, which may hold φ out of range (one
+/// uploaded so, as a test does; in a browser, one queued behind a submission that is then put
+/// back, and never used).
+fn downloaded_state(
+    params: Params,
+    seed: u64,
+    step: u64,
+    substrate: Vec<f64>,
+    patches: &[u32],
+    phi: &[u32],
+    u: &[u32],
+) -> Result<Monolayer, String> {
+    let l = params.box_size;
+    // The buffer holds whole `GpuPatch`es, made so by `DeviceState::upload`, whatever the device
+    // wrote into them.
+    let patches: &[GpuPatch] = bytemuck::cast_slice(patches);
+    let mut cells: Vec<(Patch, Vec<f64>)> = Vec::with_capacity(patches.len());
+    for (i, p) in patches.iter().enumerate() {
+        let patch = p.patch();
+        // Within the box first (as `Monolayer::from_state` asks), so that the padded length
+        // below cannot overflow; then within the array.
+        let in_box = patch.x0 < l && patch.y0 < l && patch.w < l && patch.h < l;
+        let end = p.offset as usize + patch.padded_len();
+        if !in_box || end > phi.len() {
+            return Err(format!(
+                "cell {i}: patch {patch:?} at offset {} does not fit the box ({l}) and the array ({} values)",
+                p.offset,
+                phi.len()
+            ));
+        }
+        cells.push((patch, patch_storage(*p, phi).iter().map(|&v| f32::from_bits(v) as f64).collect()));
+    }
+    let u: Vec<f32> = u.iter().map(|&w| f32::from_bits(w)).collect();
+    let warm_start: Vec<C64> = u.chunks_exact(2).map(|c| C64::new(c[0] as f64, c[1] as f64)).collect();
+    // The GPU's corrector starts from its predictor's solution alone (docs/gpu.md).
+    let corrector_shift = vec![C64::new(0.0, 0.0); warm_start.len()];
+    let state = State { step, cells, warm_start, corrector_shift, substrate };
+    Monolayer::from_state(params, seed, state).map_err(|e| e.to_string())
 }
 
 /// The per-cell and lattice buffers a step changes, of which a copy keeps the state at the
@@ -323,6 +382,7 @@ impl GpuRun {
         let s = self.gpu.state();
         let words = read_words(ctx, &[s.buffer(Slot::Fault), s.buffer(Slot::PatchFault), s.buffer(Slot::Solve)]);
         async move {
+            // Three buffers asked for, three read: `read_words` returns a vector per buffer.
             let [range, patch, solve]: [Vec<u32>; 3] = words.await?.try_into().expect("three buffers read");
             Ok(Faults { submission, range, patch, solve: *bytemuck::from_bytes(bytemuck::cast_slice(&solve)) })
         }
@@ -374,25 +434,18 @@ impl GpuRun {
     /// The state on the device after every step submitted so far, as a CPU monolayer (φ
     /// rounded from f32), at [`Self::submitted_to`]: one readback, queued now. With
     /// submissions under way it is their end, to be used once they are accepted. An error if
-    /// the device failed.
+    /// the device failed, or if what it returned is not a state as every accepted step leaves
+    /// one (`downloaded_state`).
     pub fn download(&self, ctx: &GpuContext) -> impl Future<Output = Result<Monolayer, GpuError>> + 'static {
         let s = self.gpu.state();
         let words = read_words(ctx, &[s.buffer(Slot::Patches), s.buffer(Slot::Phi), s.buffer(Slot::MeanVelocity)]);
         let (params, seed, step, substrate) =
             (self.params.clone(), self.seed, self.submitted_to(), self.substrate.clone());
         async move {
+            // Three buffers asked for, three read: `read_words` returns a vector per buffer.
             let [patches, phi, u]: [Vec<u32>; 3] = words.await?.try_into().expect("three buffers read");
-            let patches: &[GpuPatch] = bytemuck::cast_slice(&patches);
-            let cells: Vec<(Patch, Vec<f64>)> = patches
-                .iter()
-                .map(|p| (p.patch(), patch_storage(*p, &phi).iter().map(|&v| f32::from_bits(v) as f64).collect()))
-                .collect();
-            let u: Vec<f32> = u.into_iter().map(f32::from_bits).collect();
-            let warm_start: Vec<C64> = u.chunks_exact(2).map(|c| C64::new(c[0] as f64, c[1] as f64)).collect();
-            // The GPU's corrector starts from its predictor's solution alone (docs/gpu.md).
-            let corrector_shift = vec![C64::new(0.0, 0.0); warm_start.len()];
-            let state = State { step, cells, warm_start, corrector_shift, substrate };
-            Ok(Monolayer::from_state(params, seed, state).expect("the GPU's state is a valid state"))
+            downloaded_state(params, seed, step, substrate, &patches, &phi, &u)
+                .map_err(|why| GpuError::Failed(format!("the state it returned is not valid: {why}")))
         }
     }
 
@@ -400,7 +453,9 @@ impl GpuRun {
     /// [`IN_FLIGHT`] under way at once. A cell that outgrows its storage is met as the CPU would
     /// never meet it: the state of the start of that submission is uploaded again with room for
     /// the patches it has then, and the steps are taken again. On any other fault the state is
-    /// back at the start of the submission and the error names its steps and the cell.
+    /// back at the start of the submission and the error names its steps and the cell. A device
+    /// that fails is [`GpuRunError::Device`], after the last steps accepted; the submissions
+    /// under way are dropped with it, and nothing more is read from the device.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn advance(&mut self, ctx: &GpuContext, n: u64) -> Result<(), GpuRunError> {
         let end = self.submitted_to() + n;
@@ -411,13 +466,15 @@ impl GpuRun {
                     break;
                 }
             }
+            // With steps left and fewer than `max_in_flight` under way, `submit` took at least
+            // one step; every readback handed out here is settled below or dropped with all the
+            // submissions under way (a device failure), so the oldest still has its own.
             let readback = self.next_faults().expect("a submission is under way while steps are left");
-            let faults = pollster::block_on(readback)
-                .map_err(|e| GpuRunError::Device { from: self.step, reason: e.to_string() })?;
+            let faults = pollster::block_on(readback).map_err(|e| self.device_failed(e))?;
             match self.settle(ctx, &faults) {
                 Err(GpuRunError::BeyondCapacity { from, .. }) if regrown_at != Some(from) => {
                     regrown_at = Some(from);
-                    self.regrow(ctx).map_err(|e| GpuRunError::Regrow { from, reason: e.to_string() })?;
+                    self.regrow(ctx)?;
                 }
                 result => {
                     result?;
@@ -427,21 +484,29 @@ impl GpuRun {
         Ok(())
     }
 
-    /// Uploads the state again, each cell's storage sized anew from its patch now (blocking;
-    /// native). The browser's engine does the same with [`Self::download`] awaited.
+    /// The device failed: the submissions under way are dropped (nothing they computed is
+    /// used, and their readbacks would fail too), the steps taken stay those accepted.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn regrow(&mut self, ctx: &GpuContext) -> Result<(), GpuError> {
-        let m = pollster::block_on(self.download(ctx))?;
-        self.upload(ctx, &m)
+    fn device_failed(&mut self, e: GpuError) -> GpuRunError {
+        self.pending.clear();
+        GpuRunError::device(self.step, e)
     }
 
-    /// [`Self::download`], blocking (native).
-    ///
-    /// # Panics
-    /// If the device failed (natively a lost device ends the run: wgpu has no device to go on
-    /// with, and the CPU engine cannot continue a GPU run's record).
+    /// Uploads the state again, each cell's storage sized anew from its patch now (blocking;
+    /// native). The browser's engine does the same with [`Self::download`] awaited. A download
+    /// that fails is the device's failure ([`GpuRunError::Device`]); a state the device cannot
+    /// hold, [`GpuRunError::Regrow`].
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn download_now(&self, ctx: &GpuContext) -> Monolayer {
-        pollster::block_on(self.download(ctx)).unwrap_or_else(|e| panic!("{e}"))
+    pub fn regrow(&mut self, ctx: &GpuContext) -> Result<(), GpuRunError> {
+        let m = self.download_now(ctx).map_err(|e| self.device_failed(e))?;
+        self.upload(ctx, &m).map_err(|e| GpuRunError::Regrow { from: self.step, reason: e.to_string() })
+    }
+
+    /// [`Self::download`], blocking (native). An error if the device failed: natively a failed
+    /// device ends the run (wgpu has no device to go on with, and the CPU engine cannot
+    /// continue a GPU run's record), which resumes from its last checkpoint.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn download_now(&self, ctx: &GpuContext) -> Result<Monolayer, GpuError> {
+        pollster::block_on(self.download(ctx))
     }
 }

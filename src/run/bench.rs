@@ -307,18 +307,18 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
     let mut m = Monolayer::new(p.clone(), seed).map_err(RunError::from)?;
     m.advance(relax_steps + 5).map_err(RunError::from)?;
     let mut gpu = GpuMonolayer::new(&ctx, &m).map_err(RunError::gpu)?;
-    let time = |gpu: &GpuMonolayer, kernels: &[Kernel]| -> f64 {
+    let time = |gpu: &GpuMonolayer, kernels: &[Kernel]| -> Result<f64, RunError> {
         gpu.run(&ctx, kernels);
-        ctx.wait();
-        let times: Vec<f64> = (0..repeats.max(1))
+        ctx.wait().map_err(RunError::gpu)?;
+        let times = (0..repeats.max(1))
             .map(|_| {
                 let t = Instant::now();
                 gpu.run(&ctx, kernels);
-                ctx.wait();
-                1e3 * t.elapsed().as_secs_f64()
+                ctx.wait().map_err(RunError::gpu)?;
+                Ok(1e3 * t.elapsed().as_secs_f64())
             })
-            .collect();
-        median(&times)
+            .collect::<Result<Vec<f64>, RunError>>()?;
+        Ok(median(&times))
     };
     out(format_args!(
         "N = {}, L = {}, {relax_steps} relaxation steps and 5 active on the CPU, then the median of {repeats} dispatches:",
@@ -329,7 +329,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
         out(format_args!(
             "  {:<18} {:>8.3} ms/dispatch  {:>6.2} MB",
             format!("{k:?}"),
-            time(&gpu, &[k]),
+            time(&gpu, &[k])?,
             b as f64 / 1e6
         ))?;
     }
@@ -348,7 +348,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
         out(format_args!(
             "{what}: {} dispatches, {:.3} ms in one submission, {:.2} MB at the least",
             kernels.len(),
-            time(&gpu, kernels),
+            time(&gpu, kernels)?,
             bytes(&gpu, kernels)
         ))?;
     }
@@ -357,8 +357,8 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
     // solves took decide the dispatches that work, the rest return at once.
     gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
     let step = gpu.step_kernels();
-    let ms = time(&gpu, &step);
-    let solve = gpu.read_solve(&ctx);
+    let ms = time(&gpu, &step)?;
+    let solve = gpu.read_solve(&ctx).map_err(RunError::gpu)?;
     let taken = solve.iterations[0].max(solve.iterations[1]) as usize;
     // The dispatches that work: the step with only the iterations the solve took recorded (the
     // recorded ones after them return at once), which is also what the recorded count tends to.
@@ -422,7 +422,7 @@ pub fn bench_gpu(params: &Params, relax_steps: u64, seed: u64, repeats: usize, r
     // Each dispatch timed on the device, in its own pass between two timestamps: one step from
     // the uploaded state, the recorded list.
     gpu.upload(&ctx, &m).map_err(RunError::gpu)?;
-    match gpu.time_kernels(&ctx, &recorded_list) {
+    match gpu.time_kernels(&ctx, &recorded_list).map_err(RunError::gpu)? {
         Some(ms) => {
             let stages: Vec<String> =
                 by_stage(&recorded_list, &ms).iter().map(|(f, t)| format!("{f} {t:.3}")).collect();
@@ -462,7 +462,7 @@ fn time_hand_off(ctx: &crate::gpu::GpuContext, run: &crate::gpu::GpuRun, repeats
     let mut analysis = Analysis::new(run.params());
     for _ in 0..repeats.max(1) {
         let t = Instant::now();
-        let mut m = run.download_now(ctx);
+        let mut m = run.download_now(ctx).map_err(RunError::gpu)?;
         times[0].push(1e3 * t.elapsed().as_secs_f64());
         let t = Instant::now();
         m.evaluate_now()?;

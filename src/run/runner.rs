@@ -31,8 +31,9 @@ pub enum Event {
 enum Stop {
     /// The simulation failed: a result of the run.
     Simulation(RunError),
-    /// Writing its files failed: the machine's problem, and the run can go on from its checkpoint.
-    Io(RunError),
+    /// The machine's problem, not the run's, which goes on from its checkpoint once it is
+    /// fixed: writing its files failed, or its GPU did (none found, or it failed under the run).
+    Machine(RunError),
     /// SIGTERM or SIGINT (Slurm, Ctrl-C): the step under way was finished; the run goes on from its
     /// checkpoint.
     Signal(&'static str),
@@ -463,7 +464,7 @@ impl RunDir {
         self.record.status = match &outcome {
             Ok(()) => RunStatus::Finished,
             Err(Stop::Simulation(e)) => RunStatus::Failed(e.to_string()),
-            Err(Stop::Io(e)) => RunStatus::Stopped(e.to_string()),
+            Err(Stop::Machine(e)) => RunStatus::Stopped(e.to_string()),
             Err(Stop::Signal(name)) => RunStatus::Stopped(format!("signal {name}")),
         };
         let saved = self.record.save(&self.dir);
@@ -478,33 +479,38 @@ impl RunDir {
                     self.dir.display()
                 ),
             }),
-            Err(Stop::Io(e)) => Err(RunError::Resumable { source: Box::new(e), dir: self.dir.clone() }),
+            Err(Stop::Machine(e)) => Err(RunError::Resumable { source: Box::new(e), dir: self.dir.clone() }),
         }
     }
 
     fn protocol(&mut self, live: Option<&mut LiveRun>, watch: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), Stop> {
-        self.drive(live, watch, |m| Ok(m.step()?))
+        self.drive(live, watch, |m| m.step().map_err(|e| Stop::Simulation(e.into())))
     }
 
     /// The protocol on the GPU: steps to each step that writes something (the end of the
     /// relaxation, a frame), the state downloaded there into the run's monolayer, which writes
-    /// it as the CPU's protocol does. A fault stops the run with the state before the failing
-    /// submission as its last good state.
+    /// it as the CPU's protocol does. A fault of the model stops the run with the state before
+    /// the failing submission as its last good state (`failed: …`). A failure of the device
+    /// (lost, an error no scope caught, a readback that failed, a state read back that is not
+    /// one) is the machine's: the monolayer keeps the last state taken from the device, and
+    /// the run is `stopped: GPU …`, to go on from its last checkpoint.
     #[cfg(feature = "gpu")]
     fn protocol_gpu(
         &mut self,
         live: Option<&mut LiveRun>,
         watch: &mut dyn FnMut(&Monolayer, &Event),
     ) -> Result<(), Stop> {
-        use crate::gpu::GpuRun;
+        use crate::gpu::{GpuRun, GpuRunError};
         let p = self.monolayer.params().clone();
         let total = p.total_steps();
         let fi = self.record.frame_interval;
         // No adapter, a device refused or too small: the machine's lack, not the run's; the run
         // is stopped, and continues where a GPU is.
-        let machine = |e: crate::gpu::GpuError| Stop::Io(RunError::gpu(e).context("--engine gpu"));
+        let machine = |e: crate::gpu::GpuError| Stop::Machine(RunError::gpu(e).context("--engine gpu"));
+        let mut lose = LostGpu::from_env().map_err(Stop::Machine)?;
         let ctx = crate::gpu::GpuContext::new().map_err(machine)?;
         let mut run = GpuRun::new(&ctx, &self.monolayer).map_err(machine)?;
+        let device_failed = |e: GpuRunError| Stop::Machine(RunError::gpu(e));
         self.drive(live, watch, |m| {
             let s = run.step_count();
             // The next step that writes, at most one check's worth of steps ahead (so that a
@@ -512,20 +518,28 @@ impl RunDir {
             let next =
                 if s < p.relax_steps { p.relax_steps } else { p.relax_steps + ((s - p.relax_steps) / fi + 1) * fi };
             let to = next.min(total).min(s + run.check_every);
+            lose.at(&ctx, LossPoint::BeforeSteps, s);
             let stepped = run.advance(&ctx, to - s);
-            *m = run.download_now(&ctx);
-            stepped.map_err(RunError::gpu)
+            // Nothing more is read from a device that failed: `m` keeps the last state taken
+            // from it.
+            if let Err(e @ GpuRunError::Device { .. }) = stepped {
+                return Err(device_failed(e));
+            }
+            lose.at(&ctx, LossPoint::BeforeDownload, run.step_count());
+            *m = run.download_now(&ctx).map_err(|e| device_failed(GpuRunError::device(run.step_count(), e)))?;
+            stepped.map_err(|e| Stop::Simulation(RunError::gpu(e)))
         })
     }
 
     /// The protocol's loop, whichever engine steps: `advance` takes the monolayer one or more
-    /// steps, leaving in it the state to write (on a failure, the last good one); between calls
-    /// a signal stops the run, and every frame or checkpoint due is written.
+    /// steps, leaving in it the state to write (on a failure of the simulation, the last good
+    /// one, which is written aside; on one of the machine, the last state it holds); between
+    /// calls a signal stops the run, and every frame or checkpoint due is written.
     fn drive(
         &mut self,
         mut live: Option<&mut LiveRun>,
         watch: &mut dyn FnMut(&Monolayer, &Event),
-        mut advance: impl FnMut(&mut Monolayer) -> Result<(), RunError>,
+        mut advance: impl FnMut(&mut Monolayer) -> Result<(), Stop>,
     ) -> Result<(), Stop> {
         let total = self.monolayer.params().total_steps();
         let (m, dir, record) = (&mut self.monolayer, &self.dir, &mut self.record);
@@ -533,8 +547,10 @@ impl RunDir {
             if let Some((name, _)) = stop_signal() {
                 return Err(Stop::Signal(name));
             }
-            if let Err(e) = advance(m) {
-                return Err(unstable(m, dir, record, e));
+            match advance(m) {
+                Ok(()) => {}
+                Err(Stop::Simulation(e)) => return Err(unstable(m, dir, record, e)),
+                Err(stop) => return Err(stop),
             }
             watch(m, &Event::Step);
             write_scheduled(m, dir, record, live.as_deref_mut(), watch)?;
@@ -546,7 +562,63 @@ impl RunDir {
     /// is stopped, and continues in a build with the GPU kernels.
     #[cfg(not(feature = "gpu"))]
     fn protocol_gpu(&mut self, _: Option<&mut LiveRun>, _: &mut dyn FnMut(&Monolayer, &Event)) -> Result<(), Stop> {
-        Err(Stop::Io(no_gpu()))
+        Err(Stop::Machine(no_gpu()))
+    }
+}
+
+/// Where a run of the GPU engine loses its device on demand ([`LostGpu`]).
+#[cfg(feature = "gpu")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LossPoint {
+    /// Right before the steps from the step given are submitted: the check of their faults
+    /// fails, as under a driver reset while the device steps.
+    BeforeSteps,
+    /// Once the run has stepped to the step given, before the state there is read back: the
+    /// download fails.
+    BeforeDownload,
+}
+
+/// A GPU lost on demand, for the tests of what a run does then (tests/gpu.rs, docs/gpu-testing.md):
+/// `MONOLAYER_TEST_LOSE_GPU=steps@STEP` or `download@STEP` destroys the run's device
+/// (`wgpu::Device::destroy`, which wgpu reports as a loss) at that [`LossPoint`], the first
+/// time the run is there at STEP or later. Only the tests set it.
+#[cfg(feature = "gpu")]
+struct LostGpu(Option<(LossPoint, u64)>);
+
+#[cfg(feature = "gpu")]
+impl LostGpu {
+    const VAR: &'static str = "MONOLAYER_TEST_LOSE_GPU";
+
+    /// The loss asked for by [`Self::VAR`], if any; a value that is not one is refused, so that
+    /// a test cannot pass by losing nothing.
+    fn from_env() -> Result<Self, RunError> {
+        let text = match std::env::var(Self::VAR) {
+            Err(std::env::VarError::NotPresent) => return Ok(LostGpu(None)),
+            Err(std::env::VarError::NotUnicode(v)) => v.to_string_lossy().into_owned(),
+            Ok(text) => text,
+        };
+        let loss = text.split_once('@').and_then(|(point, step)| {
+            let point = match point {
+                "steps" => LossPoint::BeforeSteps,
+                "download" => LossPoint::BeforeDownload,
+                _ => return None,
+            };
+            Some((point, step.parse().ok()?))
+        });
+        match loss {
+            Some(loss) => Ok(LostGpu(Some(loss))),
+            None => {
+                Err(RunError::invalid(format!("{} =", Self::VAR), format!("{text:?}"), "steps@STEP or download@STEP"))
+            }
+        }
+    }
+
+    /// Destroys the device if the run is at the point asked for, at its step or later; once.
+    fn at(&mut self, ctx: &crate::gpu::GpuContext, point: LossPoint, step: u64) {
+        if self.0.is_some_and(|(p, from)| p == point && step >= from) {
+            self.0 = None;
+            ctx.destroy();
+        }
     }
 }
 
@@ -555,7 +627,7 @@ impl RunDir {
 fn unstable(m: &Monolayer, dir: &Path, record: &RunRecord, e: RunError) -> Stop {
     let last_good = dir.join(LAST_GOOD_STATE);
     if let Err(io) = write_run_checkpoint(m, &last_good, record) {
-        return Stop::Io(io);
+        return Stop::Machine(io);
     }
     Stop::Simulation(RunError::Unstable { source: Box::new(e), last_good, checkpoint: checkpoint_path(dir) })
 }
@@ -575,15 +647,15 @@ fn write_scheduled(
     let frame = s >= p.relax_steps && (s - p.relax_steps).is_multiple_of(record.frame_interval);
     if frame {
         m.evaluate_now().map_err(|e| Stop::Simulation(e.into()))?;
-        write_frame(m, &frame_path(dir, s)).map_err(Stop::Io)?;
+        write_frame(m, &frame_path(dir, s)).map_err(Stop::Machine)?;
         if let Some(Err(e)) = live.map(|live| live.frame(m)) {
             watch(m, &Event::AnalysisFailed(e.to_string()));
         }
     }
     if frame || s == p.relax_steps {
-        write_run_checkpoint(m, &checkpoint_path(dir), record).map_err(Stop::Io)?;
+        write_run_checkpoint(m, &checkpoint_path(dir), record).map_err(Stop::Machine)?;
         if record.keep_checkpoints {
-            keep_checkpoint(dir, s).map_err(Stop::Io)?;
+            keep_checkpoint(dir, s).map_err(Stop::Machine)?;
         }
         // The record's last frame advances only once the checkpoint of its step is safely
         // written: a failed checkpoint write (a full disk) leaves the record at the previous
@@ -591,7 +663,7 @@ fn write_scheduled(
         if frame {
             record.last_frame_step = Some(s);
         }
-        record.save(dir).map_err(Stop::Io)?;
+        record.save(dir).map_err(Stop::Machine)?;
         if frame {
             watch(m, &Event::Frame);
         }
