@@ -775,11 +775,6 @@ impl GpuMonolayer {
         self.run(ctx, &Kernel::FRICTION_SUMS)
     }
 
-    /// The kernels of one evaluation of the rate in the uploaded phase ([`Kernel::rate`]).
-    pub fn rate_kernels(&self) -> Vec<Kernel> {
-        Kernel::rate(self.solve())
-    }
-
     /// The friction solve's preconditioner and recorded iterations where the phase has one.
     pub fn solve(&self) -> Option<(Preconditioner, usize)> {
         self.state.solves_friction.then_some((self.preconditioner, self.solve_iterations))
