@@ -3,6 +3,7 @@
 
 use wasm_bindgen::prelude::*;
 
+use super::binding::Readout;
 use super::playback::Playback;
 use super::render::WebView;
 use super::view::FieldKind;
@@ -46,27 +47,9 @@ impl WebPlayback {
         self.0.info.as_ref().map_or(0.0, |i| i.seed as f64)
     }
 
-    /// The frame shown: [step, active time, holes, void area, packing, ζ, χ, γ, cells, L,
-    /// relaxation steps, seconds per time unit] (empty before the first).
-    pub fn stats(&self) -> Vec<f64> {
-        let Some(m) = self.0.monolayer() else { return Vec::new() };
-        let p = m.params();
-        let s = self.0.stats;
-        let t = m.step_count().saturating_sub(p.relax_steps) as f64 * p.dt;
-        vec![
-            m.step_count() as f64,
-            t,
-            s.holes as f64,
-            s.void_area as f64,
-            s.packing,
-            p.zeta,
-            p.chi(),
-            p.gamma,
-            m.cells().len() as f64,
-            p.box_size as f64,
-            p.relax_steps as f64,
-            p.time_unit_seconds,
-        ]
+    /// What the page reads out of the frame shown (nothing before the first).
+    pub fn readout(&self) -> Option<Readout> {
+        self.0.monolayer().map(|m| Readout::of(m, self.0.stats))
     }
 
     /// What the renderer draws of the frame shown for `field` (throws before the first frame).

@@ -96,7 +96,7 @@ async function open(context, base, query, errors) {
 const centre = (page) => page.evaluate(async () => {
   const c = document.getElementById('view');
   const r = c.getBoundingClientRect();
-  const [x0, y0, side] = window.demo.renderer.layout();
+  const { x: x0, y: y0, side } = window.demo.renderer.layout();
   const l = await window.demo.call('box_size');
   const f = (l / 2 + 0.5) / l;
   const s = c.width / r.width;
