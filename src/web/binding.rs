@@ -75,3 +75,47 @@ impl Readout {
         }
     }
 }
+
+/// A ±½ defect of the smoothed nematic field as the page marks it (`analysis::Defect`).
+#[wasm_bindgen::prelude::wasm_bindgen]
+#[derive(Clone, Copy, Debug)]
+pub struct DefectMark {
+    /// Where it is, in lattice sites.
+    pub x: f64,
+    pub y: f64,
+    /// Twice its charge: +1 or −1.
+    pub twice_charge: i32,
+    /// A +½ defect's orientation, radians (NaN for a −½, which has none).
+    pub orientation: f64,
+}
+
+impl DefectMark {
+    /// The marks of `defects`, in their order.
+    pub fn all(defects: &[crate::analysis::Defect]) -> Vec<DefectMark> {
+        let mark = |d: &crate::analysis::Defect| DefectMark {
+            x: d.x,
+            y: d.y,
+            twice_charge: d.twice_charge as i32,
+            orientation: d.orientation,
+        };
+        defects.iter().map(mark).collect()
+    }
+}
+
+/// A spiral core of the flow as the page marks it (a +1 point of the velocity, `analysis::PlusOne`).
+#[wasm_bindgen::prelude::wasm_bindgen]
+#[derive(Clone, Copy, Debug)]
+pub struct SpiralMark {
+    /// Where it is, in lattice sites.
+    pub x: f64,
+    pub y: f64,
+    /// The velocity's divergence there (> 0: the flow swirls outwards).
+    pub divergence: f64,
+}
+
+impl SpiralMark {
+    /// The marks of `cores`, in their order.
+    pub fn all(cores: &[crate::analysis::PlusOne]) -> Vec<SpiralMark> {
+        cores.iter().map(|p| SpiralMark { x: p.x, y: p.y, divergence: p.divergence }).collect()
+    }
+}

@@ -16,7 +16,7 @@
 //!   (and what the page's Canvas 2D renderer reads of a view where neither exists);
 //! - `player` (wasm32): `WebPlayback`, the binding of `playback`;
 //! - `binding` (wasm32): what the bindings share (the start hook, the error they throw, the
-//!   threads the core runs on, the readout of a tissue);
+//!   threads the core runs on, the readout of a tissue and the marks drawn on it);
 //! - `gpu_engine` (wasm32, feature `gpu`): `WebGpuEngine`, the model stepped on WebGPU compute
 //!   (`crate::gpu`), handing its state to a `WebSim` to draw and measure.
 //!
@@ -53,7 +53,7 @@ pub use view::{FieldKind, Segment, View, ViewBuilder};
 
 // The bindings the page's JavaScript drives (wasm32), named here for Rust as well.
 #[cfg(target_arch = "wasm32")]
-pub use binding::Readout;
+pub use binding::{DefectMark, Readout, SpiralMark};
 #[cfg(all(target_arch = "wasm32", feature = "gpu"))]
 pub use gpu_engine::WebGpuEngine;
 #[cfg(target_arch = "wasm32")]

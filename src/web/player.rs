@@ -3,7 +3,7 @@
 
 use wasm_bindgen::prelude::*;
 
-use super::binding::Readout;
+use super::binding::{DefectMark, Readout, SpiralMark};
 use super::playback::Playback;
 use super::render::WebView;
 use super::view::FieldKind;
@@ -57,13 +57,13 @@ impl WebPlayback {
         self.0.view(field, dpr).map(|v| WebView(v.clone())).ok_or_else(|| JsError::new("no frame shown yet"))
     }
 
-    /// ±½ defects as last drawn: [x, y, twice the charge, orientation] per defect.
-    pub fn defects(&self) -> Vec<f64> {
-        self.0.builder().defects.iter().flat_map(|d| [d.x, d.y, d.twice_charge as f64, d.orientation]).collect()
+    /// ±½ defects as last drawn.
+    pub fn defects(&self) -> Vec<DefectMark> {
+        DefectMark::all(&self.0.builder().defects)
     }
 
-    /// Spiral cores as last drawn: [x, y, ∇·v] per core.
-    pub fn spiral_cores(&self) -> Vec<f64> {
-        self.0.builder().spiral_cores.iter().flat_map(|p| [p.x, p.y, p.divergence]).collect()
+    /// Spiral cores as last drawn.
+    pub fn spiral_cores(&self) -> Vec<SpiralMark> {
+        SpiralMark::all(&self.0.builder().spiral_cores)
     }
 }

@@ -4,7 +4,7 @@
 
 use wasm_bindgen::prelude::*;
 
-use super::binding::{js_err, Readout};
+use super::binding::{js_err, DefectMark, Readout, SpiralMark};
 
 use super::history::{History, Verdict, Watch};
 use super::measure::{tissue_stats, TissueStats};
@@ -398,15 +398,14 @@ impl WebSim {
         self.m.phi_sum().to_vec()
     }
 
-    /// ±½ defects of the smoothed nematic field as last drawn (director and signed fields),
-    /// flattened as [x, y, twice the charge, orientation] per defect.
-    pub fn defects(&self) -> Vec<f64> {
-        self.view.defects.iter().flat_map(|d| [d.x, d.y, d.twice_charge as f64, d.orientation]).collect()
+    /// ±½ defects of the smoothed nematic field as last drawn (director and signed fields).
+    pub fn defects(&self) -> Vec<DefectMark> {
+        DefectMark::all(&self.view.defects)
     }
 
-    /// Spiral cores as last drawn (speed and strain rate), flattened as [x, y, ∇·v] per core.
-    pub fn spiral_cores(&self) -> Vec<f64> {
-        self.view.spiral_cores.iter().flat_map(|p| [p.x, p.y, p.divergence]).collect()
+    /// Spiral cores as last drawn (speed and strain rate).
+    pub fn spiral_cores(&self) -> Vec<SpiralMark> {
+        SpiralMark::all(&self.view.spiral_cores)
     }
 
     /// Multiplies ξ_s by `multiplier` on a disc of `radius` sites around lattice point (x, y)

@@ -72,6 +72,8 @@
 /** @typedef {import('../pkg/monolayer.js').GpuState} GpuState */
 /** @typedef {import('../pkg/monolayer.js').FieldKind} FieldKind */
 /** @typedef {import('../pkg/monolayer.js').Readout} Readout */
+/** @typedef {import('../pkg/monolayer.js').DefectMark} DefectMark */
+/** @typedef {import('../pkg/monolayer.js').SpiralMark} SpiralMark */
 /** @typedef {typeof import('../pkg/monolayer.js')} SingleCore */
 /**
  * The core's module: the single-thread build's exports; the GPU engine only in that build.
@@ -669,6 +671,34 @@ async function gpuTurn() {
 
 // --- what the page is sent ---------------------------------------------------------------------
 
+// How many marks a view made (the core's objects freed).
+/** @param {{ free(): void }[]} marks */
+function count(marks) {
+  for (const m of marks) m.free();
+  return marks.length;
+}
+
+// The ±½ defects a view marked, as plain data: where, twice the charge, a +½'s orientation
+// (NaN for a −½).
+/** @param {DefectMark[]} marks */
+function defectsOf(marks) {
+  return marks.map((d) => {
+    const out = { x: d.x, y: d.y, twiceCharge: d.twice_charge, orientation: d.orientation };
+    d.free();
+    return out;
+  });
+}
+
+// The spiral cores a view marked, as plain data: where, and ∇·v there.
+/** @param {SpiralMark[]} marks */
+function spiralCoresOf(marks) {
+  return marks.map((p) => {
+    const out = { x: p.x, y: p.y, divergence: p.divergence };
+    p.free();
+    return out;
+  });
+}
+
 // A binding's readout as plain data (its wasm object freed).
 /** @param {Readout} r */
 function readoutOf(r) {
@@ -760,7 +790,7 @@ function sendFrame() {
   const parts = { l: v.l(), kind: v.kind(), tissue: v.tissue(), field: v.field(), segments: v.segments(), range: v.range() };
   v.free();
   // The spiral cores this view marks (the guided tour waits for one in the flow).
-  const cores = source.spiral_cores().length / 3;
+  const cores = count(source.spiral_cores());
   post({ type: 'frame', parts, stats: stats(), cores }, [parts.tissue.buffer, parts.field.buffer, parts.segments.buffer]);
 }
 
@@ -902,10 +932,10 @@ export const CALLS = {
   marks: (kind) => {
     const s = sim();
     s.field_values(kind);
-    return { defects: s.defects().length / 4, spiralCores: s.spiral_cores().length / 3 };
+    return { defects: count(s.defects()), spiralCores: count(s.spiral_cores()) };
   },
-  defects: () => (state.kind === 'frames' ? state.playback.p : sim()).defects(),
-  spiral_cores: () => (state.kind === 'frames' ? state.playback.p : sim()).spiral_cores(),
+  defects: () => defectsOf((state.kind === 'frames' ? state.playback.p : sim()).defects()),
+  spiral_cores: () => spiralCoresOf((state.kind === 'frames' ? state.playback.p : sim()).spiral_cores()),
   stats: () => stats(),
   // The Download button: the readouts since the tissue was made (CSV), the current state as a
   // native frame file and a run.json that makes a run of it for `monolayer analyze`.
