@@ -63,7 +63,7 @@ shrink() {
 say "building the WebAssembly core with its GPU engine (release)"
 cargo build --target wasm32-unknown-unknown --lib --no-default-features --features gpu --release
 say "generating the JS bindings into www/pkg"
-wasm-bindgen --target web --no-typescript --out-dir www/pkg \
+wasm-bindgen --target web --out-dir www/pkg \
   "$TARGET_DIR/wasm32-unknown-unknown/release/monolayer.wasm"
 shrink www/pkg/monolayer_bg.wasm
 
@@ -87,7 +87,7 @@ if rustup component list --toolchain nightly --installed 2>/dev/null | grep -q '
     -C link-arg=--export=__wasm_init_tls -C link-arg=--export=__tls_size -C link-arg=--export=__tls_align \
     -C link-arg=--export=__tls_base
   say "generating the threaded core's JS bindings into www/pkg-threads"
-  wasm-bindgen --target web --no-typescript --out-dir www/pkg-threads \
+  wasm-bindgen --target web --out-dir www/pkg-threads \
     "$TARGET_DIR/threads/wasm32-unknown-unknown/release/monolayer.wasm"
   shrink www/pkg-threads/monolayer_bg.wasm --enable-threads
 fi

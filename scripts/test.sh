@@ -39,7 +39,7 @@ step "lints and unit tests with the cells' fields stored in f32 (feature \`f32-s
 cargo clippy --lib --no-default-features --features f32-storage -- -D warnings
 cargo test --no-default-features --features f32-storage --lib
 
-step "browser demo (Chromium: WebGPU on SwiftShader, then WebGL2; the shared checks in Chromium, Firefox and WebKit)"
+step "the page's build (www/pkg, www/pkg-threads) and the browser tests' packages"
 # Debian's chromium, firefox-esr and webkit2gtk-driver (with xvfb), and the npm packages of
 # tests/browser; .ci/run installs them. No browser is ever downloaded.
 for b in /usr/bin/chromium /usr/bin/firefox-esr /usr/bin/WebKitWebDriver; do
@@ -50,11 +50,17 @@ for b in /usr/bin/chromium /usr/bin/firefox-esr /usr/bin/WebKitWebDriver; do
 done
 bash scripts/serve.sh --build-only
 (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
+
+step "type check of the page's JavaScript (TypeScript's tsc over www/js, JSDoc types, the core's .d.ts)"
+# www/jsconfig.json: strict, nothing emitted (the page is served as it is, without a build).
+tests/browser/node_modules/.bin/tsc -p www/jsconfig.json
+
+step "browser demo (Chromium: WebGPU on SwiftShader, then WebGL2; the shared checks in Chromium, Firefox and WebKit)"
 # The native binary the page is compared with (target/release/monolayer): the one the tests step
 # built for the integration tests. Asked for with that step's own command, since a plain
 # `cargo build --bin monolayer` resolves features without the dev-dependencies (proptest turns on
 # bitflags' `std`), which would rebuild bitflags, wgpu and naga here a second time; with the same
 # command nothing is compiled again.
 cargo test --release --features gpu --no-run
-node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/demo.test.mjs tests/browser/viewer.test.mjs \
-  tests/browser/engines.test.mjs
+node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/whatif.test.mjs tests/browser/demo.test.mjs \
+  tests/browser/viewer.test.mjs tests/browser/engines.test.mjs

@@ -137,11 +137,6 @@ impl WebGpuEngine {
         self.0.with_run(|r| r.submitted_to() as f64)
     }
 
-    /// Steps between checks: the most one submission takes.
-    pub fn set_check_every(&self, n: u32) -> Result<(), JsError> {
-        self.0.with_run(|r| r.check_every = n.max(1) as u64)
-    }
-
     /// Resolves once the oldest submission under way ran and its faults were read: to true if
     /// its steps were taken, false if they were put back to be taken again (a solve needed more
     /// recorded iterations, or a cell more storage: both are then given), with the submissions

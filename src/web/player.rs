@@ -3,6 +3,7 @@
 
 use wasm_bindgen::prelude::*;
 
+use super::binding::{DefectMark, Readout, SpiralMark};
 use super::playback::Playback;
 use super::render::WebView;
 use super::view::FieldKind;
@@ -46,27 +47,9 @@ impl WebPlayback {
         self.0.info.as_ref().map_or(0.0, |i| i.seed as f64)
     }
 
-    /// The frame shown: [step, active time, holes, void area, packing, ζ, χ, γ, cells, L,
-    /// relaxation steps, seconds per time unit] (empty before the first).
-    pub fn stats(&self) -> Vec<f64> {
-        let Some(m) = self.0.monolayer() else { return Vec::new() };
-        let p = m.params();
-        let s = self.0.stats;
-        let t = m.step_count().saturating_sub(p.relax_steps) as f64 * p.dt;
-        vec![
-            m.step_count() as f64,
-            t,
-            s.holes as f64,
-            s.void_area as f64,
-            s.packing,
-            p.zeta,
-            p.chi(),
-            p.gamma,
-            m.cells().len() as f64,
-            p.box_size as f64,
-            p.relax_steps as f64,
-            p.time_unit_seconds,
-        ]
+    /// What the page reads out of the frame shown (nothing before the first).
+    pub fn readout(&self) -> Option<Readout> {
+        self.0.monolayer().map(|m| Readout::of(m, self.0.stats))
     }
 
     /// What the renderer draws of the frame shown for `field` (throws before the first frame).
@@ -74,13 +57,13 @@ impl WebPlayback {
         self.0.view(field, dpr).map(|v| WebView(v.clone())).ok_or_else(|| JsError::new("no frame shown yet"))
     }
 
-    /// ±½ defects as last drawn: [x, y, twice the charge, orientation] per defect.
-    pub fn defects(&self) -> Vec<f64> {
-        self.0.builder().defects.iter().flat_map(|d| [d.x, d.y, d.twice_charge as f64, d.orientation]).collect()
+    /// ±½ defects as last drawn.
+    pub fn defects(&self) -> Vec<DefectMark> {
+        DefectMark::all(&self.0.builder().defects)
     }
 
-    /// Spiral cores as last drawn: [x, y, ∇·v] per core.
-    pub fn spiral_cores(&self) -> Vec<f64> {
-        self.0.builder().spiral_cores.iter().flat_map(|p| [p.x, p.y, p.divergence]).collect()
+    /// Spiral cores as last drawn.
+    pub fn spiral_cores(&self) -> Vec<SpiralMark> {
+        SpiralMark::all(&self.0.builder().spiral_cores)
     }
 }

@@ -4,11 +4,12 @@
 //! seed and the parameters. With it the page writes the current state as a frame file
 //! ([`crate::formats::encode_frame`]) and a `run.json` that `monolayer analyze` accepts.
 
-use crate::analysis::{Analysis, Detail};
+use crate::analysis::{Analysis, Detail, HoleTracker};
 use crate::formats::RunRecord;
 use crate::model::SimError;
 use crate::Monolayer;
 
+use super::history::Nucleation;
 use super::version::code_version;
 
 /// Active steps between two rows (10 steps = one time unit at the default Δt = 0.1).
@@ -50,6 +51,12 @@ pub struct Row {
 pub struct ReadoutLog {
     pub rows: Vec<Row>,
     analysis: Option<Analysis>,
+    /// The holes followed from row to row, as `analyze` follows them from frame to frame.
+    pub tracker: Option<HoleTracker>,
+    /// The step of the last row the tracker took (a resumed log's tracker has taken its first).
+    tracked: Option<u64>,
+    /// Every hole that nucleated, at its first row (fragments of an open one are not new).
+    pub nucleations: Vec<Nucleation>,
 }
 
 impl ReadoutLog {
@@ -88,11 +95,30 @@ impl ReadoutLog {
         }
     }
 
-    /// Records a row if the state of `m` is due one.
+    /// A log that goes on from a saved state whose row `tracker` has taken already (a replay
+    /// of the page's "What if?"): its rows start again, its holes carry on.
+    pub fn resumed(tracker: Option<HoleTracker>, step: u64) -> Self {
+        ReadoutLog { tracked: tracker.is_some().then_some(step), tracker, ..Self::default() }
+    }
+
+    /// Records a row if the state of `m` is due one, and the holes that nucleated at it.
     pub fn record_if_due(&mut self, m: &Monolayer) {
-        if self.due(m) {
-            let row = self.measure(m);
-            self.rows.push(row);
+        if !self.due(m) {
+            return;
+        }
+        let row = self.measure(m);
+        let (step, time) = (row.step, row.time);
+        self.rows.push(row);
+        if self.tracked == Some(step) {
+            return;
+        }
+        self.tracked = Some(step);
+        let voids = &self.analysis.as_ref().expect("measured above").voids;
+        let tracker = self.tracker.get_or_insert_with(|| HoleTracker::new(m.params().radius));
+        tracker.update(voids, time);
+        for h in tracker.nucleated_holes() {
+            let (_, _, x, y) = tracker.holes[h].history[0];
+            self.nucleations.push(Nucleation { step, x, y });
         }
     }
 

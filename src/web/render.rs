@@ -118,24 +118,28 @@ pub fn bar_colours(kind: FieldKind, n: usize) -> Vec<u8> {
 }
 
 /// Where the lattice square and the colour bar go on a canvas of `width × height` device
-/// pixels: [left, top, side, bar top, bar height], as [`Renderer::layout`] gives them. The
-/// Canvas 2D renderer places its drawing with it, so that every renderer shares one geometry.
+/// pixels, as [`Renderer::layout`] gives it. The Canvas 2D renderer places its drawing with it,
+/// so that every renderer shares one geometry.
 #[wasm_bindgen(js_name = canvasLayout)]
-pub fn canvas_layout(width: u32, height: u32, dpr: f32, with_bar: bool) -> Vec<f32> {
-    let g = Layout::of(width.max(1), height.max(1), dpr, with_bar);
-    vec![g.x, g.y, g.side, g.bar_y, g.bar_h]
+pub fn canvas_layout(width: u32, height: u32, dpr: f32, with_bar: bool) -> Layout {
+    Layout::of(width.max(1), height.max(1), dpr, with_bar)
 }
 
-/// Where things are on the canvas, in device pixels.
-#[derive(Clone, Copy)]
-struct Layout {
-    /// Lattice square: left, top, side.
-    x: f32,
-    y: f32,
-    side: f32,
-    /// Colour bar top (same left and width as the square).
-    bar_y: f32,
-    bar_h: f32,
+/// Where things are on the canvas, in device pixels (the page maps pointers and places the
+/// colour bar's labels with it).
+#[wasm_bindgen]
+#[derive(Clone, Copy, Debug)]
+pub struct Layout {
+    /// The lattice square's left edge.
+    pub x: f32,
+    /// The lattice square's top edge.
+    pub y: f32,
+    /// The lattice square's side.
+    pub side: f32,
+    /// The colour bar's top (same left and width as the square).
+    pub bar_y: f32,
+    /// The colour bar's height.
+    pub bar_h: f32,
 }
 
 impl Layout {
@@ -358,10 +362,9 @@ impl Renderer {
         self.device.destroy();
     }
 
-    /// [left, top, side, bar top, bar height] in device pixels, as last drawn.
-    pub fn layout(&self) -> Vec<f32> {
-        let g = self.layout;
-        vec![g.x, g.y, g.side, g.bar_y, g.bar_h]
+    /// Where the lattice square and the colour bar are, in device pixels, as last drawn.
+    pub fn layout(&self) -> Layout {
+        self.layout
     }
 
     /// Draws `view`; `dpr` is the page's devicePixelRatio (the bar is in CSS pixels),

@@ -1,11 +1,12 @@
 //! `WebSim`: the object the page drives. It owns a [`Monolayer`] and forwards to it; the only
 //! state of its own is what the page adds (the painted substrate map, each cell's colour key,
-//! the measurements of the last frame).
+//! the measurements of the last frame, the readouts and the saved states of "What if?").
 
 use wasm_bindgen::prelude::*;
 
-use super::binding::js_err;
+use super::binding::{js_err, DefectMark, Readout, SpiralMark};
 
+use super::history::{History, Verdict, Watch};
 use super::measure::{tissue_stats, TissueStats};
 use super::readouts::{run_record_json, ReadoutLog};
 use super::render::WebView;
@@ -49,8 +50,62 @@ pub struct WebSim {
     /// Step at which `stats` was measured (u64::MAX: never).
     stats_step: u64,
     regions: VoidRegions,
-    /// The readouts since the tissue was made (the Download button's CSV).
+    /// The readouts since the tissue was made (the Download button's CSV), with its holes.
     log: ReadoutLog,
+    /// The live tissue's saved states, for "What if?" (a replay keeps none).
+    history: History,
+    /// A replay's watch for the hole it was rewound before, and the fingerprint its state had
+    /// when it was saved (None: the live tissue).
+    replay: Option<(Watch, u64)>,
+}
+
+/// A saved state of the live tissue ([`WebSim::saved_states`]).
+#[wasm_bindgen(getter_with_clone)]
+pub struct SavedState {
+    pub step: f64,
+    /// The core's fingerprint of the state when it was saved (16 hex digits).
+    pub fingerprint: String,
+    /// Bytes it takes.
+    pub bytes: f64,
+}
+
+/// Where the live tissue rewinds to for its last hole ([`WebSim::rewind_point`]).
+#[wasm_bindgen]
+#[derive(Clone, Copy)]
+pub struct RewindPoint {
+    /// The step of the saved state a replay starts from.
+    pub from: f64,
+    /// The last hole's first row of readouts, and where it opened (its centroid there).
+    pub hole_step: f64,
+    pub hole_x: f64,
+    pub hole_y: f64,
+}
+
+/// What a replay watches for and has seen so far ([`WebSim::replay_watch`]).
+#[wasm_bindgen(getter_with_clone)]
+pub struct ReplayWatch {
+    /// The saved state's step, and its fingerprint when it was saved.
+    pub from: f64,
+    pub saved_fingerprint: String,
+    /// The original hole: its first row and where it opened.
+    pub hole_step: f64,
+    pub hole_x: f64,
+    pub hole_y: f64,
+    /// The last step watched, and the distance within which a hole is the same tear (R).
+    pub until: f64,
+    pub radius: f64,
+    pub verdict: ReplayVerdict,
+    /// The step a hole opened within R, if one did.
+    pub tear_step: Option<f64>,
+}
+
+/// Whether a replay tore where the original did ([`Verdict`]).
+#[wasm_bindgen]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReplayVerdict {
+    Watching,
+    Tore,
+    Held,
 }
 
 /// A copy of a tissue's core, stepped without the page's readouts (a row of measurements every
@@ -94,7 +149,9 @@ impl WebSim {
         seed: u32,
     ) -> Result<WebSim, JsError> {
         let p = page_params(box_size, n_cells, relax_steps, zeta, chi, gamma);
-        Ok(Self::wrap(Monolayer::new(p, seed as u64).map_err(js_err)?))
+        let m = Monolayer::new(p, seed as u64).map_err(js_err)?;
+        let keys = (1..=m.params().n_cells as u32).collect();
+        Ok(Self::wrap(m, keys, ReadoutLog::default(), None))
     }
 
     /// The same tissue as [`WebSim::new`] with the same arguments, further on: its state is
@@ -116,7 +173,9 @@ impl WebSim {
         let p = page_params(box_size, n_cells, relax_steps, zeta, chi, gamma);
         p.validate().map_err(js_err)?;
         let state = snapshot::decode_shipped(snapshot, &p, seed as u64).map_err(js_err)?;
-        Ok(Self::wrap(Monolayer::from_state(p, seed as u64, state).map_err(js_err)?))
+        let m = Monolayer::from_state(p, seed as u64, state).map_err(js_err)?;
+        let keys = (1..=m.params().n_cells as u32).collect();
+        Ok(Self::wrap(m, keys, ReadoutLog::default(), None))
     }
 
     /// The tissue, for the GPU engine's upload.
@@ -125,19 +184,32 @@ impl WebSim {
         &self.m
     }
 
-    fn wrap(m: Monolayer) -> WebSim {
-        let (n, l) = (m.params().n_cells, m.params().box_size);
-        let mut log = ReadoutLog::default();
+    /// The page's object for `m`, its cells coloured by `keys`, its readouts going on in `log`;
+    /// `replay`: a replay's watch (see the field).
+    fn wrap(m: Monolayer, keys: Vec<u32>, mut log: ReadoutLog, replay: Option<(Watch, u64)>) -> WebSim {
         log.record_if_due(&m);
-        WebSim {
+        let mut sim = WebSim {
             log,
-            keys: (1..=n as u32).collect(),
-            substrate: vec![1.0; l * l],
+            keys,
+            // The painted multipliers are the core's substrate map (1 where nothing is painted).
+            substrate: m.state().substrate,
             view: ViewBuilder::default(),
             stats: TissueStats::default(),
             stats_step: u64::MAX,
             regions: VoidRegions::default(),
+            history: History::default(),
+            replay,
             m,
+        };
+        sim.remember();
+        sim
+    }
+
+    /// Saves the state if it is due ([`History`]); a replay saves none.
+    fn remember(&mut self) {
+        if self.replay.is_none() {
+            let last_hole = self.log.nucleations.last().copied();
+            self.history.record_if_due(&self.m, &self.keys, self.log.tracker.as_ref(), last_hole);
         }
     }
 
@@ -157,13 +229,81 @@ impl WebSim {
         self.m = m;
         self.stats_step = u64::MAX;
         self.log.record_if_due(&self.m);
+        self.remember();
         Ok(())
     }
 
-    /// Runs `n` steps. On an error (instability, failed solve) the state before the failing
-    /// step is kept and the error's message is thrown to the page.
+    /// Runs `n` steps, stopping at each row of readouts (and each state to save). On an error
+    /// (instability, failed solve) the state before the failing step is kept and the error's
+    /// message is thrown to the page.
     pub fn step(&mut self, n: u32) -> Result<(), JsError> {
-        self.log.advance(&mut self.m, n as u64).map_err(js_err)
+        let mut left = n as u64;
+        while left > 0 {
+            let k = left.min(ReadoutLog::steps_to_next_row(self.m.step_count(), self.m.params().relax_steps));
+            self.log.advance(&mut self.m, k).map_err(js_err)?;
+            self.remember();
+            left -= k;
+        }
+        Ok(())
+    }
+
+    /// What the page reads out of the tissue now.
+    pub fn readout(&mut self) -> Readout {
+        let stats = self.measure();
+        Readout::of(&self.m, stats)
+    }
+
+    /// The saved states, oldest first ("What if?"; the browser tests compare fingerprints).
+    pub fn saved_states(&self) -> Vec<SavedState> {
+        let states = self.history.iter().map(|s| SavedState {
+            step: s.step as f64,
+            fingerprint: format!("{:016x}", s.fingerprint),
+            bytes: s.size() as f64,
+        });
+        states.collect()
+    }
+
+    /// Where "What if?" would rewind to: the latest saved state at least `history::LEAD` steps
+    /// before the last hole's first row, if one is kept (none in a replay).
+    pub fn rewind_point(&self) -> Option<RewindPoint> {
+        let hole = self.log.nucleations.last()?;
+        let saved = self.history.rewind_point(hole.step).filter(|_| self.replay.is_none())?;
+        Some(RewindPoint { from: saved.step as f64, hole_step: hole.step as f64, hole_x: hole.x, hole_y: hole.y })
+    }
+
+    /// A replay of this tissue from its [`WebSim::rewind_point`]: a new tissue, bit for bit the
+    /// saved state (its readouts start there; its hole tracker goes on from the saved one),
+    /// watched for a hole within R of where the last one opened. This tissue is left as it is.
+    pub fn rewind(&self) -> Result<WebSim, JsError> {
+        let point = self.rewind_point().ok_or_else(|| JsError::new("rewind: no hole with a saved state before it"))?;
+        let hole = *self.log.nucleations.last().expect("a rewind point has a hole");
+        let saved = self.history.rewind_point(hole.step).expect("the rewind point's state");
+        let m = saved.monolayer().map_err(js_err)?;
+        let (radius, l) = (m.params().radius, m.params().box_size);
+        let log = ReadoutLog::resumed(saved.tracker.clone(), saved.step);
+        let watch = Watch::new(point.from as u64, hole, radius, l);
+        Ok(WebSim::wrap(m, saved.keys.clone(), log, Some((watch, saved.fingerprint))))
+    }
+
+    /// A replay's watch and what it has seen so far (None: the live tissue).
+    pub fn replay_watch(&self) -> Option<ReplayWatch> {
+        let (w, fingerprint) = self.replay?;
+        let (verdict, tear_step) = match w.verdict(self.m.step_count(), &self.log.nucleations) {
+            Verdict::Watching => (ReplayVerdict::Watching, None),
+            Verdict::Tore(n) => (ReplayVerdict::Tore, Some(n.step as f64)),
+            Verdict::Held => (ReplayVerdict::Held, None),
+        };
+        Some(ReplayWatch {
+            from: w.from as f64,
+            saved_fingerprint: format!("{fingerprint:016x}"),
+            hole_step: w.hole.step as f64,
+            hole_x: w.hole.x,
+            hole_y: w.hole.y,
+            until: w.until as f64,
+            radius: w.radius,
+            verdict,
+            tear_step,
+        })
     }
 
     /// The readouts since the tissue was made as CSV, its last row the current state
@@ -220,28 +360,12 @@ impl WebSim {
         self.update(|p| p.gamma = gamma)
     }
 
-    pub fn zeta(&self) -> f64 {
-        self.m.params().zeta
-    }
-
-    pub fn chi(&self) -> f64 {
-        self.m.params().chi()
-    }
-
-    pub fn gamma(&self) -> f64 {
-        self.m.params().gamma
-    }
-
     pub fn box_size(&self) -> usize {
         self.m.params().box_size
     }
 
     pub fn n_cells(&self) -> usize {
         self.m.cells().len()
-    }
-
-    pub fn relax_steps(&self) -> f64 {
-        self.m.params().relax_steps as f64
     }
 
     /// Steps since the random disks, relaxation included (f64: exact far beyond any visit to the page).
@@ -252,16 +376,6 @@ impl WebSim {
     /// Whether activity is on (relaxation is over).
     pub fn active(&self) -> bool {
         self.m.phase() == crate::Phase::Active
-    }
-
-    /// Time since activity started, in simulation units (steps × Δt; 0 while relaxing).
-    pub fn active_time(&self) -> f64 {
-        self.m.step_count().saturating_sub(self.m.params().relax_steps) as f64 * self.m.params().dt
-    }
-
-    /// Seconds per simulation time unit (reporting only: the page's clock and chart).
-    pub fn time_unit_seconds(&self) -> f64 {
-        self.m.params().time_unit_seconds
     }
 
     /// The core's bit-exact hash of the state, as 16 hex digits (as `monolayer fingerprint`).
@@ -284,30 +398,14 @@ impl WebSim {
         self.m.phi_sum().to_vec()
     }
 
-    /// Holes: connected void regions (Σφ < 0.01) larger than πR²/4.
-    pub fn holes(&mut self) -> u32 {
-        self.measure().holes
+    /// ±½ defects of the smoothed nematic field as last drawn (director and signed fields).
+    pub fn defects(&self) -> Vec<DefectMark> {
+        DefectMark::all(&self.view.defects)
     }
 
-    /// All void sites (µm² at Δx ≈ 1 µm), in holes or smaller gaps.
-    pub fn hole_area(&mut self) -> u32 {
-        self.measure().void_area
-    }
-
-    /// ±½ defects of the smoothed nematic field as last drawn (director and signed fields),
-    /// flattened as [x, y, twice the charge, orientation] per defect.
-    pub fn defects(&self) -> Vec<f64> {
-        self.view.defects.iter().flat_map(|d| [d.x, d.y, d.twice_charge as f64, d.orientation]).collect()
-    }
-
-    /// Spiral cores as last drawn (speed and strain rate), flattened as [x, y, ∇·v] per core.
-    pub fn spiral_cores(&self) -> Vec<f64> {
-        self.view.spiral_cores.iter().flat_map(|p| [p.x, p.y, p.divergence]).collect()
-    }
-
-    /// Fraction of the box covered by cells (Σφ ≥ ½).
-    pub fn packing_fraction(&mut self) -> f64 {
-        self.measure().packing
+    /// Spiral cores as last drawn (speed and strain rate).
+    pub fn spiral_cores(&self) -> Vec<SpiralMark> {
+        SpiralMark::all(&self.view.spiral_cores)
     }
 
     /// Multiplies ξ_s by `multiplier` on a disc of `radius` sites around lattice point (x, y)
@@ -327,12 +425,6 @@ impl WebSim {
                 }
             }
         }
-        self.m.set_substrate(&self.substrate).map_err(js_err)
-    }
-
-    /// Resets the substrate to uniform friction.
-    pub fn clear_substrate(&mut self) -> Result<(), JsError> {
-        self.substrate.fill(1.0);
         self.m.set_substrate(&self.substrate).map_err(js_err)
     }
 

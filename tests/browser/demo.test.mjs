@@ -96,7 +96,7 @@ async function open(context, base, query, errors) {
 const centre = (page) => page.evaluate(async () => {
   const c = document.getElementById('view');
   const r = c.getBoundingClientRect();
-  const [x0, y0, side] = window.demo.renderer.layout();
+  const { x: x0, y: y0, side } = window.demo.renderer.layout();
   const l = await window.demo.call('box_size');
   const f = (l / 2 + 0.5) / l;
   const s = c.width / r.width;
@@ -292,15 +292,14 @@ for (const [modeName, mode] of Object.entries(MODES)) {
           // disordered active tissue has some, each of charge ±½, inside the box, a +½ with an
           // orientation and a −½ without one.
           const l = await page.evaluate(() => window.demo.call('box_size'));
-          const d = Array.from(await page.evaluate(() => window.demo.call('defects')));
-          assert(d.length > 0 && d.length % 4 === 0, `defects: 4 numbers each, at least one defect: ${d}`);
-          for (let i = 0; i < d.length; i += 4) {
-            const [x, y, twice, psi] = d.slice(i, i + 4);
+          const d = await page.evaluate(() => window.demo.call('defects'));
+          assert(d.length > 0, `defects: at least one: ${JSON.stringify(d)}`);
+          for (const { x, y, twiceCharge: twice, orientation: psi } of d) {
             assert(x >= 0 && x < l && y >= 0 && y < l, `defect at (${x}, ${y}) outside the ${l} box`);
             assert(twice === 1 || twice === -1, `defect of twice the charge ${twice}`);
             assert(twice === 1 ? Number.isFinite(psi) : Number.isNaN(psi), `defect ${twice}/2 with orientation ${psi}`);
           }
-          m.defectsSeen = d.length / 4;
+          m.defectsSeen = d.length;
         }
       }
     });
@@ -311,13 +310,13 @@ for (const [modeName, mode] of Object.entries(MODES)) {
       const cores = await page.evaluate(async () => {
         for (;;) {
           const c = await window.demo.call('spiral_cores');
-          if (c.length) return Array.from(c);
+          if (c.length) return c;
           await new Promise((r) => setTimeout(r, 200));
         }
       });
-      assert(cores.length > 0 && cores.length % 3 === 0, `spiral cores: ${cores}`);
-      for (let i = 0; i < cores.length; i += 3) assert(cores[i + 2] > 0, `a spiral core with ∇·v = ${cores[i + 2]}`);
-      m.spiralCoresSeen = cores.length / 3;
+      assert(cores.length > 0, `spiral cores: ${JSON.stringify(cores)}`);
+      for (const c of cores) assert(c.divergence > 0, `a spiral core with ∇·v = ${c.divergence}`);
+      m.spiralCoresSeen = cores.length;
       await canvasShot(page, shot('spiral-cores'));
       await page.keyboard.press('1');
     });

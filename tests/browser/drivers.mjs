@@ -144,6 +144,8 @@ async function display() {
     const n = 90 + Math.floor(Math.random() * 400);
     const proc = spawn('Xvfb', [`:${n}`, '-screen', '0', '1400x1000x24', '-nolisten', 'tcp'], { stdio: 'ignore' });
     xvfb = { proc, name: `:${n}` };
+    // Not a reason for Node to stay: once the tests are done the process exits, and Xvfb with it.
+    proc.unref();
     process.on('exit', () => proc.kill());
     await sleep(500);
   }

@@ -214,8 +214,8 @@ describe(`the page as an instrument (Chromium, ${WEBGPU ? 'WebGPU' : 'WebGL2'})`
       assert(Math.abs(st.area / 3600 - row.void_fraction) < 1e-6, `step ${f.step}: void ${st.area} sites, analyze ${row.void_fraction}`);
       assert(Math.abs(st.packing - row.packing_fraction) < 1e-6, `step ${f.step}: packing ${st.packing}, analyze ${row.packing_fraction}`);
       const d = await page.evaluate(() => window.demo.call('defects'));
-      const plus = d.filter((_, k) => k % 4 === 2 && d[k] > 0).length;
-      const minus = d.filter((_, k) => k % 4 === 2 && d[k] < 0).length;
+      const plus = d.filter((x) => x.twiceCharge > 0).length;
+      const minus = d.filter((x) => x.twiceCharge < 0).length;
       assert.deepEqual([plus, minus], [row.plus_half_defects, row.minus_half_defects], `step ${f.step}: ±½ defects`);
     }
     assert(holesSeen > 0, 'no holes in the frames: the test proves little');

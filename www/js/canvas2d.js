@@ -13,7 +13,14 @@ import { barColours, canvasLayout } from '../pkg/monolayer.js';
 const SEGMENT_FLOATS = 12;
 const BACKGROUND = 'rgb(15, 17, 21)';
 
+/**
+ * Where the lattice square (left, top, side) and the colour bar (top, height) are, in device
+ * pixels: the fields of the core's `Layout`, as plain numbers.
+ * @typedef {{ x: number, y: number, side: number, bar_y: number, bar_h: number }} CanvasGeometry
+ */
+
 export class Canvas2DRenderer {
+  /** @param {HTMLCanvasElement} canvas */
   constructor(canvas) {
     const ctx = canvas.getContext('2d');
     if (!ctx) throw new Error('this canvas cannot be drawn on with Canvas 2D');
@@ -23,8 +30,13 @@ export class Canvas2DRenderer {
     this.bar = document.createElement('canvas'); // the colour bar, 256 pixels
     this.bar.width = 256;
     this.bar.height = 1;
+    /** @type {number | null} */
     this.barKind = null;
-    this.g = [0, 0, 1, 0, 0];
+    /** @type {CanvasGeometry} */
+    this.g = { x: 0, y: 0, side: 1, bar_y: 0, bar_h: 0 };
+    /** What was drawn last: the browser tests compare the canvas as shown with it. */
+    /** @type {{ rgba: Uint8Array, tissue: Float32Array } | null} */
+    this.last = null;
   }
 
   backend() {
@@ -40,7 +52,8 @@ export class Canvas2DRenderer {
     return undefined;
   }
 
-  // [left, top, side, bar top, bar height] in device pixels, as last drawn.
+  // Where the lattice square and the colour bar are, in device pixels, as last drawn.
+  /** @returns {CanvasGeometry} */
   layout() {
     return this.g;
   }
@@ -48,19 +61,23 @@ export class Canvas2DRenderer {
   free() {}
 
   // Draws `view` (a WebView); `dpr` is the device pixels per CSS pixel.
+  /** @param {import('../pkg/monolayer.js').WebView} view @param {number} dpr @param {boolean} substrate */
   draw(view, dpr, substrate) {
     const { canvas, ctx } = this;
     const l = view.l();
     const kind = view.kind();
     const withBar = kind !== 0; // FieldKind.Tissue draws no colour bar
-    this.g = Array.from(canvasLayout(canvas.width, canvas.height, dpr, withBar));
-    const [x0, y0, side, barY, barH] = this.g;
+    const g = canvasLayout(canvas.width, canvas.height, dpr, withBar);
+    this.g = { x: g.x, y: g.y, side: g.side, bar_y: g.bar_y, bar_h: g.bar_h };
+    g.free();
+    const { x: x0, y: y0, side, bar_y: barY, bar_h: barH } = this.g;
     if (this.sites.width !== l) {
       this.sites.width = l;
       this.sites.height = l;
     }
-    const rgba = view.rgba(substrate);
-    this.sites.getContext('2d').putImageData(new ImageData(new Uint8ClampedArray(rgba.buffer), l, l), 0, 0);
+    // The bindings copy the core's Vec<u8> into an ArrayBuffer of its own (never shared memory).
+    const rgba = /** @type {Uint8Array<ArrayBuffer>} */ (view.rgba(substrate));
+    /** @type {CanvasRenderingContext2D} */ (this.sites.getContext('2d')).putImageData(new ImageData(new Uint8ClampedArray(rgba.buffer), l, l), 0, 0);
     // The browser tests compare the canvas as shown with the image and the cells it came from.
     this.last = { rgba, tissue: view.tissue() };
     ctx.fillStyle = BACKGROUND;
@@ -76,7 +93,7 @@ export class Canvas2DRenderer {
     ctx.restore();
     if (withBar && barY + barH <= canvas.height) {
       if (this.barKind !== kind) {
-        this.bar.getContext('2d').putImageData(new ImageData(new Uint8ClampedArray(barColours(kind, 256).buffer), 256, 1), 0, 0);
+        /** @type {CanvasRenderingContext2D} */ (this.bar.getContext('2d')).putImageData(new ImageData(new Uint8ClampedArray(/** @type {ArrayBuffer} */ (barColours(kind, 256).buffer)), 256, 1), 0, 0);
         this.barKind = kind;
       }
       ctx.imageSmoothingEnabled = true;
@@ -85,6 +102,7 @@ export class Canvas2DRenderer {
   }
 
   // Segments as round-capped lines, at least 1.5 device pixels wide (as segments.wgsl).
+  /** @param {Float32Array} s @param {number} l @param {number} x0 @param {number} y0 @param {number} side */
   segments(s, l, x0, y0, side) {
     const { ctx } = this;
     const k = side / l;

@@ -2,10 +2,13 @@
 // (time in the core's units; the axis label in seconds, `secondsPerUnit` of them per unit).
 
 export class HoleChart {
+  /** @param {HTMLCanvasElement} canvas */
   constructor(canvas, capacity = 600) {
     this.canvas = canvas;
     this.capacity = capacity;
+    /** @type {number[]} */
     this.t = [];
+    /** @type {number[]} */
     this.area = [];
     this.secondsPerUnit = 1;
   }
@@ -17,6 +20,7 @@ export class HoleChart {
   }
 
   // Adds a point; false (and nothing added) unless time has moved on.
+  /** @param {number} time @param {number} area */
   push(time, area) {
     if (this.t.length && time <= this.t[this.t.length - 1]) return false;
     this.t.push(time);
@@ -38,7 +42,7 @@ export class HoleChart {
       c.width = w;
       c.height = h;
     }
-    const g = c.getContext('2d');
+    const g = /** @type {CanvasRenderingContext2D} */ (c.getContext('2d'));
     g.clearRect(0, 0, w, h);
     g.font = `${10 * dpr}px system-ui, sans-serif`;
     g.fillStyle = '#9aa3b2';

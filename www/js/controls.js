@@ -4,15 +4,38 @@
 
 import { PARAMS, SLIDERS, FIELDS, PRESETS, ENGINES, fieldName, toSlider, fromSlider } from './state.js';
 
-const $ = (id) => document.getElementById(id);
+const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
+const input = (/** @type {string} */ id) => /** @type {HTMLInputElement} */ (document.getElementById(id));
+const select = (/** @type {string} */ id) => /** @type {HTMLSelectElement} */ (document.getElementById(id));
+
+/**
+ * What the controls do (main.js): setParam(name, v), applyPreset(name), setField(kind),
+ * setSeed(v), setEngine(engine), togglePlay(), stepOnce(), reset(), screenshot(), record(),
+ * download(), brush(x, y, radius, multiplier), ablate(x, y), latticeAt(event).
+ * @typedef {object} ControlActions
+ * @property {(name: import('./state.js').ParamName, v: number) => void} setParam
+ * @property {(name: import('./state.js').PresetName) => void} applyPreset
+ * @property {(kind: import('../pkg/monolayer.js').FieldKind) => void} setField
+ * @property {(raw: string) => void} setSeed
+ * @property {(engine: import('./worker.js').EngineChoice) => unknown} setEngine
+ * @property {() => void} togglePlay
+ * @property {() => void} stepOnce
+ * @property {() => void} reset
+ * @property {() => void} screenshot
+ * @property {() => unknown} record
+ * @property {() => unknown} download
+ * @property {(x: number, y: number, radius: number, multiplier: number) => unknown} brush
+ * @property {(x: number, y: number) => unknown} ablate
+ * @property {(ev: PointerEvent) => [number, number] | null} latticeAt
+ */
 
 // Substrate brushes: ξs multiplier painted on a disc of BRUSH_RADIUS sites.
+/** @type {Record<string, number>} */
 const BRUSHES = { soft: 0.1, stiff: 10, erase: 1 };
 const BRUSH_RADIUS = 6;
 
 export class Controls {
-  // actions: setParam(name, v), applyPreset(name), setField(kind), setSeed(v), togglePlay(),
-  // stepOnce(), reset(), screenshot(), record(), download(), brush(x, y, multiplier), ablate(x, y), latticeAt(event).
+  /** @param {ControlActions} actions */
   constructor(actions) {
     this.actions = actions;
     this.tool = 'none';
@@ -20,7 +43,7 @@ export class Controls {
     this.buildChoosers();
     this.wireButtons();
     // On the canvas's wrapper: a new renderer brings a new canvas.
-    this.installBrush($('view').parentElement);
+    this.installBrush(/** @type {HTMLElement} */ ($('view').parentElement));
     window.addEventListener('keydown', (e) => this.onKey(e));
   }
 
@@ -36,35 +59,36 @@ export class Controls {
       const out = document.createElement('output');
       out.id = `${name}-out`;
       out.htmlFor = name;
-      const input = document.createElement('input');
-      Object.assign(input, { id: name, type: 'range', min: 0, max: 1000 });
-      input.setAttribute('aria-labelledby', label.id);
-      input.addEventListener('input', () => this.actions.setParam(name, fromSlider(name, Number(input.value))));
-      div.append(label, out, input);
+      const range = document.createElement('input');
+      Object.assign(range, { id: name, type: 'range', min: 0, max: 1000 });
+      range.setAttribute('aria-labelledby', label.id);
+      range.addEventListener('input', () => this.actions.setParam(name, fromSlider(name, Number(range.value))));
+      div.append(label, out, range);
       box.append(div);
     }
   }
 
   buildChoosers() {
-    const preset = $('preset');
+    const preset = select('preset');
     for (const [key, p] of Object.entries(PRESETS)) preset.add(new Option(p.label, key));
     preset.add(new Option('Custom', 'custom'));
-    preset.addEventListener('change', (e) => {
-      if (e.target.value in PRESETS) this.actions.applyPreset(e.target.value);
+    preset.addEventListener('change', () => {
+      if (preset.value in PRESETS) this.actions.applyPreset(/** @type {import('./state.js').PresetName} */ (preset.value));
     });
-    const engine = $('engine-choice');
+    const engine = select('engine-choice');
     for (const [key, label] of Object.entries(ENGINES)) engine.add(new Option(label, key));
-    engine.addEventListener('change', (e) => this.actions.setEngine(e.target.value));
+    engine.addEventListener('change', () => this.actions.setEngine(/** @type {import('./worker.js').EngineChoice} */ (engine.value)));
     const fields = $('fields');
     for (const [kind, f] of FIELDS) {
       const l = document.createElement('label');
-      const input = document.createElement('input');
-      Object.assign(input, { type: 'radio', name: 'field', value: fieldName(kind) });
-      input.addEventListener('change', () => this.actions.setField(kind));
-      l.append(input, ` ${f.label}`);
+      const radio = document.createElement('input');
+      Object.assign(radio, { type: 'radio', name: 'field', value: fieldName(kind) });
+      radio.addEventListener('change', () => this.actions.setField(kind));
+      l.append(radio, ` ${f.label}`);
       fields.append(l);
     }
-    $('seed').addEventListener('change', (e) => this.actions.setSeed(e.target.value));
+    const seed = input('seed');
+    seed.addEventListener('change', () => this.actions.setSeed(seed.value));
   }
 
   wireButtons() {
@@ -75,6 +99,7 @@ export class Controls {
     $('record').addEventListener('click', () => this.actions.record());
     $('download').addEventListener('click', () => this.actions.download());
     for (const r of document.querySelectorAll('input[name=tool]')) {
+      if (!(r instanceof HTMLInputElement)) continue;
       r.addEventListener('change', () => {
         this.tool = r.value;
         $('view').classList.toggle('tool', this.tool !== 'none');
@@ -83,28 +108,31 @@ export class Controls {
   }
 
   // Shows `state` in every control.
+  /** @param {import('./state.js').PageState} state @param {boolean} playing */
   refresh(state, playing) {
     for (const name of SLIDERS) {
-      $(name).value = toSlider(name, state[name]);
+      input(name).value = String(toSlider(name, state[name]));
       $(name).setAttribute('aria-valuetext', String(state[name]));
       $(`${name}-out`).textContent = String(state[name]);
     }
-    $('seed').value = String(state.seed);
-    $('preset').value = state.preset ?? 'custom';
-    $('engine-choice').value = state.engine;
-    for (const input of document.querySelectorAll('input[name=field]')) {
-      input.checked = input.value === fieldName(state.field);
+    input('seed').value = String(state.seed);
+    select('preset').value = state.preset ?? 'custom';
+    select('engine-choice').value = state.engine;
+    for (const radio of document.querySelectorAll('input[name=field]')) {
+      if (radio instanceof HTMLInputElement) radio.checked = radio.value === fieldName(state.field);
     }
     $('play').textContent = playing ? 'Pause' : 'Play';
     $('play').setAttribute('aria-pressed', String(!playing));
   }
 
+  /** @param {boolean} on */
   showRecording(on) {
     $('record').textContent = on ? 'Stop' : 'Record';
     $('record').setAttribute('aria-pressed', String(on));
     $('record').classList.toggle('recording', on);
   }
 
+  /** @param {KeyboardEvent} e */
   onKey(e) {
     if (e.target instanceof HTMLInputElement && e.target.type !== 'range' && e.target.type !== 'radio') return;
     if (e.target instanceof HTMLSelectElement || e.ctrlKey || e.metaKey || e.altKey) return;
@@ -116,8 +144,10 @@ export class Controls {
     else if (k === 'p') $('shot').click();
     else if (k === 'v') $('record').click();
     else if (k === 'd') $('download').click();
+    // "What if?" (whatif.js), once it is offered.
+    else if (k === 'w' && !$('whatif').hidden) $('whatif-off').click();
     else if (k === 'b') {
-      const tools = [...document.querySelectorAll('input[name=tool]')];
+      const tools = /** @type {HTMLInputElement[]} */ ([...document.querySelectorAll('input[name=tool]')]);
       const i = tools.findIndex((t) => t.checked);
       tools[(i + 1) % tools.length].click();
     } else if (k >= '1' && k <= String(kinds.length)) this.actions.setField(kinds[Number(k) - 1]);
@@ -125,6 +155,7 @@ export class Controls {
     e.preventDefault();
   }
 
+  /** @param {PointerEvent} ev */
   applyTool(ev) {
     const at = this.actions.latticeAt(ev);
     if (!at || this.tool === 'none') return;
@@ -133,10 +164,11 @@ export class Controls {
   }
 
   // Brushes paint while the pointer is down on the canvas; the laser removes one cell per press.
+  /** @param {HTMLElement} wrap */
   installBrush(wrap) {
     let down = false;
     wrap.addEventListener('pointerdown', (e) => {
-      if (e.target.id !== 'view') return;
+      if (!(e.target instanceof HTMLCanvasElement) || e.target.id !== 'view') return;
       down = true;
       e.target.setPointerCapture(e.pointerId);
       this.applyTool(e);

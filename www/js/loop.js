@@ -10,14 +10,21 @@ const MIN_SCALE = 0.3;
 // Animation frames missing this long on a visible page: the watchdog draws instead.
 const WATCHDOG_MS = 500;
 
+/** @typedef {{ parts: import('./worker.js').FrameParts, stats: import('./worker.js').Stats }} Frame */
+
 export class FrameLoop {
-  // hooks: check() before each frame (the renderer still has its device); draw(frame, dpr);
-  // request(dpr) asks the worker for a frame; readouts(); fatal(error).
+  /**
+   * @param {HTMLCanvasElement} canvas
+   * @param {{ check(): void, draw(frame: Frame, dpr: number): void, request(dpr: number): void, readouts(): void,
+   *   fatal(e: unknown): void }} hooks check() before each frame (the renderer still has its device);
+   *   draw(frame, dpr); request(dpr) asks the worker for a frame; readouts(); fatal(error).
+   */
   constructor(canvas, hooks) {
     this.canvas = canvas;
     this.hooks = hooks;
     this.stopped = false;
-    this.latest = null; // the worker's last frame: { parts, stats }
+    /** @type {Frame | null} */
+    this.latest = null; // the worker's last frame
     this.fresh = false; // `latest` not drawn yet
     this.dirty = true; // redraw `latest` (resized, screenshot)
     this.requested = false; // a frame request is with the worker
@@ -25,11 +32,14 @@ export class FrameLoop {
     this.intervalMs = FRAME_MS; // running estimate of the time from a drawn frame to the next
     this.renderScale = 1; // backing pixels per device pixel (≤ 1)
     this.scaleCooldownUntil = 0; // ms: let the estimates settle between changes
+    /** @type {number | null} */
     this.drewAt = null; // when the last frame was drawn, until the next animation frame
     this.frameAt = performance.now(); // when the last frame (drawn or not) ran
     this.rafPending = false; // an animation frame is asked for
+    /** @type {number | undefined} */
     this.watchdog = undefined;
     // Steps the worker took and frames drawn here, per second.
+    /** @type {{ steps: number, frames: number, t0: number, sps: number, fps: number, lastStep: number | null }} */
     this.rate = { steps: 0, frames: 0, t0: performance.now(), sps: 0, fps: 0, lastStep: null };
   }
 
@@ -53,6 +63,7 @@ export class FrameLoop {
   }
 
   // A frame from the worker.
+  /** @param {Frame} frame */
   receive(frame) {
     const r = this.rate;
     if (r.lastStep !== null && frame.stats.step > r.lastStep) r.steps += frame.stats.step - r.lastStep;
@@ -73,9 +84,11 @@ export class FrameLoop {
   // there is room. Only the time from a drawn frame to the next one counts: an idle page (paused,
   // or waiting for the worker) says nothing about the GPU, and must not start a cycle of resizes
   // and redraws that would take the CPU from the worker.
+  /** @param {number} now */
   adaptResolution(now) {
-    const drew = this.drewAt !== null;
-    if (drew) this.intervalMs = 0.9 * this.intervalMs + 0.1 * (now - this.drewAt);
+    const drewAt = this.drewAt;
+    const drew = drewAt !== null;
+    if (drew) this.intervalMs = 0.9 * this.intervalMs + 0.1 * (now - drewAt);
     this.drewAt = null;
     if (!drew || now < this.scaleCooldownUntil) return;
     if (this.intervalMs > 1.15 * FRAME_MS && this.drawMs < 0.75 * this.intervalMs && this.renderScale > MIN_SCALE) {
@@ -101,6 +114,7 @@ export class FrameLoop {
     return dpr;
   }
 
+  /** @param {number} now */
   frame(now) {
     if (this.stopped) return;
     this.frameAt = performance.now();
@@ -110,9 +124,10 @@ export class FrameLoop {
       this.adaptResolution(now);
       const t0 = performance.now();
       const dpr = this.resizeCanvas();
-      const draw = this.latest && (this.fresh || this.dirty);
+      const latest = this.latest;
+      const draw = latest !== null && (this.fresh || this.dirty);
       if (draw) {
-        this.hooks.draw(this.latest, dpr);
+        this.hooks.draw(latest, dpr);
         this.drewAt = now;
         this.rate.frames++;
         this.fresh = false;
@@ -131,6 +146,7 @@ export class FrameLoop {
   }
 
   // Steps and frames per second over the last half second; whether they were updated.
+  /** @param {number} now */
   countRate(now) {
     const r = this.rate;
     if (now - r.t0 < 500) return false;

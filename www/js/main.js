@@ -4,7 +4,7 @@
 // readouts (readouts.js) to them. Every change of state goes through the actions below, which
 // keep the worker, the controls and the URL in step.
 
-import init, { Renderer, WebView, FieldKind, codeVersion } from '../pkg/monolayer.js';
+import init, { Renderer, WebView, FieldKind, Layout, codeVersion } from '../pkg/monolayer.js';
 import { PARAMS, MODEL_PARAMS, PRESETS, FIELDS, SIZES, parseUrl, toUrl, shippedStateFor, fieldName } from './state.js';
 import { FrameLoop } from './loop.js';
 import { Controls } from './controls.js';
@@ -13,20 +13,41 @@ import { Recorder } from './recorder.js';
 import { Viewer } from './viewer.js';
 import { Canvas2DRenderer } from './canvas2d.js';
 import { Tour, TOUR_SPF } from './tour.js';
+import { WhatIf } from './whatif.js';
 
-const $ = (id) => document.getElementById(id);
+/** @typedef {import('./worker.js').Stats} Stats */
+/** @typedef {import('./worker.js').WorkerIn} WorkerIn */
+/** @typedef {import('./worker.js').WorkerOut} WorkerOut */
+/** @typedef {import('./worker.js').Calls} Calls */
+/** @typedef {import('./worker.js').FrameParts} FrameParts */
+/** @typedef {import('./state.js').PageState} PageState */
+/** @typedef {Renderer | Canvas2DRenderer} AnyRenderer */
+
+const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 // The canvas drawn on; a new renderer gets a new one (renderers below).
-let canvas = $('view');
+let canvas = /** @type {HTMLCanvasElement} */ ($('view'));
 const message = $('message');
 
-// Everything the tests read lives here too (window.demo); `demo.call` reaches the simulation.
+/**
+ * Everything the tests read lives here too (window.demo); `demo.call` reaches the simulation.
+ * @type {Record<string, any>}
+ */
 const demo = { ready: false, error: null, notices: [], progress: [], firstHole: null, loadedAt: performance.now(), worker: true };
-window.demo = demo;
+/** @type {any} */ (window).demo = demo;
 
-// The renderer, the state (what the URL carries), the pending screenshot, and the last stats
-// the worker sent.
-const page = { renderer: null, state: null, screenshot: false, stats: null, version: undefined };
+/**
+ * The renderer, the state (what the URL carries), the pending screenshot, the last stats the
+ * worker sent and the spiral cores its frame marks, and, while "What if?" replays the tissue's
+ * past, the live tissue's parameters to return to.
+ * @type {{ renderer: AnyRenderer | null, state: PageState, screenshot: boolean, stats: Stats | null, cores: number,
+ *   version: string | undefined, aside: { zeta: number, chi: number, gamma: number, preset: string | null } | null }}
+ */
+const page = {
+  renderer: null, state: /** @type {PageState} */ (/** @type {unknown} */ (null)), screenshot: false, stats: null, cores: 0,
+  version: undefined, aside: null,
+};
 
+/** @param {string} text */
 function showMessage(text, isError = false) {
   message.textContent = text;
   message.classList.toggle('error', isError);
@@ -43,8 +64,9 @@ console.error = (...args) => {
 };
 
 // A fatal error (no GPU, a Rust panic, a lost device): stop and say so on the canvas.
+/** @param {string} what @param {unknown} err */
 function fatal(what, err) {
-  const detail = String(err && err.message ? err.message : err);
+  const detail = String(/** @type {{ message?: unknown }} */ (err)?.message || err);
   const panic = lastConsoleError.includes('panicked') ? `\n\n${lastConsoleError}` : '';
   demo.error = `${what}: ${detail}${panic}`;
   loop.stopped = true;
@@ -53,6 +75,7 @@ function fatal(what, err) {
 window.addEventListener('error', (e) => fatal('Unexpected error', e.error ?? e.message));
 window.addEventListener('unhandledrejection', (e) => fatal('Unexpected error', e.reason));
 
+/** @param {string[]} lines */
 function notify(lines) {
   if (!lines.length) return;
   demo.notices.push(...lines);
@@ -62,17 +85,28 @@ function notify(lines) {
 
 // --- the simulation's worker ------------------------------------------------------------------------
 const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+/** @param {WorkerIn} m */
+const tell = (m) => worker.postMessage(m);
+/** @type {Map<number, { resolve: (v: any) => void, reject: (e: Error) => void }>} */
 const calls = new Map();
 let nextCall = 0;
+/** @type {(() => void) | null} */
 let onReady = null;
+/** @type {(() => void) | null} */
 let onEngine = null;
 
-// Runs one of the worker's CALLS on the simulation; resolves with its value.
+/**
+ * Runs one of the worker's CALLS on the simulation; resolves with its value.
+ * @template {keyof Calls} K
+ * @param {K} method
+ * @param {Parameters<Calls[K]>} args
+ * @returns {Promise<Awaited<ReturnType<Calls[K]>>>}
+ */
 function call(method, ...args) {
   return new Promise((resolve, reject) => {
     const id = ++nextCall;
     calls.set(id, { resolve, reject });
-    worker.postMessage({ type: 'call', id, method, args });
+    tell({ type: 'call', id, method, args });
   });
 }
 demo.call = call;
@@ -84,7 +118,8 @@ function hideProgress() {
   progressShown = false;
 }
 
-worker.onerror = (e) => fatal('The simulation worker failed', e.message ?? e);
+worker.onerror = (/** @type {ErrorEvent} */ e) => fatal('The simulation worker failed', e.message ?? e);
+/** @param {MessageEvent<WorkerOut>} e */
 worker.onmessage = (e) => {
   const m = e.data;
   if (m.type === 'frame') {
@@ -95,8 +130,8 @@ worker.onmessage = (e) => {
   } else if (m.type === 'result') {
     const c = calls.get(m.id);
     calls.delete(m.id);
-    if ('error' in m) c.reject(new Error(m.error));
-    else c.resolve(m.value);
+    if (m.error !== undefined) c?.reject(new Error(m.error));
+    else c?.resolve(m.value);
   } else if (m.type === 'progress') {
     // The GPU engine's kernels compiling (once per device): shown over the view until the
     // engine is chosen.
@@ -131,6 +166,7 @@ worker.onmessage = (e) => {
 // Which engine steps the tissue, said plainly: the CPU core compiled to WebAssembly gives the
 // native program's bits for the same parameters and seed; the GPU engine steps the same model
 // in f32 on WebGPU compute (src/gpu/; natively within 10⁻⁴ of the CPU over 100 full-size steps).
+/** @param {Stats} s */
 function showEngine(s) {
   const size = `${s.cells} cells on ${s.l}²`;
   let text;
@@ -153,6 +189,7 @@ function showEngine(s) {
 
 // The engine's speed as measured in this page (steps and their time since the engine was
 // chosen, hand-offs and checks included), beside the engine's name.
+/** @param {Stats} s */
 function showSpeed(s) {
   const v = s.stepsPerSecond;
   $('speed').textContent = v ? `Measured here: ${v < 10 ? v.toFixed(2) : v.toFixed(0)} steps/s on the ${s.engine === 'gpu' ? 'GPU' : 'CPU'} engine.` : '';
@@ -161,14 +198,16 @@ function showSpeed(s) {
 
 // Where a tissue from a shipped state further on than its relaxation came from: its seed and
 // step, and the step its first hole opens (found natively; tests/relaxed_state.rs holds it).
+/** @param {Stats} s */
 function showOrigin(s) {
   const shipped = shippedStateFor(page.state);
-  const later = s.startedFrom === 'snapshot' && shipped?.step !== undefined && s.startedAt === shipped.step;
+  const step = shipped?.step;
+  const later = s.startedFrom === 'snapshot' && step !== undefined && s.startedAt === step;
   const origin = $('origin');
   origin.hidden = !later;
-  if (!later) return;
-  const n = (v) => v.toLocaleString('en-US');
-  origin.textContent = `Seed ${shipped.seed}, from step ${n(shipped.step)} of the native run (${n(shipped.step - s.relaxSteps)} active steps): its first hole opens at step ${n(shipped.firstHole)}. The forecast (key 7) shades where.`;
+  if (!shipped || !later) return;
+  const n = (/** @type {number | undefined} */ v) => (v ?? NaN).toLocaleString('en-US');
+  origin.textContent = `Seed ${shipped.seed}, from step ${n(step)} of the native run (${n(step - s.relaxSteps)} active steps): its first hole opens at step ${n(shipped.firstHole)}. The forecast (key 7) shades where.`;
 }
 
 // --- drawing and readouts ---------------------------------------------------------------------------
@@ -177,19 +216,20 @@ const readouts = new Readouts();
 const loop = new FrameLoop(canvas, {
   check: checkRenderer,
   draw,
-  request: (dpr) => worker.postMessage({ type: 'frame', field: page.state.field, dpr }),
+  request: (dpr) => tell({ type: 'frame', field: page.state.field, dpr }),
   readouts: updateReadouts,
   fatal: (e) => fatal('The page stopped', e),
 });
 
 // Stops or restarts asking the worker for frames, as a hidden tab does (no animation frames)
 // while the worker steps on: the browser tests check that the readouts miss no row then.
-demo.drawing = (on) => {
+demo.drawing = (/** @type {boolean} */ on) => {
   if (loop.stopped === !on) return;
   loop.stopped = !on;
   if (on) loop.start();
 };
 
+/** @param {{ parts: FrameParts }} frame @param {number} dpr */
 function draw(frame, dpr) {
   // Between a lost renderer and its replacement (which redraws the latest frame).
   if (!page.renderer) return;
@@ -204,20 +244,20 @@ function draw(frame, dpr) {
   // Since the page's navigation began (performance.now's origin): the load's measure.
   demo.firstFrameMs ??= performance.now();
   if (p.kind === FieldKind.Tissue) readouts.hideColourBar();
-  else readouts.colourBar(p.kind, p.range, page.renderer.layout(), dpr);
+  else readouts.colourBar(p.kind, p.range, layoutNow(), dpr);
   if (recorder.recording) recorder.frame(caption());
   if (page.screenshot) saveScreenshot();
 }
 
 // What a recording shows burnt in: the time and the parameters.
 function caption() {
-  const s = page.stats;
+  const s = /** @type {Stats} */ (page.stats);
   const st = page.state;
   const t = s.active ? `t = ${s.time.toFixed(0)} (${formatSeconds(s.time * s.timeUnitSeconds)})` : 'relaxing';
   return [
     `${t}, step ${s.step.toLocaleString('en')}`,
     `ζ = ${s.zeta}, χ = ${Number(s.chi.toPrecision(3))}, γ = ${s.gamma}, seed ${viewer.active ? viewer.seed : st.seed}, L = ${s.l}, N = ${s.cells}`,
-    FIELDS.get(st.field).label,
+    FIELDS.get(st.field)?.label ?? '',
   ];
 }
 
@@ -233,7 +273,7 @@ async function toggleRecording() {
     loop.dirty = true;
   } else {
     const step = page.stats?.step ?? 0;
-    const blob = await recorder.stop();
+    const blob = /** @type {Blob} */ (await recorder.stop());
     const a = document.createElement('a');
     a.href = URL.createObjectURL(blob);
     a.download = `monolayer-seed${page.state.seed}-step${step}.webm`;
@@ -249,7 +289,8 @@ function updateReadouts() {
   const s = page.stats;
   if (!s) return;
   readouts.update(s, loop, page.state.spf, isPlaying());
-  tour.update(s, page.cores ?? 0);
+  tour.update(s, page.cores);
+  whatIf.update(s);
   if (s.active && s.holes > 0 && demo.firstHole === null) {
     demo.firstHole = { seconds: (performance.now() - demo.loadedAt) / 1000, step: s.step, sinceNavigationMs: performance.now() };
   }
@@ -260,6 +301,7 @@ function updateReadouts() {
 }
 
 // Saves `blob` under `name` (the browser's download; nothing leaves the machine).
+/** @param {Blob} blob @param {string} name */
 function saveBlob(blob, name) {
   const a = document.createElement('a');
   a.href = URL.createObjectURL(blob);
@@ -276,7 +318,8 @@ async function download() {
   const d = await call('download');
   const stem = `monolayer-seed${page.state.seed}-step${d.step}`;
   saveBlob(new Blob([d.csv], { type: 'text/csv' }), `${stem}.csv`);
-  saveBlob(new Blob([d.npz], { type: 'application/octet-stream' }), d.frameName);
+  // The core's Vec<u8>, copied into its own ArrayBuffer by the bindings.
+  saveBlob(new Blob([/** @type {Uint8Array<ArrayBuffer>} */ (d.npz)], { type: 'application/octet-stream' }), d.frameName);
   saveBlob(new Blob([d.runJson], { type: 'application/json' }), 'run.json');
   demo.lastDownload = { step: d.step, csvName: `${stem}.csv`, frameName: d.frameName, npzBytes: d.npz.length };
 }
@@ -287,12 +330,22 @@ function saveScreenshot() {
   const url = canvas.toDataURL('image/png');
   const a = document.createElement('a');
   a.href = url;
-  a.download = `monolayer-step${page.stats.step}.png`;
+  a.download = `monolayer-step${page.stats?.step ?? 0}.png`;
   a.click();
   demo.lastScreenshot = url;
 }
 
 // --- renderers ------------------------------------------------------------------------------------
+
+// Where the renderer drew the lattice square and the colour bar, as plain numbers (the wgpu
+// renderer's `Layout` is a core object, freed here once read).
+/** @returns {import('./canvas2d.js').CanvasGeometry} */
+function layoutNow() {
+  const g = /** @type {AnyRenderer} */ (page.renderer).layout();
+  const out = { x: g.x, y: g.y, side: g.side, bar_y: g.bar_y, bar_h: g.bar_h };
+  if (g instanceof Layout) g.free();
+  return out;
+}
 // The page draws with wgpu on WebGPU, else on WebGL2, else with Canvas 2D (canvas2d.js), in
 // that order. A lost device or context (a driver update, sleep, a crash of the browser's GPU
 // process: normal events) gets a new renderer of the same kind on a new canvas, and drawing goes
@@ -304,6 +357,7 @@ const LOSSES_BEFORE_FALLBACK = 3;
 const LOSS_WINDOW_MS = 60_000;
 // The kind in use (an index of RENDERERS), the times of its recent losses, and why the page
 // draws with a later kind than the first (shown beside the renderer's name).
+/** @type {{ level: number, losses: number[], lostOnes: AnyRenderer[], recovering: boolean, glLost: string | null, why: string }} */
 const renderers = { level: 0, losses: [], lostOnes: [], recovering: false, glLost: null, why: '' };
 demo.rendererLosses = [];
 
@@ -311,7 +365,7 @@ demo.rendererLosses = [];
 // (a WebGPU canvas cannot become a 2D one), and a lost WebGL2 context stays lost on its canvas.
 function freshCanvas() {
   const old = canvas;
-  const c = old.cloneNode(false);
+  const c = /** @type {HTMLCanvasElement} */ (old.cloneNode(false));
   c.width = old.width;
   c.height = old.height;
   old.replaceWith(c);
@@ -323,6 +377,7 @@ function freshCanvas() {
 
 // A renderer of kind RENDERERS[from] or a later one, on a fresh canvas: { renderer, level }.
 // wgpu asked for WebGPU may come back on WebGL2 (no adapter): its level says which it is.
+/** @param {number} from @param {boolean} fresh @returns {Promise<{ renderer: AnyRenderer, level: number, why: string }>} */
 async function makeRenderer(from, fresh) {
   let why = '';
   for (let level = from; level < RENDERERS.length; level++) {
@@ -337,14 +392,14 @@ async function makeRenderer(from, fresh) {
       const r = await Renderer.create(c, level === 0);
       return { renderer: r, level: r.backend().startsWith('WebGPU') ? 0 : 1, why };
     } catch (e) {
-      why = String(e.message ?? e);
+      why = String(/** @type {Error} */ (e).message ?? e);
     }
   }
   throw new Error(why);
 }
 
 function showBackend() {
-  const r = page.renderer;
+  const r = /** @type {AnyRenderer} */ (page.renderer);
   demo.backend = r.backend();
   demo.renderer = r;
   $('backend').textContent = `Drawing with ${r.backend()}${renderers.why ? ` (${renderers.why})` : ''}.`;
@@ -365,6 +420,7 @@ function checkRenderer() {
   });
 }
 
+/** @param {string} why */
 async function replaceRenderer(why) {
   const now = performance.now();
   const losses = renderers.losses.filter((t) => now - t < LOSS_WINDOW_MS);
@@ -377,7 +433,7 @@ async function replaceRenderer(why) {
   // Kept, never freed: freeing a wgpu renderer whose device was destroyed crashed the page in
   // Chromium (SwiftShader) on the second such loss. A few per minute at most: after
   // LOSSES_BEFORE_FALLBACK the page falls back to a renderer that is not lost like this.
-  renderers.lostOnes.push(old);
+  if (old) renderers.lostOnes.push(old);
   let made;
   try {
     made = await makeRenderer(fallBack ? level + 1 : level, true);
@@ -408,6 +464,7 @@ function changed() {
 // Another field drawn. The frame asked for before was of the old field: the worker holds such a
 // request until the state changes, so a paused tissue would never be drawn in the new field
 // without asking again.
+/** @param {import('../pkg/monolayer.js').FieldKind} kind */
 function showField(kind) {
   page.state.field = kind;
   loop.requested = false;
@@ -418,11 +475,14 @@ function showField(kind) {
 function newSim() {
   if (viewer.active && page.renderer) showBackend();
   viewer.close();
+  // A replay of "What if?" is gone with the tissue it replayed.
+  page.aside = null;
   const s = page.state;
+  /** @type {Promise<void>} */
   const ready = new Promise((resolve) => {
     onReady = resolve;
   });
-  worker.postMessage({
+  tell({
     type: 'new', size: SIZES[s.size], params: { zeta: s.zeta, chi: s.chi, gamma: s.gamma }, seed: s.seed, shipped: shippedStateFor(s)?.file ?? null,
     engine: s.engine, threads: s.threads,
   });
@@ -437,17 +497,20 @@ function newSim() {
 }
 
 // Another engine for the same tissue (the Engine chooser): it goes on from the state it has.
+/** @param {import('./worker.js').EngineChoice} engine */
 function setEngine(engine) {
   page.state.engine = engine;
   changed();
+  /** @type {Promise<void>} */
   const done = new Promise((resolve) => {
     onEngine = resolve;
   });
-  worker.postMessage({ type: 'engine', engine });
+  tell({ type: 'engine', engine });
   return done;
 }
 demo.setEngine = setEngine;
 
+/** @param {boolean} on */
 function setPlaying(on) {
   page.state.paused = !on;
   tellWorkerToPlay();
@@ -456,28 +519,30 @@ function setPlaying(on) {
 
 // A hidden page does not step: a forgotten background tab should not hold a core.
 function tellWorkerToPlay() {
-  worker.postMessage({ type: 'play', on: isPlaying() && !document.hidden });
+  tell({ type: 'play', on: isPlaying() && !document.hidden });
 }
 document.addEventListener('visibilitychange', tellWorkerToPlay);
 
 // Sets a parameter in the state and, for the model's, in the core (a preset sets them together).
+/** @param {import('./state.js').ParamName} name @param {number} value */
 function setParam(name, value, fromPreset = false) {
   const state = page.state;
   state[name] = value;
-  if (MODEL_PARAMS.includes(name)) {
+  if (name === 'zeta' || name === 'chi' || name === 'gamma') {
     if (!fromPreset) state.preset = null;
-    call('set', name, value).catch((e) => notify([`${name} = ${value}: ${e.message ?? e}`]));
+    call('set_param', name, value).catch((e) => notify([`${name} = ${value}: ${e.message ?? e}`]));
   }
-  if (name === 'spf') worker.postMessage({ type: 'spf', n: value });
+  if (name === 'spf') tell({ type: 'spf', n: value });
   changed();
 }
 
 // Pointer → lattice site, through the layout the renderer drew.
+/** @param {PointerEvent} ev @returns {[number, number] | null} */
 function latticeAt(ev) {
   if (!page.stats || !page.renderer) return null;
   const rect = canvas.getBoundingClientRect();
   const scale = canvas.width / rect.width; // backing pixels per CSS pixel
-  const [x0, y0, side] = page.renderer.layout();
+  const { x: x0, y: y0, side } = layoutNow();
   const l = page.stats.l;
   const x = (((ev.clientX - rect.left) * scale - x0) / side) * l;
   const y = (((ev.clientY - rect.top) * scale - y0) / side) * l;
@@ -486,7 +551,8 @@ function latticeAt(ev) {
 }
 
 // A brush or the laser: an invalid stroke is reported, not fatal.
-const edit = (method, ...args) => call(method, ...args).catch((e) => notify([String(e.message ?? e)]));
+/** @param {Promise<unknown>} done */
+const reported = (done) => done.catch((e) => notify([String(e.message ?? e)]));
 
 const controls = new Controls({
   setParam,
@@ -520,7 +586,11 @@ const controls = new Controls({
     setPlaying(false);
     call('step', page.state.spf);
   },
-  reset: () => newSim(),
+  reset() {
+    // Out of a replay: the live tissue's parameters, then a new tissue.
+    if (page.aside) Object.assign(page.state, page.aside);
+    newSim();
+  },
   setEngine: (engine) => setEngine(engine),
   screenshot() {
     page.screenshot = true;
@@ -528,8 +598,8 @@ const controls = new Controls({
   },
   record: () => toggleRecording(),
   download: () => download().catch((e) => notify([`Download: ${e.message ?? e}`])),
-  brush: (x, y, radius, multiplier) => edit('paint_substrate', x, y, radius, multiplier),
-  ablate: (x, y) => edit('remove_cell_at', x, y),
+  brush: (x, y, radius, multiplier) => reported(call('paint_substrate', x, y, radius, multiplier)),
+  ablate: (x, y) => reported(call('remove_cell_at', x, y)),
   latticeAt,
 });
 
@@ -541,12 +611,15 @@ const tour = new Tour({
     for (const k of MODEL_PARAMS) s[k] = PRESETS.paper[k];
     // The tour's pace, unless the link set one (a test, or a visitor who wants it faster).
     if (!new URLSearchParams(location.search).has('spf')) s.spf = TOUR_SPF;
-    worker.postMessage({ type: 'spf', n: s.spf });
+    tell({ type: 'spf', n: s.spf });
     changed();
     await newSim();
-    return page.stats;
+    return /** @type {Stats} */ (page.stats);
   },
-  setField: (name) => showField([...FIELDS.keys()].find((k) => fieldName(k) === name)),
+  setField: (name) => {
+    const kind = [...FIELDS.keys()].find((k) => fieldName(k) === name);
+    if (kind !== undefined) showField(kind);
+  },
   setPlaying: (on) => setPlaying(on),
   end() {
     page.state.tour = false;
@@ -556,16 +629,58 @@ const tour = new Tour({
 demo.tour = tour;
 $('tour-start').addEventListener('click', () => tour.start());
 
+// "What if?" (whatif.js): the live tissue's last hole replayed from a state saved before it,
+// with activity off or halved; the ζ slider and the URL show the replay's ζ, and Back returns
+// to the live tissue and its parameters.
+const whatIf = new WhatIf({
+  async rewind(factor) {
+    const r = await call('what_if', factor).catch((e) => {
+      notify([`What if?: ${e.message ?? e}`]);
+      return null;
+    });
+    if (!r) return;
+    const s = page.state;
+    page.aside ??= { zeta: s.zeta, chi: s.chi, gamma: s.gamma, preset: s.preset };
+    s.zeta = r.zeta;
+    s.preset = null;
+    whatIf.factor = factor;
+    demo.whatIf = r;
+    afterSwap();
+    setPlaying(true);
+  },
+  async back() {
+    const r = await call('back_to_live');
+    if (page.aside) Object.assign(page.state, page.aside);
+    page.aside = null;
+    whatIf.factor = null;
+    demo.whatIfBack = r;
+    afterSwap();
+  },
+});
+demo.whatIfControl = whatIf;
+
+// The worker shows another tissue of the same size (a replay, or the live one again): the
+// readouts start over, the controls and the URL follow.
+function afterSwap() {
+  readouts.reset(page.stats?.timeUnitSeconds ?? 1);
+  loop.restart();
+  changed();
+}
+
 // A run's frames (viewer.js): they replace the live tissue until Reset.
 const viewer = new Viewer({
-  call,
+  open: (files) => call('open', files),
+  show: (index) => call('show', index),
   opened(r) {
+    // The live tissue (and a replay of it) are gone: the controls show the live parameters.
+    if (page.aside) Object.assign(page.state, page.aside);
+    page.aside = null;
     setPlaying(false);
     readouts.reset(page.stats?.timeUnitSeconds ?? 1);
     loop.restart();
     message.hidden = true;
     const from = r.runVersion && r.runVersion !== page.version ? ` (written by version ${r.runVersion}; this page is ${page.version})` : '';
-    $('backend').textContent = `Showing ${r.frames.length} frames of a run, seed ${r.seed}${from}. Drawing with ${page.renderer.backend()}.`;
+    $('backend').textContent = `Showing ${r.frames.length} frames of a run, seed ${r.seed}${from}. Drawing with ${page.renderer?.backend()}.`;
   },
   frameShown() {
     loop.dirty = true;
@@ -590,7 +705,7 @@ async function boot() {
   notify(parsed.notices);
   document.body.classList.toggle('embed', page.state.embed);
   changed();
-  worker.postMessage({ type: 'spf', n: page.state.spf });
+  tell({ type: 'spf', n: page.state.spf });
   showMessage('Looking for WebGPU or WebGL2…');
   loop.resizeCanvas();
   try {
@@ -608,7 +723,8 @@ async function boot() {
   // The browser tests' forced loss: the renderer's device destroyed, as a driver reset would,
   // or its WebGL2 context lost.
   demo.loseRenderer = () => {
-    if (page.renderer.destroy_device) page.renderer.destroy_device();
+    const r = page.renderer;
+    if (r && 'destroy_device' in r) r.destroy_device();
     canvas.getContext('webgl2')?.getExtension('WEBGL_lose_context')?.loseContext();
   };
   if (page.state.tour) await tour.start();

@@ -6,11 +6,16 @@ const TYPES = ['video/webm;codecs=vp9', 'video/webm;codecs=vp8', 'video/webm'];
 const MAX_SIDE = 960;
 
 export class Recorder {
+  /** @param {HTMLCanvasElement} source */
   constructor(source) {
     this.source = source;
+    /** @type {HTMLCanvasElement | null} */
     this.canvas = null;
+    /** @type {MediaRecorder | null} */
     this.recorder = null;
+    /** @type {Blob[]} */
     this.chunks = [];
+    this.type = TYPES[0];
   }
 
   get recording() {
@@ -32,7 +37,7 @@ export class Recorder {
     // Even sizes: some encoders reject odd ones.
     this.canvas.width = 2 * Math.round((w * k) / 2);
     this.canvas.height = 2 * Math.round((h * k) / 2);
-    this.type = TYPES.find((t) => MediaRecorder.isTypeSupported(t));
+    this.type = TYPES.find((t) => MediaRecorder.isTypeSupported(t)) ?? TYPES[0];
     this.recorder = new MediaRecorder(this.canvas.captureStream(30), { mimeType: this.type, videoBitsPerSecond: 4e6 });
     this.chunks = [];
     this.recorder.ondataavailable = (e) => {
@@ -42,10 +47,11 @@ export class Recorder {
   }
 
   // Copies the frame just drawn, with `lines` of caption in its top-left corner.
+  /** @param {string[]} lines */
   frame(lines) {
-    if (!this.recording) return;
     const c = this.canvas;
-    const g = c.getContext('2d');
+    if (!this.recording || !c) return;
+    const g = /** @type {CanvasRenderingContext2D} */ (c.getContext('2d'));
     g.fillStyle = '#0f1115';
     g.fillRect(0, 0, c.width, c.height);
     g.drawImage(this.source, 0, 0, c.width, c.height);
@@ -60,10 +66,12 @@ export class Recorder {
   }
 
   // Stops; resolves with the WebM file.
+  /** @returns {Promise<Blob>} */
   stop() {
     const r = this.recorder;
     this.recorder = null;
     return new Promise((resolve) => {
+      if (!r) return resolve(new Blob([], { type: this.type.split(';')[0] }));
       r.onstop = () => resolve(new Blob(this.chunks, { type: this.type.split(';')[0] }));
       r.stop();
     });

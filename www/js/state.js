@@ -6,10 +6,39 @@
 // itself is instantiated by main.js.
 import { FieldKind } from '../pkg/monolayer.js';
 
+/**
+ * The page's state: what the URL carries (parseUrl, toUrl).
+ * @typedef {object} PageState
+ * @property {PresetName | null} preset the preset whose values these still are, or null
+ * @property {number} zeta
+ * @property {number} chi
+ * @property {number} gamma
+ * @property {number} spf the speed limit, steps per 1/30 s
+ * @property {number} seed
+ * @property {FieldKind} field the field drawn
+ * @property {boolean} embed
+ * @property {boolean} paused
+ * @property {boolean} relax start from random disks, relaxing in the page
+ * @property {boolean} tour
+ * @property {SizeName} size
+ * @property {import('./worker.js').EngineChoice} engine
+ * @property {number | null} threads the threaded core's threads (null: every core)
+ *
+ * @typedef {'zeta' | 'chi' | 'gamma' | 'spf' | 'seed'} ParamName
+ * @typedef {'reduced' | 'paper'} SizeName
+ * @typedef {'no-holes' | 'short-lived' | 'persistent' | 'paper'} PresetName
+ * @typedef {{ label: string, min: number, max: number, def: number, step?: number, log?: boolean,
+ *   integer?: boolean, slider?: boolean, model?: boolean }} ParamSpec
+ * @typedef {{ label: string, zeta: number, chi: number, gamma: number, size: SizeName }} Preset
+ * @typedef {{ file: string, seed: number, size?: SizeName, gamma?: number, preset?: PresetName, step?: number,
+ *   firstHole?: number }} ShippedState
+ */
+
 // Sizes of the browser's tissue. `reduced`, chosen from measurements (docs/demo.md, "Presets"):
 // big enough for a hole to be a hole (several cells around it), small enough that its presets
 // open their first hole within a minute of the relaxation on the CPU engine. `paper`: the
 // paper's own tissue, 100 cells on 140² after 10,000 relaxation steps (the native defaults).
+/** @type {Record<SizeName, import('./worker.js').Size>} */
 export const SIZES = {
   reduced: { box: 80, cells: 33, relaxSteps: 1500 },
   paper: { box: 140, cells: 100, relaxSteps: 10000 },
@@ -26,13 +55,15 @@ export const SIZES = {
 // The paper's preset opens on seed 1 at step 12,000, 2,000 active steps after its relaxation,
 // a short time before its first hole (a void region above πR²/4) opens at `firstHole`: the step
 // the native core reaches it, one step at a time, with the page's own count.
-const asset = (name) => new URL(`../assets/${name}`, import.meta.url).href;
+const asset = (/** @type {string} */ name) => new URL(`../assets/${name}`, import.meta.url).href;
+/** @type {ShippedState[]} */
 export const SHIPPED_STATES = [
   { size: 'reduced', seed: 1, gamma: 0.06, file: asset('relaxed-seed1.bin') },
   { size: 'paper', seed: 1, gamma: 0.06, file: asset('relaxed-paper-seed1.bin') },
   { preset: 'paper', seed: 1, step: 12000, firstHole: 14255, file: asset('paper-seed1-step12000.bin') },
 ];
 // The shipped state a new tissue of `state` starts from (its URL and step), or null.
+/** @param {PageState} state */
 export function shippedStateFor(state) {
   if (state.relax) return null;
   const later = SHIPPED_STATES.find((r) => r.preset !== undefined && r.preset === state.preset && r.seed === state.seed);
@@ -55,6 +86,7 @@ export const ENGINES = {
 
 // Each parameter: label, range, default, and whether its slider is logarithmic. The page makes
 // one slider for each entry with `slider` (in this order); `model` ones are the core's.
+/** @type {Record<ParamName, ParamSpec>} */
 export const PARAMS = {
   zeta: { label: 'Activity ζ', min: 0, max: 3, def: 2.5, step: 0.01, slider: true, model: true },
   chi: { label: 'Friction ratio χ = ξs/ξcell', min: 0.001, max: 1, def: 0.001, log: true, slider: true, model: true },
@@ -62,8 +94,10 @@ export const PARAMS = {
   spf: { label: 'Speed limit: steps per 1/30 s', min: 1, max: 50, def: 20, step: 1, integer: true, slider: true },
   seed: { label: 'Seed', min: 0, max: 4294967295, def: 1, step: 1, integer: true },
 };
-export const SLIDERS = Object.keys(PARAMS).filter((k) => PARAMS[k].slider);
-export const MODEL_PARAMS = Object.keys(PARAMS).filter((k) => PARAMS[k].model);
+const PARAM_NAMES = /** @type {ParamName[]} */ (Object.keys(PARAMS));
+export const SLIDERS = PARAM_NAMES.filter((k) => PARAMS[k].slider);
+/** @typedef {'zeta' | 'chi' | 'gamma'} ModelParamName the core's parameters (`model` in PARAMS) */
+export const MODEL_PARAMS = /** @type {ModelParamName[]} */ (PARAM_NAMES.filter((k) => PARAMS[k].model));
 
 // The fields the core can draw (src/web/view.rs, `FieldKind`), in the order of keys 1–7, with
 // the colour bar's units. In the URL a field is its FieldKind name in lower case.
@@ -78,8 +112,8 @@ export const FIELDS = new Map([
   // saw is in docs/figures.md, "Forecast".
   [FieldKind.Forecast, { label: 'Forecast of the next hole within 3,000 steps (held-out AUC 0.95)', units: '' }],
 ]);
-export const fieldName = (kind) => FieldKind[kind].toLowerCase();
-const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === name);
+export const fieldName = (/** @type {FieldKind} */ kind) => FieldKind[kind].toLowerCase();
+const fieldByName = (/** @type {string} */ name) => [...FIELDS.keys()].find((k) => fieldName(k) === name);
 
 // The paper's three regimes at this size, from native runs of the same core with the calibrated
 // conventions (subdomain friction weights, −∇μ; `monolayer sweep`, seeds 1 and 2, 1,500
@@ -95,6 +129,7 @@ const fieldByName = (name) => [...FIELDS.keys()].find((k) => fieldName(k) === na
 // The `paper` preset is the paper's own tissue at its parameters (Fig. 1a: χ = 0.001, ζ = 0.5,
 // γ = 0.06), 100 cells on 140²; natively its first hole opens 4,000–12,000 active steps after
 // the relaxation (docs/calibration.md), which the CPU engine takes minutes to reach.
+/** @type {Record<PresetName, Preset>} */
 export const PRESETS = {
   'no-holes': { label: 'No holes (high friction, χ = 0.1)', zeta: 2, chi: 0.1, gamma: 0.06, size: 'reduced' },
   'short-lived': { label: 'Short-lived holes (χ = 0.001, ζ = 1.5)', zeta: 1.5, chi: 0.001, gamma: 0.06, size: 'reduced' },
@@ -102,13 +137,16 @@ export const PRESETS = {
   paper: { label: "The paper's tissue (100 cells on 140², χ = 0.001, ζ = 0.5)", zeta: 0.5, chi: 0.001, gamma: 0.06, size: 'paper' },
 };
 // Whether the state is still exactly the preset (its model parameters and its size).
+/** @param {PageState} state @param {PresetName} name */
 const isPreset = (state, name) => MODEL_PARAMS.every((k) => state[k] === PRESETS[name][k]) && state.size === PRESETS[name].size;
 // The page opens on the paper's own tissue, from its shipped state a short time before a hole.
+/** @type {PresetName} */
 export const DEFAULT_PRESET = 'paper';
 // The size a URL without `size` or `preset` means.
 export const DEFAULT_SIZE = PRESETS[DEFAULT_PRESET].size;
 
 // `fallback` is what the state holds without this value (the preset's, or the default).
+/** @param {ParamName} name @param {string | null} raw @param {string[]} notices @param {number} fallback */
 function clampParam(name, raw, notices, fallback) {
   const p = PARAMS[name];
   let v = Number(raw);
@@ -130,6 +168,7 @@ function clampParam(name, raw, notices, fallback) {
 // Reads the state from a query string. Returns { state, notices }. `version` is the page's code
 // version (crate version + git commit, `codeVersion()` of the core): a link made by another
 // version (its `v`) says so, since the same parameters and seed may then show another tissue.
+/** @param {string} search @param {string} [version] @returns {{ state: PageState, notices: string[] }} */
 export function parseUrl(search, version) {
   const q = new URLSearchParams(search);
   const notices = [];
@@ -137,12 +176,11 @@ export function parseUrl(search, version) {
   if (version !== undefined && linkVersion !== null && linkVersion !== version) {
     notices.push(`This link was made by version ${linkVersion || '(none)'} of the page; this is ${version}: the same parameters and seed may show another tissue.`);
   }
-  let preset = q.get('preset');
-  if (preset !== null && !(preset in PRESETS)) {
-    notices.push(`preset=${preset} is unknown: using ${DEFAULT_PRESET}.`);
-    preset = null;
-  }
+  const asked = q.get('preset');
+  if (asked !== null && !(asked in PRESETS)) notices.push(`preset=${asked} is unknown: using ${DEFAULT_PRESET}.`);
+  const preset = asked !== null && asked in PRESETS ? /** @type {PresetName} */ (asked) : null;
   const base = PRESETS[preset ?? DEFAULT_PRESET];
+  /** @type {PageState} */
   const state = {
     preset: preset ?? (MODEL_PARAMS.some((k) => q.has(k)) ? null : DEFAULT_PRESET),
     zeta: base.zeta,
@@ -161,7 +199,7 @@ export function parseUrl(search, version) {
   };
   const engine = q.get('engine');
   if (engine !== null) {
-    if (engine in ENGINES) state.engine = engine;
+    if (engine in ENGINES) state.engine = /** @type {import('./worker.js').EngineChoice} */ (engine);
     else notices.push(`engine=${engine} is unknown (${Object.keys(ENGINES).join(', ')}): using auto.`);
   }
   // The threaded core's pool (worker.js): every core unless the link asks for fewer.
@@ -173,10 +211,10 @@ export function parseUrl(search, version) {
   }
   const size = q.get('size');
   if (size !== null) {
-    if (size in SIZES) state.size = size;
+    if (size in SIZES) state.size = /** @type {SizeName} */ (size);
     else notices.push(`size=${size} is unknown (${Object.keys(SIZES).join(' or ')}): using ${state.size}.`);
   }
-  for (const name of Object.keys(PARAMS)) {
+  for (const name of PARAM_NAMES) {
     if (q.has(name)) state[name] = clampParam(name, q.get(name), notices, state[name]);
   }
   // A preset with a model parameter changed is no longer that preset: the URL written back
@@ -195,6 +233,7 @@ export function parseUrl(search, version) {
 
 // The query string that reproduces the view (only what differs from the defaults, plus the
 // seed so that a shared link shows the same tissue, and the code version `v` when given).
+/** @param {PageState} state @param {string} [version] */
 export function toUrl(state, version) {
   const q = new URLSearchParams();
   if (state.preset) q.set('preset', state.preset);
@@ -216,18 +255,20 @@ export function toUrl(state, version) {
 }
 
 // Slider position (0–1000) ↔ value, logarithmic where the parameter spans decades.
+/** @param {ParamName} name @param {number} v */
 export function toSlider(name, v) {
   const p = PARAMS[name];
   const t = p.log ? Math.log(v / p.min) / Math.log(p.max / p.min) : (v - p.min) / (p.max - p.min);
   return Math.round(1000 * t);
 }
 
+/** @param {ParamName} name @param {number} s */
 export function fromSlider(name, s) {
   const p = PARAMS[name];
   const t = s / 1000;
   let v = p.log ? p.min * Math.pow(p.max / p.min, t) : p.min + t * (p.max - p.min);
   if (p.log) v = Number(v.toPrecision(2));
   else if (p.integer) v = Math.round(v);
-  else v = Math.round(v / p.step) * p.step;
+  else v = Math.round(v / (p.step ?? 1)) * (p.step ?? 1);
   return Number(v.toFixed(6));
 }

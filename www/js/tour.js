@@ -13,6 +13,12 @@
 // `cores`: also a spiral core drawn in the flow; `hole`: the first hole open. `field`: the view
 // it switches to; `pause`: the tour stops the tissue on it; `next`: it comes when the visitor
 // presses Next on the caption before.
+/**
+ * @typedef {{ id: string, title: string, field: string, text: string, after?: number, cores?: boolean,
+ *   hole?: boolean, pause?: boolean, next?: boolean }} Caption
+ * @typedef {import('./worker.js').Stats} Stats
+ */
+/** @type {Caption[]} */
 export const TOUR = [
   {
     id: 'cells', title: 'The cells', field: 'tissue', after: 0,
@@ -56,18 +62,25 @@ export const TOUR = [
 // The speed limit while touring (steps per 1/30 s: at most 60 steps/s), unless the link sets one.
 export const TOUR_SPF = 2;
 
-const $ = (id) => document.getElementById(id);
+const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
 
 export class Tour {
-  // actions: begin(playing) (the paper's tissue from its shipped state at the tour's speed
-  // limit; a Promise of its first stats), setField(name), setPlaying(on), end().
+  /**
+   * @param {{ begin(playing: boolean): Promise<Stats>, setField(name: string): void, setPlaying(on: boolean): void,
+   *   end(): void }} actions begin(playing): the paper's tissue from its shipped state at the tour's speed limit,
+   *   a Promise of its first stats
+   */
   constructor(actions) {
     this.actions = actions;
     this.active = false;
+    this.waiting = false; // with reduced motion, for the Play button
     this.index = -1;
     this.since = 0; // the step the last caption was shown at
     this.coresSeen = false;
-    this.log = []; // each caption shown: { id, step, holes, cores }
+    /** @type {(Stats & { cores: number }) | undefined} */
+    this.last = undefined;
+    /** @type {{ id: string, step: number | null, holes: number | null, cores: number | null, coresSeen: boolean }[]} */
+    this.log = []; // each caption shown
     $('tour-next').addEventListener('click', () => this.next());
     $('tour-play').addEventListener('click', () => this.play());
     $('tour-close').addEventListener('click', () => this.close());
@@ -117,6 +130,7 @@ export class Tour {
   }
 
   // Each frame's stats (and the spiral cores it drew): shows the next caption whose event came.
+  /** @param {Stats} stats @param {number} cores */
   update(stats, cores) {
     if (!this.active || this.index < 0 || !stats) return;
     this.last = { ...stats, cores };
@@ -126,9 +140,10 @@ export class Tour {
     if (this.index < hole && stats.active && stats.holes > 0) return this.show(hole, this.last);
     const c = TOUR[this.index + 1];
     if (!c || c.hole || c.next) return;
-    if (stats.step - this.since >= c.after && (!c.cores || this.coresSeen || cores > 0)) this.show(this.index + 1, this.last);
+    if (stats.step - this.since >= (c.after ?? 0) && (!c.cores || this.coresSeen || cores > 0)) this.show(this.index + 1, this.last);
   }
 
+  /** @param {number} index @param {{ step: number, holes: number, cores: number } | undefined} at */
   show(index, at) {
     const c = TOUR[index];
     this.index = index;

@@ -15,96 +15,256 @@
 // the threaded one where the page is isolated and the CPU engine is to step, else the other.
 // Both give the same bits: the parallel loops do not depend on the thread count (par.rs).
 //
-// Messages in: { type: 'new', size, params, seed, shipped (a shipped state's URL, or null),
-// engine ('auto' | 'cpu' | 'gpu'), threads (null: every core) }, { type: 'engine', engine },
-// { type: 'play', on }, { type: 'spf', n },
-// { type: 'frame', field, dpr }, { type: 'call', id, method, args }.
-// Messages out: { type: 'ready', info }, { type: 'progress', text }, { type: 'engine', stats }, { type: 'frame', parts, stats, cores }, { type: 'stopped', why,
-// active }, { type: 'result', id, value | error }, { type: 'fatal', message }.
+// Messages in (`WorkerIn` below): new, engine, play, spf, frame, call. Messages out
+// (`WorkerOut`): ready, progress, engine, frame, stopped, result, fatal. A call runs one of
+// `CALLS` (the page's and the tests' requests: step, download, open a run, "What if?", …).
+//
+// THE STATE MACHINE. Everything the worker holds is one value, `state`, whose `kind` says what
+// the page shows and what steps it:
+//
+//   none    no tissue: before the first 'new', while one is made, after a fatal error
+//   cpu     a tissue stepped by the CPU core (`tissue.sim` steps in place)
+//   gpu     a tissue stepped by the GPU engine; `sync` says how `tissue.sim` stands to the
+//           device: 'level' (the same state), 'ahead' (the device has stepped on: submissions
+//           in `flight`, or a state not yet downloaded), 'stale' (`tissue.sim` was edited since
+//           the last upload: upload before the next submission)
+//   frames  a native run's frames (`playback`) instead of a live tissue
+//
+// A tissue is live, or a replay of its past ("What if?"): then `tissue.live` holds the live
+// simulation, set aside as it was, and `tissue.sim` the replay, which steps, draws and edits
+// like any tissue.
+//
+//   state            event                          next state        what it does
+//   ---------------  -----------------------------  ----------------  --------------------------------------------
+//   any              'new'                          none, then cpu    frees what it held; makes the tissue (a
+//                                                                     shipped state, else random disks)
+//   cpu              chooseEngine finds the GPU     gpu (level)       compiles the kernels, uploads the tissue
+//   cpu / gpu        'engine'                       cpu, then cpu|gpu levels with the device first, then chooses
+//   gpu (level)      a turn while playing           gpu (ahead)       uploads if stale, submits up to
+//    or (stale)                                                       `in_flight_max` submissions, each ending at
+//                                                                     the next row of readouts at the latest
+//   gpu (ahead)      settle: checked, a download    gpu (level|ahead) the state handed to `tissue.sim` (its row
+//                    queued behind it                                 of readouts, a frame if one is asked for)
+//   gpu (ahead)      down (a frame paused, a call)  gpu (level)       settles every submission, downloads, adopts
+//   gpu (level)      an edit (a slider, a brush,    gpu (stale)       the edit is made on `tissue.sim`
+//                    a removed cell, What if, back)
+//   gpu              a model fault on a check       gpu (level),      the state before the failing submission;
+//                                                   paused            the page told ('stopped')
+//   gpu              a device fault (lost, a GPU    cpu               on the CPU core from the last state handed
+//                    error, a readback unmapped)                      over; the page told ('engine', lost)
+//   cpu (live)       call what_if(factor)           cpu (replay)      the live sim set aside; a replay from the
+//   gpu (live)                                      gpu (stale)       saved state before its last hole, ζ × factor
+//   cpu / gpu        call what_if again (replay)    same (replay)     the replay replaced by a new one
+//    (replay)
+//   cpu / gpu        call back_to_live              cpu / gpu         the replay freed, the live sim back as it
+//    (replay)                                       (live; gpu stale) was left
+//   cpu / gpu        call open (a run's files)      frames            frees the tissue (live and replay)
+//   any              a fatal error                  none              the page told ('fatal')
+//
+// Everything that may touch the GPU engine or replace the tissue runs as one turn of a queue
+// (`inTurn`): a submission is checked before the next, a download never meets a submission, a
+// call sees the tissue level with the device, and a transition never meets another half done.
+// The CPU engine steps between turns, from `pump`, in batches of about BATCH_MS.
 
-// The core's module (its exports: WebSim, WebPlayback, and WebGpuEngine in the single-thread
-// build), once loaded; which build it is, on how many threads, and why.
-let core = null;
-let coreNote = '';
+/** @typedef {import('../pkg/monolayer.js').WebSim} WebSim */
+/** @typedef {import('../pkg/monolayer.js').WebPlayback} WebPlayback */
+/** @typedef {import('../pkg/monolayer.js').WebGpuEngine} WebGpuEngine */
+/** @typedef {import('../pkg/monolayer.js').GpuState} GpuState */
+/** @typedef {import('../pkg/monolayer.js').FieldKind} FieldKind */
+/** @typedef {import('../pkg/monolayer.js').Readout} Readout */
+/** @typedef {import('../pkg/monolayer.js').DefectMark} DefectMark */
+/** @typedef {import('../pkg/monolayer.js').SpiralMark} SpiralMark */
+/** @typedef {typeof import('../pkg/monolayer.js')} SingleCore */
+/**
+ * The core's module: the single-thread build's exports; the GPU engine only in that build.
+ * @typedef {Omit<SingleCore, 'WebGpuEngine'> & { WebGpuEngine?: SingleCore['WebGpuEngine'] }} Core
+ */
 
-// Loads the core for the first tissue `m` (the build stays for the worker's life).
-async function loadCore(m) {
-  if (core) return;
-  let why;
-  if (!self.crossOriginIsolated) why = 'the page is not cross-origin isolated';
-  else if (typeof SharedArrayBuffer === 'undefined') why = 'this browser has no SharedArrayBuffer';
-  else if (m.engine === 'gpu') why = 'the GPU engine is in the single-thread build';
-  else if (m.engine === 'auto' && !(await gpuAdapterOnce()).software && !(await gpuAdapterOnce()).error) {
-    why = 'the GPU engine may step here, and it is in the single-thread build';
-  }
-  if (!why) {
-    try {
-      const threaded = await import('../pkg-threads/monolayer.js');
-      await threaded.default();
-      await threaded.initThreadPool(Math.max(1, m.threads ?? navigator.hardwareConcurrency ?? 1));
-      core = threaded;
-      coreNote = 'threaded build, cross-origin isolated';
-      return;
-    } catch (e) {
-      why = `the threaded build did not load (${e.message ?? e})`;
-    }
-  }
-  const single = await import('../pkg/monolayer.js');
-  await single.default();
-  core = single;
-  coreNote = `single-thread build: ${why}`;
+/**
+ * A tissue's size (state.js, SIZES), its model parameters, the engine asked for.
+ * @typedef {{ box: number, cells: number, relaxSteps: number }} Size
+ * @typedef {{ zeta: number, chi: number, gamma: number }} ModelParams
+ * @typedef {'auto' | 'cpu' | 'gpu'} EngineChoice
+ */
+
+/**
+ * The messages in.
+ * @typedef {{ type: 'new', size: Size, params: ModelParams, seed: number, shipped: string | null,
+ *   engine: EngineChoice, threads: number | null }} NewTissue
+ * @typedef {NewTissue
+ *   | { type: 'engine', engine: EngineChoice }
+ *   | { type: 'play', on: boolean }
+ *   | { type: 'spf', n: number }
+ *   | { type: 'frame', field: FieldKind, dpr: number }
+ *   | { type: 'call', id: number, method: CallName, args: unknown[] }} WorkerIn
+ */
+
+/**
+ * A view's arrays (`WebView` of src/web/render.rs), transferred to the main thread.
+ * @typedef {{ l: number, kind: FieldKind, tissue: Float32Array, field: Float32Array, segments: Float32Array,
+ *   range: Float32Array }} FrameParts
+ *
+ * Where "What if?" rewinds the live tissue to: the saved state's step, and the last hole's
+ * first row of readouts and where it opened.
+ * @typedef {{ from: number, holeStep: number, holeX: number, holeY: number }} Rewind
+ *
+ * A replay's watch for the hole it was rewound before (src/web/history.rs): the verdict so far
+ * ('tore': a hole opened within `radius` of where it did, at `tearStep`; 'held': none did by
+ * `until`).
+ * @typedef {{ from: number, savedFingerprint: string, holeStep: number, holeX: number, holeY: number,
+ *   until: number, radius: number, verdict: 'watching' | 'tore' | 'held', tearStep: number | null }} Replay
+ *
+ * What the page shows of the tissue (main.js, readouts.js, the tests): the readout of the core
+ * (`Readout`), how the tissue started and which engine steps it, and "What if?".
+ * @typedef {object} Stats
+ * @property {number} step steps since the random disks, relaxation included
+ * @property {number} time active time, in time units
+ * @property {number} holes void regions above πR²/4
+ * @property {number} area void sites
+ * @property {number} packing fraction of sites with Σφ ≥ ½
+ * @property {boolean} active
+ * @property {number} zeta
+ * @property {number} chi
+ * @property {number} gamma
+ * @property {number} cells
+ * @property {number} l the box's side
+ * @property {number} relaxSteps
+ * @property {number} timeUnitSeconds
+ * @property {number} msPerStep
+ * @property {'snapshot' | 'disks' | 'frames'} startedFrom
+ * @property {number} startedAt the step the tissue started at
+ * @property {'cpu' | 'gpu' | 'none'} engine which engine steps, and why (`engineNote`)
+ * @property {string} engineNote
+ * @property {number | null} stepsPerSecond measured here since the engine was chosen
+ * @property {number | null} solveIterations the GPU engine's recorded CG iterations per solve
+ * @property {number} threads the core's threads, and its build (`coreNote`)
+ * @property {string} coreNote
+ * @property {Rewind | null} rewind where "What if?" would rewind the live tissue to (null: nowhere yet)
+ * @property {Replay | null} replay the replay shown (null: the live tissue)
+ * @property {number | null} frame the frame shown of a run's (null: a live tissue)
+ * @property {number | null} frames how many the run has
+ */
+
+/**
+ * The messages out.
+ * @typedef {{ type: 'ready', stats: Stats }
+ *   | { type: 'progress', text: string }
+ *   | { type: 'engine', stats: Stats, lost?: string }
+ *   | { type: 'frame', parts: FrameParts, stats: Stats, cores: number }
+ *   | { type: 'stopped', why: string, active: boolean }
+ *   | { type: 'result', id: number, value?: unknown, error?: string }
+ *   | { type: 'fatal', message: string }} WorkerOut
+ */
+
+/**
+ * The states.
+ * @typedef {object} Tissue
+ * @property {WebSim} sim the tissue shown, stepped, measured and edited
+ * @property {WebSim | null} live the live tissue set aside while `sim` is a replay of its past
+ * @property {'snapshot' | 'disks'} startedFrom a shipped state, or random disks relaxed here
+ * @property {number} startedAt
+ *
+ * The GPU engine's device, made once per worker: { engine, adapter (its name), software }.
+ * @typedef {{ engine: WebGpuEngine, adapter: string, software: boolean }} GpuDevice
+ *
+ * A GPU submission under way: its steps, and the download of the state it ends at, queued
+ * behind it where it ends on a row of readouts or a frame is asked for (else null).
+ * @typedef {{ k: number, down: Promise<GpuState> | null }} Submission
+ *
+ * @typedef {{ kind: 'none' }} NoTissue
+ * @typedef {{ kind: 'cpu', tissue: Tissue, note: string }} CpuState
+ * @typedef {{ kind: 'gpu', tissue: Tissue, note: string, device: GpuDevice, sync: 'level' | 'ahead' | 'stale',
+ *   flight: Submission[] }} GpuEngineState
+ * @typedef {{ kind: 'frames', playback: { p: WebPlayback, frames: RunFrame[], index: number } }} FramesState
+ * @typedef {{ name: string, step: number, file: File }} RunFrame
+ * @typedef {NoTissue | CpuState | GpuEngineState | FramesState} State
+ */
+
+/** @type {State} */
+let state = { kind: 'none' };
+
+// The worker's global scope, typed: this file is checked with the page's DOM types.
+const scope = /** @type {{ postMessage(m: WorkerOut, transfer?: Transferable[]): void,
+  onmessage: ((e: MessageEvent<WorkerIn>) => void) | null }} */ (/** @type {unknown} */ (globalThis));
+
+/** @param {WorkerOut} m @param {Transferable[]} [transfer] */
+const post = (m, transfer = []) => scope.postMessage(m, transfer);
+
+/** @param {unknown} e */
+const messageOf = (e) => String(/** @type {{ message?: unknown }} */ (e)?.message ?? e);
+
+// What is loaded once per worker: the core's module and which build it is, on how many threads
+// and why; WebGPU's adapter (asked once) and the GPU engine's device (made once, when it is to
+// step), as promises.
+const loaded = {
+  /** @type {Core | null} */ core: null,
+  coreNote: '',
+  /** @type {Promise<{ adapter: string, software: boolean } | { error: string }> | null} */ adapter: null,
+  /** @type {Promise<GpuDevice | { error: string }> | null} */ device: null,
+};
+
+// The pace: whether the tissue plays, and the "steps per frame" slider's cap of `spf` steps per
+// 1/30 s, a budget that refills with time, not with frames drawn, so that drawing never holds
+// stepping back. A batch of steps is sized to take about BATCH_MS (GPU_BATCH_MS for a GPU
+// submission), so that messages are answered promptly; `steps` and `ms` since the engine was
+// last chosen (hand-offs and checks included) are the speed the page reports as measured here.
+const BATCH_MS = 12;
+const GPU_BATCH_MS = 40;
+const pace = {
+  playing: false,
+  spf: 20,
+  budget: 0,
+  refilledAt: performance.now(),
+  msPerStep: 5,
+  steps: 0,
+  ms: 0,
+  scheduled: false,
+};
+
+// The page's pending request for a frame, whether the state changed since the last frame sent,
+// and what that frame was.
+const view = {
+  /** @type {{ field: FieldKind, dpr: number } | null} */ request: null,
+  changed: true,
+  /** @type {FieldKind | null} */ lastField: null,
+  /** @type {number | null} */ lastDpr: null,
+};
+
+// The queue of turns (`inTurn`), and whether a GPU turn is in it.
+/** @type {{ queue: Promise<unknown>, gpuQueued: boolean }} */
+const turns = { queue: Promise.resolve(), gpuQueued: false };
+
+/**
+ * Runs fn as the next turn, after every turn queued before it (whether that one failed or not).
+ * @template T
+ * @param {() => T | Promise<T>} fn
+ * @returns {Promise<T>}
+ */
+function inTurn(fn) {
+  const next = turns.queue.then(fn, fn);
+  turns.queue = next;
+  return next;
 }
 
-let sim = null;
-// The GPU engine, or null while the CPU engine steps: { engine: WebGpuEngine, adapter,
-// software }; `gpuNote` says why the engine is the one it is (shown by the page).
-let gpu = null;
-let gpuNote = '';
-// The device, asked for once per worker (a promise of { engine } or { error }).
-let gpuDevice = null;
-// The GPU's state is ahead of `sim` (download before drawing or measuring); `sim` was edited
-// since the last upload (upload before stepping).
-let gpuAhead = false;
-let gpuEdited = false;
-// The GPU submissions under way, oldest first (the engine keeps up to `in_flight_max`, so that
-// it steps the next while the last is checked): { k (steps), down (a Promise of the state they
-// end at, queued behind them where it is due a row of readouts or a frame, else null) }.
-let flight = [];
-const queued = () => flight.reduce((n, f) => n + f.k, 0);
-// Everything that may touch the GPU engine or replace `sim` runs in turn, one after the other
-// (a submission must be checked before the next, a download must not meet a submission):
-// `exclusive(fn)` queues fn behind the last one. `turnQueued`: a GPU turn is in the queue.
-let queue = Promise.resolve();
-const exclusive = (fn) => (queue = queue.then(fn, fn));
-let turnQueued = false;
-// A run's frames opened in the page instead of the live simulation (null while live):
-// { p: WebPlayback, frames: [{ name, step, file }], index }.
-let playback = null;
-// How the current tissue started: 'snapshot' (a shipped state) or 'disks' (relaxing here), and
-// the step it started at.
-let startedFrom = null;
-let startedAt = 0;
-let playing = false;
-// The "steps per frame" slider caps the speed at `spf` steps per 1/30 s: a budget that refills
-// with time, not with frames drawn, so that drawing never holds stepping back.
-let spf = 20;
-let budget = 0;
-let refilledAt = performance.now();
-// The page's pending request for a frame, and whether the state changed since the last frame.
-let frameRequest = null;
-let changed = true;
-let lastSent = { field: null, dpr: null };
-let scheduled = false;
-// A batch of steps is sized to take about this long, so that messages are answered promptly.
-const BATCH_MS = 12;
-let msPerStep = 5;
-// Steps taken and their milliseconds since the engine was last chosen (hand-offs and checks
-// included): the speed the page reports as measured here.
-let speed = { steps: 0, ms: 0 };
-
+/** @param {number} steps @param {number} ms */
 function timed(steps, ms) {
-  speed.steps += steps;
-  speed.ms += ms;
+  pace.steps += steps;
+  pace.ms += ms;
+}
+
+// The core and the tissue in use, or null.
+const gpuState = () => (state.kind === 'gpu' ? state : null);
+const tissueOf = () => (state.kind === 'cpu' || state.kind === 'gpu' ? state.tissue : null);
+const core = () => {
+  if (!loaded.core) throw new Error('the core is not loaded');
+  return loaded.core;
+};
+
+// The live tissue's simulation (or its replay), for the calls that need one.
+function sim() {
+  const t = tissueOf();
+  if (!t) throw new Error("there is no live tissue: a run's frames are shown (Reset returns to it)");
+  return t.sim;
 }
 
 // console_error_panic_hook writes a Rust panic's message to console.error before the trap.
@@ -115,74 +275,115 @@ console.error = (...args) => {
   consoleError(...args);
 };
 
+// Any state → none: the page is told, and nothing steps any more.
+/** @param {unknown} e */
 function fatal(e) {
   const panic = lastConsoleError.includes('panicked') ? `\n\n${lastConsoleError}` : '';
-  postMessage({ type: 'fatal', message: `${e.message ?? e}${panic}` });
-  sim = null;
+  post({ type: 'fatal', message: `${messageOf(e)}${panic}` });
+  state = { kind: 'none' };
+}
+
+// Loads the core for the first tissue `m` (the build stays for the worker's life).
+/** @param {NewTissue} m */
+async function loadCore(m) {
+  if (loaded.core) return;
+  let why;
+  if (!self.crossOriginIsolated) why = 'the page is not cross-origin isolated';
+  else if (typeof SharedArrayBuffer === 'undefined') why = 'this browser has no SharedArrayBuffer';
+  else if (m.engine === 'gpu') why = 'the GPU engine is in the single-thread build';
+  else if (m.engine === 'auto') {
+    const found = await gpuAdapterOnce();
+    if (!('error' in found) && !found.software) why = 'the GPU engine may step here, and it is in the single-thread build';
+  }
+  if (!why) {
+    try {
+      // A specifier the type check does not follow: the threaded build exists only where the
+      // nightly toolchain built it, and its exports are the single-thread build's without the
+      // GPU engine, with initThreadPool.
+      const THREADED = '../pkg-threads/monolayer.js';
+      const threaded = /** @type {Core & { default(): Promise<unknown>, initThreadPool(n: number): Promise<unknown> }} */ (
+        await import(THREADED));
+      await threaded.default();
+      await threaded.initThreadPool(Math.max(1, m.threads ?? navigator.hardwareConcurrency ?? 1));
+      loaded.core = threaded;
+      loaded.coreNote = 'threaded build, cross-origin isolated';
+      return;
+    } catch (e) {
+      why = `the threaded build did not load (${messageOf(e)})`;
+    }
+  }
+  const single = await import('../pkg/monolayer.js');
+  await single.default();
+  loaded.core = single;
+  loaded.coreNote = `single-thread build: ${why}`;
 }
 
 // A zero-delay task (setTimeout would be clamped to 4 ms once nested).
 const tick = new MessageChannel();
 tick.port1.onmessage = () => pump();
 function schedule() {
-  if (!scheduled) {
-    scheduled = true;
+  if (!pace.scheduled) {
+    pace.scheduled = true;
     tick.port2.postMessage(null);
   }
 }
 
-// Steps the core; on an error of the model (the core keeps the state before the failing step)
-// stops and tells the page why.
-function takeSteps(n) {
+// Steps the CPU core; on an error of the model (the core keeps the state before the failing
+// step) pauses and tells the page why.
+/** @param {WebSim} s @param {number} n */
+function takeSteps(s, n) {
   try {
-    sim.step(n);
+    s.step(n);
     return true;
   } catch (e) {
     if (e instanceof WebAssembly.RuntimeError) throw e;
-    playing = false;
-    postMessage({ type: 'stopped', why: String(e.message ?? e), active: sim.active() });
+    pace.playing = false;
+    post({ type: 'stopped', why: messageOf(e), active: s.active() });
     return false;
   }
 }
 
 function refill() {
   const now = performance.now();
-  budget = Math.min(spf, budget + ((now - refilledAt) * spf * 30) / 1000);
-  refilledAt = now;
+  pace.budget = Math.min(pace.spf, pace.budget + ((now - pace.refilledAt) * pace.spf * 30) / 1000);
+  pace.refilledAt = now;
 }
 
+// The scheduler: on the GPU engine, queues a turn (gpuTurn); on the CPU engine, a batch of
+// steps now; then a frame if one is asked for.
 function pump() {
-  scheduled = false;
-  if (!sim && !playback) return;
-  if (gpu && sim) {
-    if (!turnQueued) {
-      turnQueued = true;
-      exclusive(gpuTurn).finally(() => {
-        turnQueued = false;
-        if (playing || frameRequest) schedule();
+  pace.scheduled = false;
+  const s = state;
+  if (s.kind === 'none') return;
+  if (s.kind === 'gpu') {
+    if (!turns.gpuQueued) {
+      turns.gpuQueued = true;
+      inTurn(gpuTurn).finally(() => {
+        turns.gpuQueued = false;
+        if (pace.playing || view.request) schedule();
       });
     }
     return;
   }
   try {
-    if (playing && sim) {
+    if (pace.playing && s.kind === 'cpu') {
       refill();
-      const n = Math.min(Math.floor(budget), Math.max(1, Math.floor(BATCH_MS / msPerStep)));
+      const n = Math.min(Math.floor(pace.budget), Math.max(1, Math.floor(BATCH_MS / pace.msPerStep)));
       if (n >= 1) {
         const t0 = performance.now();
-        if (takeSteps(n)) {
+        if (takeSteps(s.tissue.sim, n)) {
           const ms = performance.now() - t0;
-          msPerStep = 0.8 * msPerStep + 0.2 * (ms / n);
+          pace.msPerStep = 0.8 * pace.msPerStep + 0.2 * (ms / n);
           timed(n, ms);
-          budget -= n;
-          changed = true;
+          pace.budget -= n;
+          view.changed = true;
         }
       }
     }
-    if (frameRequest) sendFrame();
-    if (playing) {
-      if (budget >= 1) schedule();
-      else setTimeout(schedule, 1000 / (30 * spf));
+    if (view.request) sendFrame();
+    if (pace.playing) {
+      if (pace.budget >= 1) schedule();
+      else setTimeout(schedule, 1000 / (30 * pace.spf));
     }
   } catch (e) {
     fatal(e);
@@ -190,117 +391,105 @@ function pump() {
 }
 
 // --- the GPU engine --------------------------------------------------------------------------
-// A GPU submission is sized to take about this long, so that frames and calls are answered
-// between submissions.
-const GPU_BATCH_MS = 40;
 
 // Whether an adapter is a software one (SwiftShader, lavapipe): there the CPU engine is faster.
+/** @param {Record<string, unknown>} info */
 function isSoftware(info) {
-  const text = [info?.vendor, info?.architecture, info?.description, info?.device].join(' ');
-  return Boolean(info?.isFallbackAdapter) || /swiftshader|llvmpipe|lavapipe|software/i.test(text);
+  const text = [info.vendor, info.architecture, info.description, info.device].join(' ');
+  return Boolean(info.isFallbackAdapter) || /swiftshader|llvmpipe|lavapipe|software/i.test(text);
 }
 
-// What WebGPU offers here, asked once: { adapter (its name), software } or { error }.
-let gpuAdapter = null;
+// What WebGPU offers here, asked once: { adapter (its name), software } or { error }. The
+// adapter the engine asks for (src/gpu/context.rs: high performance), so that the name shown
+// and the software test are of the one that steps.
 function gpuAdapterOnce() {
-  gpuAdapter ??= (async () => {
-    if (!self.navigator?.gpu) return { error: 'this browser has no WebGPU' };
-    // The adapter the engine asks for (src/gpu/context.rs: high performance), so that the
-    // name shown and the software test are of the one that steps.
-    const adapter = await navigator.gpu.requestAdapter({ powerPreference: 'high-performance' }).catch(() => null);
+  loaded.adapter ??= (async () => {
+    // WebGPU's types are not among the page's (the type check knows the DOM without it).
+    const gpu = /** @type {{ gpu?: { requestAdapter(o: object): Promise<{ info?: Record<string, unknown> } | null> } }} */ (
+      /** @type {unknown} */ (self.navigator))?.gpu;
+    if (!gpu) return { error: 'this browser has no WebGPU' };
+    const adapter = await gpu.requestAdapter({ powerPreference: 'high-performance' }).catch(() => null);
     if (!adapter) return { error: 'WebGPU found no adapter' };
     const info = adapter.info ?? {};
     const name = [info.vendor, info.architecture, info.description].filter(Boolean).join(' ') || 'unnamed adapter';
     return { adapter: name, software: isSoftware(info) };
   })();
-  return gpuAdapter;
+  return loaded.adapter;
 }
 
-// The GPU engine's device, made once and only when it is to step: { engine, adapter,
-// software } or { error }.
+// The GPU engine's device, made once and only when it is to step.
+/** @param {{ adapter: string, software: boolean }} found */
 function gpuDeviceOnce(found) {
-  gpuDevice ??= (async () => {
+  loaded.device ??= (async () => {
     try {
-      const engine = await core.WebGpuEngine.create();
+      const GpuEngine = core().WebGpuEngine;
+      if (!GpuEngine) throw new Error('this build has no GPU engine');
+      const engine = await GpuEngine.create();
       return { engine, adapter: found.adapter, software: found.software || engine.runs_on_cpu() };
     } catch (e) {
-      return { error: `WebGPU refused a device for compute (${e.message ?? e})` };
+      return { error: `WebGPU refused a device for compute (${messageOf(e)})` };
     }
   })();
-  return gpuDevice;
+  return loaded.device;
 }
 
 // The GPU engine's kernels, compiled one at a time (once per device), the page told the
 // progress before each: the browser compiles them in its GPU process before their first use,
 // which would otherwise hold the first step (about 7 s on SwiftShader) with nothing shown.
+/** @param {WebGpuEngine} engine */
 async function compileKernels(engine) {
   const total = engine.kernels();
   for (let left = engine.kernels_left(); left > 0; ) {
-    postMessage({ type: 'progress', text: `compiling the GPU engine's kernels: ${total - left} of ${total}` });
+    post({ type: 'progress', text: `compiling the GPU engine's kernels: ${total - left} of ${total}` });
     left = await engine.compile_next();
   }
 }
 
-// Chooses the engine for a new tissue: 'gpu' wherever WebGPU compute works, 'cpu' always, and
-// 'auto' the GPU on a hardware adapter and the CPU on a software one, where it is faster.
-async function chooseEngine(wanted) {
-  gpu = null;
-  flight = [];
-  gpuAhead = gpuEdited = false;
-  if (wanted === 'cpu') {
-    gpuNote = 'chosen';
-    return;
-  }
+// cpu or gpu → cpu, then → gpu where the GPU engine is to step: 'gpu' wherever WebGPU compute
+// works, 'cpu' always, and 'auto' the GPU on a hardware adapter and the CPU on a software one,
+// where it is faster. The CPU engine steps while the GPU engine's kernels compile.
+/** @param {Tissue} tissue @param {EngineChoice} wanted */
+async function chooseEngine(tissue, wanted) {
+  /** @param {string} note */
+  const onCpu = (note) => {
+    state = { kind: 'cpu', tissue, note };
+  };
+  onCpu('chosen');
+  if (wanted === 'cpu') return;
   const found = await gpuAdapterOnce();
-  if (found.error) {
-    gpuNote = `${found.error}: stepping on the CPU engine`;
-    return;
-  }
+  if ('error' in found) return onCpu(`${found.error}: stepping on the CPU engine`);
   if (wanted === 'auto' && found.software) {
-    gpuNote = `WebGPU runs in software here (${found.adapter}), where the CPU engine is faster`;
-    return;
+    return onCpu(`WebGPU runs in software here (${found.adapter}), where the CPU engine is faster`);
   }
-  if (!core.WebGpuEngine) {
-    gpuNote = 'the threaded core has no GPU engine (?engine=gpu opens the page on the single-thread core, which has)';
-    return;
+  if (!core().WebGpuEngine) {
+    return onCpu('the threaded core has no GPU engine (?engine=gpu opens the page on the single-thread core, which has)');
   }
   const d = await gpuDeviceOnce(found);
-  if (d.error) {
-    gpuNote = `${d.error}: stepping on the CPU engine`;
-    return;
-  }
+  if ('error' in d) return onCpu(`${d.error}: stepping on the CPU engine`);
   try {
     await compileKernels(d.engine);
   } catch (e) {
-    gpuNote = `the GPU engine's kernels did not compile (${e.message ?? e}): stepping on the CPU engine`;
-    return;
+    return onCpu(`the GPU engine's kernels did not compile (${messageOf(e)}): stepping on the CPU engine`);
   }
   try {
-    d.engine.upload(sim);
+    d.engine.upload(tissue.sim);
   } catch (e) {
-    gpuNote = `the GPU could not take this tissue (${e.message ?? e}): stepping on the CPU engine`;
-    return;
+    return onCpu(`the GPU could not take this tissue (${messageOf(e)}): stepping on the CPU engine`);
   }
+  let note = d.software ? `on a software adapter (${d.adapter}), chosen` : d.adapter;
   if (wanted === 'auto') {
     // A hardware adapter: the faster engine for this tissue, by a short trial.
     let t;
     try {
-      t = await engineTrial(d, TRIAL_STEPS);
+      t = await engineTrial(tissue.sim, d, TRIAL_STEPS);
     } catch (e) {
-      gpuNote = `the GPU engine failed its trial (${e.message ?? e}): stepping on the CPU engine`;
-      return;
+      return onCpu(`the GPU engine failed its trial (${messageOf(e)}): stepping on the CPU engine`);
     }
     const ms = `${t.gpu.toFixed(2)} ms per step against ${t.cpu.toFixed(2)} on the CPU engine in a short trial`;
-    if (!(t.gpu < t.cpu)) {
-      gpuNote = `${d.adapter} took ${ms}: stepping on the CPU engine`;
-      return;
-    }
-    gpu = d;
-    gpuNote = `${d.adapter}, ${ms}`;
-    return;
+    if (!(t.gpu < t.cpu)) return onCpu(`${d.adapter} took ${ms}: stepping on the CPU engine`);
+    note = `${d.adapter}, ${ms}`;
   }
-  gpu = d;
-  gpuNote = d.software ? `on a software adapter (${d.adapter}), chosen` : d.adapter;
+  state = { kind: 'gpu', tissue, note, device: d, sync: 'level', flight: [] };
 }
 
 // Steps per engine in `auto`'s trial: enough to time past the first submission's set-up,
@@ -308,10 +497,11 @@ async function chooseEngine(wanted) {
 const TRIAL_STEPS = 5;
 
 // Milliseconds per step of each engine on the tissue as it is, which the trial leaves as it was:
-// the CPU core on a copy, the GPU engine from an upload of `sim` after one warm-up step (its
+// the CPU core on a copy, the GPU engine from an upload of `s` after one warm-up step (its
 // first submission compiles and sets up), then uploaded again.
-async function engineTrial(d, steps) {
-  const copy = sim.core_copy();
+/** @param {WebSim} s @param {GpuDevice} d @param {number} steps */
+async function engineTrial(s, d, steps) {
+  const copy = s.core_copy();
   let cpu;
   try {
     const t0 = performance.now();
@@ -320,248 +510,394 @@ async function engineTrial(d, steps) {
   } finally {
     copy.free();
   }
-  d.engine.upload(sim);
+  d.engine.upload(s);
   d.engine.submit(1);
   await d.engine.check();
   const t1 = performance.now();
   const k = d.engine.submit(steps);
   await d.engine.check();
   const gpuMs = (performance.now() - t1) / Math.max(k, 1);
-  d.engine.upload(sim);
+  d.engine.upload(s);
   return { cpu, gpu: gpuMs };
 }
 
-// Brings `sim` level with the GPU (the submissions under way settled, then one readback), so
-// that it can be drawn, measured or edited.
+// gpu (ahead) → gpu (level): the submissions under way settled, then one readback, so that
+// the tissue can be drawn, measured or edited. A device fault on the way: → cpu.
 async function gpuDown() {
-  while (gpu && flight.length) {
-    if ((await gpuSettle()) === null) return;
+  for (let g = gpuState(); g && g.flight.length; g = gpuState()) {
+    if ((await gpuSettle(g)) === null) return;
   }
-  if (!gpu || !gpuAhead) return;
+  const g = gpuState();
+  if (!g || g.sync !== 'ahead') return;
   try {
-    sim.adopt(await gpu.engine.download());
+    g.tissue.sim.adopt(await g.device.engine.download());
   } catch (e) {
-    if (gpuFailed()) return;
+    if (gpuFailed(g)) return;
     throw e;
   }
-  gpuAhead = false;
-  changed = true;
+  g.sync = 'level';
+  view.changed = true;
 }
 
 // Whether the GPU device failed (lost, a GPU error, a readback that did not map), as opposed to
-// the model (φ out of range, a cell lost); if it did, the engine is dropped (gpuLost).
-function gpuFailed() {
-  const why = gpu?.engine.device_fault();
+// the model (φ out of range, a cell lost); if it did, gpu → cpu (gpuLost).
+/** @param {GpuEngineState} g */
+function gpuFailed(g) {
+  const why = g.device.engine.device_fault();
   if (!why) return false;
-  gpuLost(why);
+  gpuLost(g, why);
   return true;
 }
 
-// The GPU engine is gone: the tissue goes on on the CPU engine from the last state `sim` holds
-// (the last hand-off, at most a row of readouts behind the device), and the page says why. A
-// later choice of the GPU engine asks for a new adapter and device.
-function gpuLost(why) {
-  const lost = gpu;
-  gpu = null;
-  gpuAdapter = null;
-  gpuDevice = null;
-  flight = [];
-  gpuAhead = gpuEdited = false;
+// gpu → cpu: the tissue goes on on the CPU engine from the last state `tissue.sim` holds (the
+// last hand-off, at most a row of readouts behind the device), and the page says why. A later
+// choice of the GPU engine asks for a new adapter and device.
+/** @param {GpuEngineState} g @param {string} why */
+function gpuLost(g, why) {
+  if (state !== g) return;
+  loaded.adapter = null;
+  loaded.device = null;
   try {
-    lost.engine.free();
+    g.device.engine.free();
   } catch {
     // Already freed: nothing to release.
   }
-  gpuNote = `the GPU device failed (${why}); the tissue goes on on the CPU engine from step ${sim.step_count()}`;
-  speed = { steps: 0, ms: 0 };
-  changed = true;
-  postMessage({ type: 'engine', stats: stats(), lost: gpuNote });
+  const note = `the GPU device failed (${why}); the tissue goes on on the CPU engine from step ${g.tissue.sim.step_count()}`;
+  state = { kind: 'cpu', tissue: g.tissue, note };
+  pace.steps = pace.ms = 0;
+  view.changed = true;
+  post({ type: 'engine', stats: stats(), lost: note });
 }
 
-// Submits GPU steps while fewer than the engine's limit are under way, up to `limit` steps
-// under way in all, `batch` at most in one (each ends at the next row of readouts at the
-// latest; one that ends on a row, or follows a request for a frame, queues the download of the
-// state it ends at), then settles the oldest. Returns its steps, 0 if they were put back to be
-// taken again (with more solve iterations or storage, and the submissions after it with them),
-// or null if the model failed (the state before the submission, in `sim` too; the page told).
-async function gpuAdvance(limit, batch) {
-  if (gpuEdited) {
-    await gpuDown();
-    if (!gpu) return 0;
-    gpu.engine.upload(sim);
-    gpuEdited = false;
+/** @param {GpuEngineState} g */
+const queued = (g) => g.flight.reduce((n, f) => n + f.k, 0);
+
+// gpu (level | stale) → gpu (ahead): uploads a stale tissue, then submits GPU steps while fewer
+// than the engine's limit are under way, up to `limit` steps under way in all, `batch` at most
+// in one (each ends at the next row of readouts at the latest; one that ends on a row, or
+// follows a request for a frame, queues the download of the state it ends at), then settles the
+// oldest. Returns its steps, 0 if they were put back to be taken again (with more solve
+// iterations or storage, and the submissions after it with them), or null if the model failed
+// (the state before the submission, in `tissue.sim` too; the page told).
+/** @param {GpuEngineState} g @param {number} limit @param {number} batch */
+async function gpuAdvance(g, limit, batch) {
+  const engine = g.device.engine;
+  if (g.sync === 'stale') {
+    engine.upload(g.tissue.sim);
+    g.sync = 'level';
   }
-  while (flight.length < gpu.engine.in_flight_max()) {
-    const want = Math.min(limit - queued(), batch);
+  while (g.flight.length < engine.in_flight_max()) {
+    const want = Math.min(limit - queued(g), batch);
     if (want < 1) break;
-    const toRow = sim.steps_to_next_row(gpu.engine.submitted_to());
-    const k = gpu.engine.submit(Math.min(want, toRow));
+    const toRow = g.tissue.sim.steps_to_next_row(engine.submitted_to());
+    const k = engine.submit(Math.min(want, toRow));
     if (k === 0) break;
-    const down = k === toRow || frameRequest ? gpu.engine.download() : null;
+    const down = k === toRow || view.request ? /** @type {Promise<GpuState>} */ (engine.download()) : null;
     // A download dropped with its submission (put back, or the device lost) is never awaited.
     down?.catch(() => {});
-    flight.push({ k, down });
+    g.flight.push({ k, down });
+    g.sync = 'ahead';
   }
-  return gpuSettle();
+  return gpuSettle(g);
 }
 
 // Settles the oldest GPU submission under way (gpuAdvance); a download queued behind it is
-// taken by `sim` (a row of readouts, a frame sent if one is asked for).
-async function gpuSettle() {
-  const f = flight.shift();
+// taken by `tissue.sim` (a row of readouts, a frame sent if one is asked for): gpu (ahead) →
+// gpu (level) when it was the last under way.
+/** @param {GpuEngineState} g @returns {Promise<number | null>} */
+async function gpuSettle(g) {
+  const f = g.flight.shift();
   if (!f) return 0;
   let taken;
   try {
-    taken = await gpu.engine.check();
+    taken = await g.device.engine.check();
   } catch (e) {
-    flight = [];
-    if (gpuFailed()) return 0;
-    playing = false;
-    gpuAhead = true;
+    g.flight = [];
+    if (gpuFailed(g)) return 0;
+    pace.playing = false;
+    g.sync = 'ahead';
     await gpuDown();
-    postMessage({ type: 'stopped', why: String(e.message ?? e), active: sim.active() });
+    post({ type: 'stopped', why: messageOf(e), active: g.tissue.sim.active() });
     return null;
   }
   if (!taken) {
-    flight = [];
+    g.flight = [];
     return 0;
   }
-  gpuAhead = true;
   if (f.down) {
     try {
-      sim.adopt(await f.down);
+      g.tissue.sim.adopt(await f.down);
     } catch (e) {
-      if (gpuFailed()) return 0;
+      if (gpuFailed(g)) return 0;
       throw e;
     }
-    gpuAhead = flight.length > 0;
-    changed = true;
-    if (frameRequest) sendFrame();
+    g.sync = g.flight.length > 0 ? 'ahead' : 'level';
+    view.changed = true;
+    if (view.request) sendFrame();
   }
   return f.k;
 }
 
 // One turn of the GPU engine: a submission while playing, then a frame if one is asked for.
 async function gpuTurn() {
-  if (!gpu || !sim) return;
+  const g = gpuState();
+  if (!g) return;
   try {
-    if (playing) {
+    if (pace.playing) {
       refill();
-      if (budget >= 1 || flight.length) {
+      if (pace.budget >= 1 || g.flight.length) {
         const t0 = performance.now();
-        const k = await gpuAdvance(Math.floor(budget), Math.max(1, Math.floor(GPU_BATCH_MS / msPerStep)));
-        if (k === null || !gpu) return;
+        const k = await gpuAdvance(g, Math.floor(pace.budget), Math.max(1, Math.floor(GPU_BATCH_MS / pace.msPerStep)));
+        if (k === null || state !== g) return;
         if (k) {
           const ms = performance.now() - t0;
-          msPerStep = 0.8 * msPerStep + 0.2 * (ms / k);
+          pace.msPerStep = 0.8 * pace.msPerStep + 0.2 * (ms / k);
           timed(k, ms);
-          budget -= k;
-          changed = true;
+          pace.budget -= k;
+          view.changed = true;
         }
       } else {
-        await new Promise((r) => setTimeout(r, 1000 / (30 * spf)));
+        await new Promise((r) => setTimeout(r, 1000 / (30 * pace.spf)));
       }
     }
     // Paused, or a frame asked for with nothing under way: level with the GPU, then draw
     // (while playing, a frame comes with the next download).
-    if (!playing || (frameRequest && !flight.length)) await gpuDown();
-    if (frameRequest && !gpuAhead) sendFrame();
+    if (!pace.playing || (view.request && !g.flight.length)) await gpuDown();
+    if (view.request && gpuState()?.sync !== 'ahead') sendFrame();
   } catch (e) {
-    if (!gpuFailed()) fatal(e);
+    if (!(state === g && gpuFailed(g))) fatal(e);
   }
 }
 
+// --- what the page is sent ---------------------------------------------------------------------
+
+// How many marks a view made (the core's objects freed).
+/** @param {{ free(): void }[]} marks */
+function count(marks) {
+  for (const m of marks) m.free();
+  return marks.length;
+}
+
+// The ±½ defects a view marked, as plain data: where, twice the charge, a +½'s orientation
+// (NaN for a −½).
+/** @param {DefectMark[]} marks */
+function defectsOf(marks) {
+  return marks.map((d) => {
+    const out = { x: d.x, y: d.y, twiceCharge: d.twice_charge, orientation: d.orientation };
+    d.free();
+    return out;
+  });
+}
+
+// The spiral cores a view marked, as plain data: where, and ∇·v there.
+/** @param {SpiralMark[]} marks */
+function spiralCoresOf(marks) {
+  return marks.map((p) => {
+    const out = { x: p.x, y: p.y, divergence: p.divergence };
+    p.free();
+    return out;
+  });
+}
+
+// A binding's readout as plain data (its wasm object freed).
+/** @param {Readout} r */
+function readoutOf(r) {
+  const out = {
+    step: r.step, time: r.active_time, holes: r.holes, area: r.void_area, packing: r.packing, active: r.active,
+    zeta: r.zeta, chi: r.chi, gamma: r.gamma, cells: r.cells, l: r.box_size, relaxSteps: r.relax_steps,
+    timeUnitSeconds: r.time_unit_seconds,
+  };
+  r.free();
+  return out;
+}
+
+// Where the live tissue `s` rewinds to, or null (src/web/history.rs).
+/** @param {WebSim} s @returns {Rewind | null} */
+function rewindOf(s) {
+  const p = s.rewind_point();
+  if (!p) return null;
+  const out = { from: p.from, holeStep: p.hole_step, holeX: p.hole_x, holeY: p.hole_y };
+  p.free();
+  return out;
+}
+
+// A replay's watch, or null for a live tissue.
+/** @param {WebSim} s @returns {Replay | null} */
+function replayOf(s) {
+  const w = s.replay_watch();
+  if (!w) return null;
+  const V = core().ReplayVerdict;
+  const verdict = w.verdict === V.Tore ? 'tore' : w.verdict === V.Held ? 'held' : 'watching';
+  const out = {
+    from: w.from, savedFingerprint: w.saved_fingerprint, holeStep: w.hole_step, holeX: w.hole_x, holeY: w.hole_y,
+    until: w.until, radius: w.radius, verdict, tearStep: w.tear_step ?? null,
+  };
+  w.free();
+  return /** @type {Replay} */ (out);
+}
+
+/** @returns {Stats} */
 function stats() {
-  if (playback) {
-    const a = playback.p.stats();
+  const s = state;
+  const base = {
+    msPerStep: pace.msPerStep,
+    stepsPerSecond: pace.steps > 0 && pace.ms > 0 ? (1000 * pace.steps) / pace.ms : null,
+    threads: core().coreThreads(),
+    coreNote: loaded.coreNote,
+  };
+  if (s.kind === 'frames') {
+    const r = s.playback.p.readout();
+    const read = r ? readoutOf(r) : {
+      step: 0, time: 0, holes: 0, area: 0, packing: 0, active: false, zeta: 0, chi: 0, gamma: 0, cells: 0, l: 0,
+      relaxSteps: 0, timeUnitSeconds: 1,
+    };
     return {
-      step: a[0], time: a[1], holes: a[2], area: a[3], packing: a[4], active: a[0] >= a[10], zeta: a[5], chi: a[6],
-      gamma: a[7], cells: a[8], l: a[9], relaxSteps: a[10], timeUnitSeconds: a[11], msPerStep, startedFrom: 'frames',
-      frame: playback.index, frames: playback.frames.length,
+      ...read, ...base, startedFrom: 'frames', startedAt: 0, engine: 'none', engineNote: '', solveIterations: null,
+      rewind: null, replay: null, frame: s.playback.index, frames: s.playback.frames.length,
     };
   }
+  if (s.kind === 'none') throw new Error('there is no tissue yet');
+  const t = s.tissue;
   return {
-    step: sim.step_count(),
-    holes: sim.holes(),
-    area: sim.hole_area(),
-    time: sim.active_time(),
-    active: sim.active(),
-    packing: sim.packing_fraction(),
-    zeta: sim.zeta(),
-    chi: sim.chi(),
-    gamma: sim.gamma(),
-    cells: sim.n_cells(),
-    l: sim.box_size(),
-    relaxSteps: sim.relax_steps(),
-    timeUnitSeconds: sim.time_unit_seconds(),
-    msPerStep,
-    startedFrom,
-    startedAt,
+    ...readoutOf(t.sim.readout()),
+    ...base,
+    startedFrom: t.startedFrom,
+    startedAt: t.startedAt,
     // Which engine steps, and why (main.js, showEngine).
-    engine: gpu ? 'gpu' : 'cpu',
-    engineNote: gpuNote,
-    stepsPerSecond: speed.steps > 0 && speed.ms > 0 ? (1000 * speed.steps) / speed.ms : null,
-    solveIterations: gpu ? gpu.engine.solve_iterations() : null,
-    // The core's build and threads (loadCore).
-    threads: core.coreThreads(),
-    coreNote,
+    engine: s.kind,
+    engineNote: s.note,
+    solveIterations: s.kind === 'gpu' ? s.device.engine.solve_iterations() : null,
+    rewind: t.live ? null : rewindOf(t.sim),
+    replay: replayOf(t.sim),
+    frame: null,
+    frames: null,
   };
 }
 
 function sendFrame() {
-  const { field, dpr } = frameRequest;
-  if (!changed && field === lastSent.field && dpr === lastSent.dpr) return;
-  frameRequest = null;
-  changed = false;
-  lastSent = { field, dpr };
-  const view = (playback ? playback.p : sim).view(field, dpr);
-  const parts = {
-    l: view.l(),
-    kind: view.kind(),
-    tissue: view.tissue(),
-    field: view.field(),
-    segments: view.segments(),
-    range: view.range(),
-  };
-  view.free();
+  const req = view.request;
+  const s = state;
+  if (!req || s.kind === 'none') return;
+  const { field, dpr } = req;
+  if (!view.changed && field === view.lastField && dpr === view.lastDpr) return;
+  view.request = null;
+  view.changed = false;
+  view.lastField = field;
+  view.lastDpr = dpr;
+  const source = s.kind === 'frames' ? s.playback.p : s.tissue.sim;
+  const v = source.view(field, dpr);
+  /** @type {FrameParts} */
+  const parts = { l: v.l(), kind: v.kind(), tissue: v.tissue(), field: v.field(), segments: v.segments(), range: v.range() };
+  v.free();
   // The spiral cores this view marks (the guided tour waits for one in the flow).
-  const cores = (playback ? playback.p : sim).spiral_cores().length / 3;
-  postMessage({ type: 'frame', parts, stats: stats(), cores }, [parts.tissue.buffer, parts.field.buffer, parts.segments.buffer]);
+  const cores = count(source.spiral_cores());
+  post({ type: 'frame', parts, stats: stats(), cores }, [parts.tissue.buffer, parts.field.buffer, parts.segments.buffer]);
 }
 
-// What the page and the tests may ask of the simulation, beyond stepping.
-const CALLS = {
-  // Steps n now and returns the milliseconds it took.
+// --- the calls ------------------------------------------------------------------------------
+
+// The model parameters the sliders set, each by its own setter.
+const SETTERS = {
+  /** @param {WebSim} s @param {number} v */ zeta: (s, v) => s.set_zeta(v),
+  /** @param {WebSim} s @param {number} v */ chi: (s, v) => s.set_chi(v),
+  /** @param {WebSim} s @param {number} v */ gamma: (s, v) => s.set_gamma(v),
+};
+
+// cpu / gpu (level) → the same, an edit made: gpu (stale), uploaded before the next step.
+/** @template T @param {T} value @returns {T} */
+function edited(value) {
+  const g = gpuState();
+  if (g) g.sync = 'stale';
+  view.changed = true;
+  return value;
+}
+
+// cpu / gpu (live or replay) → the same (replay): a replay of the live tissue's last hole, from
+// the saved state before it, with activity ζ × `factor` (0: off, ½: halved). The live tissue
+// is set aside as it is; a replay shown before is dropped. Returns the replay's start as the
+// core reads it right after the rewind: its step, fingerprint and ζ, and what it watches for.
+/** @param {number} factor */
+function toReplay(factor) {
+  const t = tissueOf();
+  if (!t) throw new Error("What if? rewinds a live tissue, and a run's frames are shown");
+  const live = t.live ?? t.sim;
+  const replay = live.rewind();
+  try {
+    // The experiment's arms scale the ζ the tissue had when the state was saved.
+    SETTERS.zeta(replay, readoutOf(replay.readout()).zeta * factor);
+  } catch (e) {
+    replay.free();
+    throw e;
+  }
+  if (t.live) t.sim.free();
+  t.live = live;
+  t.sim = replay;
+  edited(null);
+  const watch = /** @type {Replay} */ (replayOf(replay));
+  return { ...watch, step: replay.step_count(), fingerprint: replay.fingerprint(), zeta: readoutOf(replay.readout()).zeta, factor };
+}
+
+// cpu / gpu (replay) → the same (live): the replay freed, the live tissue back as it was left.
+// Returns its model parameters (null: no replay was shown).
+function toLive() {
+  const t = tissueOf();
+  if (!t?.live) return null;
+  t.sim.free();
+  t.sim = t.live;
+  t.live = null;
+  edited(null);
+  const r = readoutOf(t.sim.readout());
+  return { zeta: r.zeta, chi: r.chi, gamma: r.gamma, step: r.step };
+}
+
+// Frees whatever the state holds: any state → none.
+function drop() {
+  const s = state;
+  state = { kind: 'none' };
+  if (s.kind === 'frames') s.playback.p.free();
+  if (s.kind === 'cpu' || s.kind === 'gpu') {
+    s.tissue.sim.free();
+    s.tissue.live?.free();
+  }
+}
+
+// What the page and the tests may ask of the simulation, beyond stepping. Each runs as a turn,
+// the tissue level with the GPU engine first (handle, 'call').
+export const CALLS = {
+  // Steps n now and returns the milliseconds it took (null: the model failed, the page told).
   // On the GPU engine, if the device fails part way, the rest are taken on the CPU engine
   // from the last state handed over.
+  /** @param {number} n */
   step: async (n) => {
     const t0 = performance.now();
     let left = n;
-    while (gpu && left > 0) {
-      const k = await gpuAdvance(left, left);
+    for (let g = gpuState(); g && left > 0; g = gpuState()) {
+      const k = await gpuAdvance(g, left, left);
       if (k === null) return null;
       left -= k;
     }
-    if (gpu) await gpuDown();
-    if (left > 0 && !takeSteps(left)) return null;
+    if (gpuState()) await gpuDown();
+    if (left > 0 && !takeSteps(sim(), left)) return null;
     const ms = performance.now() - t0;
     timed(n, ms);
     return ms;
   },
   // `auto`'s timed trial on the GPU engine in use (the tests drive it on a software adapter,
   // where `auto` does not try): ms per step of each engine; the tissue does not move.
+  /** @param {number} steps */
   engine_trial: async (steps) => {
-    if (!gpu) return null;
-    await gpuDown();
-    return engineTrial(gpu, steps);
+    const g = gpuState();
+    if (!g) return null;
+    return engineTrial(g.tissue.sim, g.device, steps);
   },
   // Destroys the GPU engine's device, as a driver reset would (the browser tests' forced loss).
-  gpu_destroy: () => gpu?.engine.destroy_device(),
+  gpu_destroy: () => gpuState()?.device.engine.destroy_device(),
   // The CPU core's own milliseconds per step, without the readouts: the fastest of `batches`
   // batches of n steps of a copy of the tissue (the tests' wasm/native report). The tissue shown
   // does not move.
+  /** @param {number} n @param {number} batches */
   core_ms_per_step: (n, batches) => {
-    const copy = sim.core_copy();
+    const copy = sim().core_copy();
     try {
       let best = Infinity;
       for (let b = 0; b < batches; b++) {
@@ -574,63 +910,78 @@ const CALLS = {
       copy.free();
     }
   },
-  set: (name, value) => edited(sim[`set_${name}`](value)),
-  paint_substrate: (...a) => edited(sim.paint_substrate(...a)),
-  remove_cell_at: (...a) => edited(sim.remove_cell_at(...a)),
-  substrate_at: (...a) => sim.substrate_at(...a),
-  cell_at: (...a) => sim.cell_at(...a),
-  n_cells: () => sim.n_cells(),
-  box_size: () => sim.box_size(),
-  fingerprint: () => sim.fingerprint(),
-  phi_sum: () => sim.phi_sum(),
-  field_values: (kind) => sim.field_values(kind),
-  evaluate: () => sim.evaluate(),
+  /** @param {keyof SETTERS} name @param {number} value */
+  set_param: (name, value) => edited(SETTERS[name](sim(), value)),
+  /** @param {number} x @param {number} y @param {number} radius @param {number} multiplier */
+  paint_substrate: (x, y, radius, multiplier) => edited(sim().paint_substrate(x, y, radius, multiplier)),
+  /** @param {number} x @param {number} y */
+  remove_cell_at: (x, y) => edited(sim().remove_cell_at(x, y)),
+  /** @param {number} x @param {number} y */
+  substrate_at: (x, y) => sim().substrate_at(x, y),
+  /** @param {number} x @param {number} y */
+  cell_at: (x, y) => sim().cell_at(x, y),
+  n_cells: () => sim().n_cells(),
+  box_size: () => sim().box_size(),
+  fingerprint: () => sim().fingerprint(),
+  phi_sum: () => sim().phi_sum(),
+  /** @param {FieldKind} kind */
+  field_values: (kind) => sim().field_values(kind),
+  evaluate: () => sim().evaluate(),
   // The ±½ defects and spiral cores that the view of `kind` marks (counts), built now.
+  /** @param {FieldKind} kind */
   marks: (kind) => {
-    sim.field_values(kind);
-    return { defects: sim.defects().length / 4, spiralCores: sim.spiral_cores().length / 3 };
+    const s = sim();
+    s.field_values(kind);
+    return { defects: count(s.defects()), spiralCores: count(s.spiral_cores()) };
   },
-  defects: () => (playback ? playback.p : sim).defects(),
-  spiral_cores: () => (playback ? playback.p : sim).spiral_cores(),
+  defects: () => defectsOf((state.kind === 'frames' ? state.playback.p : sim()).defects()),
+  spiral_cores: () => spiralCoresOf((state.kind === 'frames' ? state.playback.p : sim()).spiral_cores()),
   stats: () => stats(),
   // The Download button: the readouts since the tissue was made (CSV), the current state as a
   // native frame file and a run.json that makes a run of it for `monolayer analyze`.
   download: () => {
-    if (!sim) throw new Error("this takes data out of the live simulation, and a run's frames are shown (Reset returns to it)");
-    return downloadParts();
+    const t = tissueOf();
+    if (!t) throw new Error("this takes data out of the live simulation, and a run's frames are shown (Reset returns to it)");
+    const s = t.sim;
+    return { csv: s.readouts_csv(), npz: s.frame_npz(), frameName: s.frame_name(), runJson: s.run_json(), step: s.step_count() };
   },
-  readout_rows: () => sim.readout_rows(),
+  readout_rows: () => sim().readout_rows(),
+  // The live tissue's saved states ("What if?"): their steps, fingerprints when saved and sizes.
+  saved_states: () => {
+    const t = tissueOf();
+    const s = t ? (t.live ?? t.sim) : null;
+    return (s?.saved_states() ?? []).map((x) => {
+      const out = { step: x.step, fingerprint: x.fingerprint, bytes: x.bytes };
+      x.free();
+      return out;
+    });
+  },
+  // "What if?": a replay of the last hole with activity × factor, and back to the live tissue.
+  /** @param {number} factor */
+  what_if: (factor) => toReplay(factor),
+  back_to_live: () => toLive(),
   // A run's frames: `files` (File objects the page was given) replace the live simulation.
+  /** @param {File[]} files */
   open: (files) => openRun(files),
+  /** @param {number} index */
   show: (index) => showFrame(index),
 };
-
-// An edit of `sim` reaches the GPU before its next step.
-function edited(value) {
-  gpuEdited = gpu !== null;
-  return value;
-}
-
-function downloadParts() {
-  return {
-    csv: sim.readouts_csv(),
-    npz: sim.frame_npz(),
-    frameName: sim.frame_name(),
-    runJson: sim.run_json(),
-    step: sim.step_count(),
-  };
-}
+/** @typedef {typeof CALLS} Calls */
+/** @typedef {keyof Calls} CallName */
 
 const FRAME_NAME = /^frame_\d+\.npz$/;
 // A run directory's other files (its checkpoints, lock, and the tables and plots of `analyze`):
 // skipped without a word when a whole directory is opened.
 const RUN_FILES = /^(checkpoint\.npz|last_good_state\.npz|\..*|.*\.(csv|png|svg|md|txt|webm))$/;
 
-// Opens the files of a run (its run.json and frame_*.npz; a directory's other files are
-// ignored): every frame is read and checked on its own, so that a bad one is reported, naming
-// the file, and skipped. Returns { frames: [{ name, step }], errors, seed, runVersion, hasRecord }
-// or { error, errors } when nothing can be shown (the live simulation then carries on).
+// cpu / gpu / frames → frames: opens the files of a run (its run.json and frame_*.npz; a
+// directory's other files are ignored): every frame is read and checked on its own, so that a
+// bad one is reported, naming the file, and skipped. Returns { frames: [{ name, step }], errors,
+// seed, runVersion, hasRecord } or { error, errors } when nothing can be shown (the live
+// simulation then carries on).
+/** @param {File[]} files */
 async function openRun(files) {
+  /** @type {string[]} */
   const errors = [];
   const records = files.filter((f) => f.name === 'run.json');
   const frames = files.filter((f) => FRAME_NAME.test(f.name)).sort((a, b) => (a.name < b.name ? -1 : 1));
@@ -642,11 +993,13 @@ async function openRun(files) {
   if (records.length > 1) errors.push(`${records.length} files named run.json: using the first`);
   let p;
   try {
-    p = records.length ? new core.WebPlayback('run.json', await records[0].text()) : new core.WebPlayback('', '');
+    const Playback = core().WebPlayback;
+    p = records.length ? new Playback('run.json', await records[0].text()) : new Playback('', '');
   } catch (e) {
-    return { error: String(e.message ?? e), errors };
+    return { error: messageOf(e), errors };
   }
   if (!records.length) errors.push('no run.json: the frames are shown with the default parameters (R, ζ, Δt) at their own size');
+  /** @type {RunFrame[]} */
   const good = [];
   for (const file of frames) {
     try {
@@ -654,7 +1007,7 @@ async function openRun(files) {
       if (good.some((g) => g.step === step)) errors.push(`${file.name}: step ${step} again: skipped`);
       else good.push({ name: file.name, step, file });
     } catch (e) {
-      errors.push(String(e.message ?? e));
+      errors.push(messageOf(e));
     }
   }
   if (!good.length) {
@@ -662,12 +1015,9 @@ async function openRun(files) {
     return { error: frames.length ? 'none of the frames could be read' : 'no frame_<step>.npz among the files', errors };
   }
   good.sort((a, b) => a.step - b.step);
-  playing = false;
-  gpu = null;
-  if (sim) sim.free();
-  sim = null;
-  if (playback) playback.p.free();
-  playback = { p, frames: good, index: -1 };
+  pace.playing = false;
+  drop();
+  state = { kind: 'frames', playback: { p, frames: good, index: -1 } };
   const first = await showFrame(0);
   return {
     frames: good.map(({ name, step }) => ({ name, step })), errors: first.error ? [...errors, first.error] : errors,
@@ -676,95 +1026,103 @@ async function openRun(files) {
 }
 
 // Shows frame `index` of the run opened: { step } or { error } (naming the file).
+/** @param {number} index @returns {Promise<{ index: number, step: number, error?: string }>} */
 async function showFrame(index) {
+  if (state.kind !== 'frames') throw new Error("no run's frames are open");
+  const playback = state.playback;
   const f = playback.frames[index];
   try {
     playback.p.show(f.name, new Uint8Array(await f.file.arrayBuffer()));
   } catch (e) {
-    return { index, step: f.step, error: String(e.message ?? e) };
+    return { index, step: f.step, error: messageOf(e) };
   }
   playback.index = index;
-  changed = true;
+  view.changed = true;
   return { index, step: f.step };
 }
 
-// A new tissue (the 'new' message): from a shipped state where one fits, else from
-// random disks; then the engine that steps it.
+// any → none → cpu (→ gpu): a new tissue (the 'new' message), from a shipped state where one
+// fits, else from random disks; then the engine that steps it.
+/** @param {NewTissue} m */
 async function newTissue(m) {
   await loadCore(m);
-  gpu = null;
-  if (sim) sim.free();
-  sim = null;
-  if (playback) playback.p.free();
-  playback = null;
+  drop();
   const { size, params: p, seed } = m;
+  /** @type {[number, number, number, number, number, number, number]} */
   const args = [size.box, size.cells, size.relaxSteps, p.zeta, p.chi, p.gamma, seed];
+  const c = core();
+  /** @type {WebSim | null} */
+  let s = null;
+  /** @type {'snapshot' | 'disks'} */
+  let startedFrom = 'snapshot';
   if (m.shipped) {
     try {
       const res = await fetch(m.shipped);
       if (!res.ok) throw new Error(`HTTP ${res.status}`);
-      sim = core.WebSim.from_snapshot(new Uint8Array(await res.arrayBuffer()), ...args);
-      startedFrom = 'snapshot';
+      s = c.WebSim.from_snapshot(new Uint8Array(await res.arrayBuffer()), ...args);
     } catch (err) {
       // Not fatal: the same tissue comes from relaxing here, only later.
-      console.warn(`relaxing live: the shipped state ${m.shipped} was not usable (${err.message ?? err})`);
+      console.warn(`relaxing live: the shipped state ${m.shipped} was not usable (${messageOf(err)})`);
     }
   }
   try {
-    if (!sim) {
-      sim = new core.WebSim(...args);
+    if (!s) {
+      s = new c.WebSim(...args);
       startedFrom = 'disks';
     }
-    startedAt = sim.step_count();
   } catch (err) {
-    postMessage({ type: 'fatal', message: `Could not start the simulation: ${err.message ?? err}` });
+    post({ type: 'fatal', message: `Could not start the simulation: ${messageOf(err)}` });
     return;
   }
-  await chooseEngine(m.engine ?? 'auto');
-  changed = true;
-  postMessage({ type: 'ready', stats: stats() });
+  await chooseEngine({ sim: s, live: null, startedFrom, startedAt: s.step_count() }, m.engine ?? 'auto');
+  view.changed = true;
+  post({ type: 'ready', stats: stats() });
 }
 
 // Messages are handled one after the other, each after the last one's awaits (the core's
 // instantiation, a relaxed state's download): a call or a second 'new' never meets a
 // half-made simulation.
-let inbox = Promise.resolve();
-onmessage = (e) => {
-  inbox = inbox.then(() => handle(e.data));
+const inbox = { queue: Promise.resolve() };
+scope.onmessage = (/** @type {MessageEvent<WorkerIn>} */ e) => {
+  inbox.queue = inbox.queue.then(() => handle(e.data));
 };
 
+/** @param {WorkerIn} m */
 async function handle(m) {
   try {
     if (m.type === 'new') {
-      await exclusive(() => newTissue(m));
+      await inTurn(() => newTissue(m));
     } else if (m.type === 'engine') {
-      // Another engine for the same tissue: it goes on from the state it has now.
-      await exclusive(async () => {
-        if (!sim) return;
-        if (gpu) await gpuDown();
-        await chooseEngine(m.engine);
-        speed = { steps: 0, ms: 0 };
-        changed = true;
-        postMessage({ type: 'engine', stats: stats() });
+      // cpu / gpu → cpu (→ gpu): another engine for the same tissue, from the state it has now.
+      await inTurn(async () => {
+        if (!tissueOf()) return;
+        await gpuDown();
+        const t = tissueOf();
+        if (!t) return;
+        await chooseEngine(t, m.engine);
+        pace.steps = pace.ms = 0;
+        view.changed = true;
+        post({ type: 'engine', stats: stats() });
       });
     } else if (m.type === 'play') {
-      playing = m.on;
+      pace.playing = m.on;
     } else if (m.type === 'spf') {
-      spf = m.n;
+      pace.spf = m.n;
     } else if (m.type === 'frame') {
-      frameRequest = m;
+      view.request = { field: m.field, dpr: m.dpr };
     } else if (m.type === 'call') {
       try {
         // Level with the GPU first: a call reads or edits the tissue as it is now.
-        const value = await exclusive(async () => {
-          if (gpu && sim) await gpuDown();
-          return CALLS[m.method](...(m.args ?? []));
+        const value = await inTurn(async () => {
+          await gpuDown();
+          const fn = /** @type {(...a: unknown[]) => unknown} */ (CALLS[m.method]);
+          return fn(...(m.args ?? []));
         });
-        changed = true; // cheap to assume: a call may have edited the tissue
-        postMessage({ type: 'result', id: m.id, value });
+        view.changed = true; // cheap to assume: a call may have edited the tissue
+        post({ type: 'result', id: m.id, value });
       } catch (err) {
         if (err instanceof WebAssembly.RuntimeError) throw err;
-        postMessage({ type: 'result', id: m.id, error: String(err.message ?? err) });
+        post({ type: 'result', id: m.id, error: messageOf(err) });
       }
     }
     schedule();
