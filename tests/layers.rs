@@ -592,3 +592,44 @@ fn a_circle_of_imports_is_detected() {
     fs::write(src.join("b/w.rs"), "use super::z::Z;\n").unwrap();
     assert_eq!(import_circles(src).len(), 1, "{:?}", import_circles(src));
 }
+
+/// The `use` lines of `text` that take an item from the crate's root (`crate::Monolayer`, the
+/// re-exports for the library's users) instead of from its layer (`crate::model::Monolayer`).
+fn root_imports(text: &str) -> Vec<String> {
+    const LAYERS: [&str; 6] = ["model", "analysis", "formats", "gpu", "run", "web"];
+    text.lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with("use crate::") || l.starts_with("pub use crate::"))
+        .filter(|l| {
+            let rest = l.split("crate::").nth(1).unwrap_or("");
+            !LAYERS
+                .iter()
+                .any(|layer| rest.starts_with(&format!("{layer}::")) || rest.starts_with(&format!("{layer};")))
+        })
+        .map(String::from)
+        .collect()
+}
+
+/// One import style inside the crate: every item from its layer, so that a reader sees where it
+/// lives (the crate's root re-exports a few core types for the library's users only).
+#[test]
+fn the_crate_imports_from_layers_not_its_root() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let found: Vec<String> = rust_files(&src)
+        .into_iter()
+        .flat_map(|f| {
+            let text = fs::read_to_string(&f).unwrap();
+            root_imports(&text).into_iter().map(move |l| format!("{}: {l}", f.display()))
+        })
+        .collect();
+    assert!(found.is_empty(), "imports from the crate's root (take them from their layer):\n{}", found.join("\n"));
+}
+
+#[test]
+fn an_import_from_the_root_is_detected() {
+    assert_eq!(
+        root_imports("use crate::{Monolayer, Params};\nuse crate::model::Patch;"),
+        ["use crate::{Monolayer, Params};"]
+    );
+    assert!(root_imports("    use crate::model::{Monolayer, Params};\nuse crate::run::RunDir;").is_empty());
+}

@@ -14,11 +14,11 @@ use std::collections::VecDeque;
 
 use crate::analysis::{periodic_distance, HoleTracker};
 use crate::formats::snapshot;
+use crate::model::{Monolayer, Params};
 use crate::model::{SimError, State};
-use crate::{Monolayer, Params};
 
 /// Active steps between two saved states: a multiple of the readouts' rows
-/// ([`super::ROW_EVERY`]), so that the GPU engine hands over every state to be saved.
+/// (`ROW_EVERY` of the readouts), so that the GPU engine hands over every state to be saved.
 pub const SAVE_EVERY: u64 = 500;
 /// Saved states kept: the oldest is dropped for a new one (what they weigh:
 /// docs/performance.md, the saved states of "What if?").
@@ -193,8 +193,6 @@ impl Watch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::{nucleation_area, VoidRegions};
-    use crate::web::ReadoutLog;
 
     /// A small active tissue: relaxation of 20 steps, then activity.
     fn tissue() -> Monolayer {
@@ -275,34 +273,4 @@ mod tests {
         let others = [n(1_400, 10.0, 70.0), n(w.until + 10, 1.0, 70.0), n(1_000, 1.0, 70.0)];
         assert_eq!(w.verdict(w.until + 20, &others), Verdict::Held);
     }
-
-    /// The readouts' tracker: each hole once, at its first row, at its region's centroid.
-    #[test]
-    fn the_readouts_record_each_hole_once_at_its_first_row_where_it_is() {
-        // Half-relaxed disks: void between them, holes by the nucleation criterion.
-        let mut m = tissue();
-        m.advance(20).unwrap();
-        let mut log = ReadoutLog::default();
-        log.record_if_due(&m);
-        let mut regions = VoidRegions::default();
-        regions.find(m.phi_sum(), 40);
-        let area = nucleation_area(m.params().radius);
-        let mut holes: Vec<(f64, f64)> =
-            regions.regions.iter().filter(|r| r.area as f64 > area).map(|r| (r.x, r.y)).collect();
-        assert!(!holes.is_empty(), "no hole between half-relaxed disks: the test proves little");
-        let mut found: Vec<(f64, f64)> = log.nucleations.iter().map(|n| (n.x, n.y)).collect();
-        holes.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        found.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        assert_eq!(found, holes);
-        assert!(log.nucleations.iter().all(|n| n.step == 20));
-        // The same row again, then the same state a row later: the holes go on, none is new.
-        log.record_if_due(&m);
-        let mut state = m.state();
-        state.step += ROW;
-        log.record_if_due(&Monolayer::from_state(m.params().clone(), m.seed(), state).unwrap());
-        assert_eq!(log.rows.len(), 2);
-        assert_eq!(log.nucleations.len(), holes.len());
-    }
-
-    const ROW: u64 = crate::web::ROW_EVERY;
 }

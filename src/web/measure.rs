@@ -30,7 +30,7 @@ pub fn tissue_stats(phi_sum: &[f64], l: usize, radius: f64, regions: &mut VoidRe
 mod tests {
     use super::*;
     use crate::analysis::Analysis;
-    use crate::{Monolayer, Params};
+    use crate::model::{Monolayer, Params};
 
     #[test]
     fn holes_are_void_regions_above_a_quarter_cell_joined_across_the_edges() {

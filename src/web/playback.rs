@@ -6,7 +6,7 @@
 
 use crate::analysis::VoidRegions;
 use crate::model::State;
-use crate::{Monolayer, Params};
+use crate::model::{Monolayer, Params};
 
 use super::measure::{tissue_stats, TissueStats};
 use super::view::{FieldKind, View, ViewBuilder};

@@ -6,8 +6,8 @@
 
 use crate::analysis::{Analysis, Detail, HoleTracker};
 use crate::formats::RunRecord;
+use crate::model::Monolayer;
 use crate::model::SimError;
-use crate::Monolayer;
 
 use super::history::Nucleation;
 use super::version::code_version;
@@ -200,8 +200,9 @@ pub fn run_record_json(m: &Monolayer) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analysis::{nucleation_area, VoidRegions};
+    use crate::model::Params;
     use crate::web::measure::tissue_stats;
-    use crate::Params;
 
     #[test]
     fn rows_fall_every_row_every_active_steps_and_match_the_live_readouts() {
@@ -232,5 +233,34 @@ mod tests {
         assert!(csv.contains(&format!("code version {}", code_version())));
         assert!(csv.contains("# seed 2\n"));
         assert!(csv.contains("\"box_size\":40"));
+    }
+
+    /// The readouts' tracker: each hole once, at its first row, at its region's centroid.
+    #[test]
+    fn the_readouts_record_each_hole_once_at_its_first_row_where_it_is() {
+        // Half-relaxed disks: void between them, holes by the nucleation criterion.
+        let p = Params { box_size: 40, n_cells: 5, relax_steps: 20, ..Params::default() };
+        let mut m = Monolayer::new(p, 4).unwrap();
+        m.advance(20).unwrap();
+        let mut log = ReadoutLog::default();
+        log.record_if_due(&m);
+        let mut regions = VoidRegions::default();
+        regions.find(m.phi_sum(), 40);
+        let area = nucleation_area(m.params().radius);
+        let mut holes: Vec<(f64, f64)> =
+            regions.regions.iter().filter(|r| r.area as f64 > area).map(|r| (r.x, r.y)).collect();
+        assert!(!holes.is_empty(), "no hole between half-relaxed disks: the test proves little");
+        let mut found: Vec<(f64, f64)> = log.nucleations.iter().map(|n| (n.x, n.y)).collect();
+        holes.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        found.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        assert_eq!(found, holes);
+        assert!(log.nucleations.iter().all(|n| n.step == 20));
+        // The same row again, then the same state a row later: the holes go on, none is new.
+        log.record_if_due(&m);
+        let mut state = m.state();
+        state.step += ROW_EVERY;
+        log.record_if_due(&Monolayer::from_state(m.params().clone(), m.seed(), state).unwrap());
+        assert_eq!(log.rows.len(), 2);
+        assert_eq!(log.nucleations.len(), holes.len());
     }
 }

@@ -13,7 +13,7 @@ use super::render::WebView;
 use super::view::{FieldKind, ViewBuilder};
 use crate::analysis::VoidRegions;
 use crate::formats::{encode_frame, frame_file_name, snapshot};
-use crate::{Monolayer, Params};
+use crate::model::{Monolayer, Params};
 
 /// The page's parameters: its size and the three sliders; every other one is the native default.
 fn page_params(box_size: usize, n_cells: usize, relax_steps: u32, zeta: f64, chi: f64, gamma: f64) -> Params {
