@@ -290,7 +290,7 @@ impl Layout {
         Self::with_capacity(m, Self::default_capacity(m))
     }
 
-    /// [`CAPACITY_FACTOR`] times the largest padded patch, and at least a relaxation patch.
+    /// `CAPACITY_FACTOR` times the largest padded patch, and at least a relaxation patch.
     pub fn default_capacity(m: &Monolayer) -> usize {
         let p = m.params();
         let square = (p.relax_patch_size + 2) * (p.relax_patch_size + 2);

@@ -99,8 +99,8 @@ pub enum Preconditioner {
 }
 
 impl Preconditioner {
-    /// CG iterations recorded per solve unless set otherwise ([`SOLVE_ITERATIONS`],
-    /// [`JACOBI_ITERATIONS`]).
+    /// CG iterations recorded per solve unless set otherwise (`SOLVE_ITERATIONS`,
+    /// `JACOBI_ITERATIONS`).
     pub fn default_iterations(self) -> usize {
         match self {
             Preconditioner::Multigrid => SOLVE_ITERATIONS,

@@ -35,12 +35,8 @@ mod kernels;
 mod readback;
 mod stepper;
 
-pub use buffers::{
-    patch_storage, DeviceState, GpuParams, GpuPatch, Layout, PatchFault, Slot, SolveScalars, CAPACITY_FACTOR, NO_FAULT,
-};
+pub use buffers::{patch_storage, DeviceState, GpuPatch, Layout, PatchFault, Slot, SolveScalars, NO_FAULT};
 pub use context::{GpuContext, GpuError};
 pub use iterations::LOWER_AFTER;
-pub use kernels::{
-    compile, serial_chain, GpuMonolayer, Kernel, Pipelines, Preconditioner, JACOBI_ITERATIONS, SOLVE_ITERATIONS,
-};
-pub use stepper::{Faults, FaultsReadback, GpuRun, GpuRunError, IN_FLIGHT};
+pub use kernels::{compile, serial_chain, GpuMonolayer, Kernel, Pipelines, Preconditioner};
+pub use stepper::{GpuRun, GpuRunError, IN_FLIGHT};
