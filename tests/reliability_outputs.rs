@@ -280,20 +280,7 @@ fn tables_only_without_a_grid_measures_the_runs_in_the_directory() {
         args.extend_from_slice(extra);
         monolayer(&args)
     };
-    ok(&sweep(&[
-        "--grid",
-        "zeta=0.2,0.4",
-        "--frame-interval",
-        "50",
-        "--set",
-        "box_size=48",
-        "--set",
-        "n_cells=6",
-        "--set",
-        "relax_steps=100",
-        "--set",
-        "active_steps=100",
-    ]));
+    ok(&sweep(&SWEEP_ARGS));
     let before = (lines(&out.join("summary.csv")), lines(&out.join("regimes.csv")));
     assert_eq!(before.0.len(), 3, "{:?}", before.0);
     let o = sweep(&["--tables-only"]);

@@ -55,27 +55,12 @@ fn a_signal_stops_a_run_gracefully_and_it_resumes_to_the_same_bits() {
 fn a_signal_stops_a_sweep_and_the_same_command_finishes_it() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s");
-    let args = [
-        "sweep",
-        "--quiet",
-        "--jobs",
-        "1",
-        "--out",
-        arg(&out),
-        "--grid",
-        "zeta=0.2,0.4",
-        "--frame-interval",
-        "50",
-        "--set",
-        "box_size=48",
-        "--set",
-        "n_cells=6",
-        "--set",
-        "relax_steps=100",
-        "--set",
-        "active_steps=3000",
-    ];
-    let mut child = common::command().args(args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    // The shared small sweep, its active phase long enough to be stopped part way.
+    let mut args = vec!["sweep", "--quiet", "--jobs", "1", "--out", arg(&out)];
+    args.extend_from_slice(&SWEEP_ARGS[..SWEEP_ARGS.len() - 1]);
+    args.push("active_steps=3000");
+    assert_eq!(SWEEP_ARGS[SWEEP_ARGS.len() - 1], "active_steps=100");
+    let mut child = common::command().args(&args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
     let first = out.join("runs/zeta0.2_seed1");
     wait_for_file(&mut child, &frame_path(&first, 200), "the sweep");
     send(&child, "TERM");
