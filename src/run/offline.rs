@@ -119,9 +119,22 @@ impl RunAnalysis {
 
     /// The tables, as (file name, CSV text).
     pub fn tables(&self) -> Vec<(&'static str, String)> {
-        let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
-        // Times are step × Δt: print 31, not 31.000000000000004.
-        let time = |t: f64| (t * 1e9).round() / 1e9;
+        let (holes, areas) = self.holes_tables();
+        vec![
+            ("frames.csv", self.frames_table()),
+            ("hole_precursors.csv", precursor_table(&self.precursors.rows)),
+            ("hole_precursors_chance.csv", precursor_table(&self.precursors.chance)),
+            ("hole_alignment.csv", self.alignment_table()),
+            ("hole_probability.csv", self.probability_table()),
+            ("holes.csv", holes),
+            ("hole_areas.csv", areas),
+            ("correlations.csv", self.correlations_table()),
+            ("defects_and_spirals.csv", self.points_table()),
+        ]
+    }
+
+    /// `frames.csv`: a row of measures per frame.
+    fn frames_table(&self) -> String {
         let mut frames = String::from(
             "step,time,packing_fraction,void_fraction,void_regions,holes_open,largest_void_area,plus_half_defects,\
              minus_half_defects,spiral_cores,max_strain_rate,velocity_correlation_length,nematic_correlation_length,\
@@ -150,6 +163,11 @@ impl RunAnalysis {
                 opt(s.aspect_ratio_p90)
             );
         }
+        frames
+    }
+
+    /// `holes.csv` (a row per hole) and `hole_areas.csv` (a row per hole and frame).
+    fn holes_tables(&self) -> (String, String) {
         let mut holes = String::from(
             "id,nucleation_time,closing_time,lifetime,fate,frames_open,max_area,nucleation_area,\
              nucleation_x,nucleation_y,split_from,merged_into\n",
@@ -178,48 +196,44 @@ impl RunAnalysis {
                 let _ = writeln!(areas, "{},{},{},{:.3},{:.3}", h.id, time(t), a, x, y);
             }
         }
+        (holes, areas)
+    }
+
+    /// `correlations.csv`: C_v(r) and C_Q(r) per frame.
+    fn correlations_table(&self) -> String {
         let mut corr = String::from("step,r,velocity_correlation,nematic_correlation\n");
         for f in &self.frames {
             for (r, (cv, cq)) in f.velocity_correlation.iter().zip(&f.nematic_correlation).enumerate() {
                 let _ = writeln!(corr, "{},{r},{cv:.6},{cq:.6}", f.step);
             }
         }
+        corr
+    }
+
+    /// `defects_and_spirals.csv`: every ±½ defect and spiral core per frame.
+    fn points_table(&self) -> String {
         let mut points = String::from("step,kind,x,y,orientation_or_divergence\n");
         for f in &self.frames {
             for &(kind, x, y, v) in &f.points {
                 let _ = writeln!(points, "{},{kind},{x:.3},{y:.3},{v:.6}", f.step);
             }
         }
+        points
+    }
+
+    /// `hole_probability.csv`: P(hole | ε̇) by strain-rate bin.
+    fn probability_table(&self) -> String {
         let mut probability =
             String::from("strain_rate_bin_low,strain_rate_bin_high,sites,sites_opening_into_a_new_hole,probability\n");
         for (lo, n, h, p) in self.hole_probability.table() {
             let hi = lo + crate::analysis::STRAIN_RATE_BIN;
             let _ = writeln!(probability, "{lo:.6},{hi:.6},{n},{h},{p:.6e}");
         }
-        let precursor_table = |rows: &[crate::analysis::Precursor]| {
-            let mut t = String::from(
-                "hole,frames_before,spiral_core_distance_over_r,plus_half_distance_over_r,\
-                 second_plus_half_distance_over_r,max_strain_rate_within_r_half_over_max,\
-                 plus_half_pair_angle,minus_half_distance_over_r\n",
-            );
-            for p in rows {
-                let _ = writeln!(
-                    t,
-                    "{},{},{},{},{},{:.6},{},{}",
-                    p.hole,
-                    p.frames_before,
-                    opt(p.spiral_core),
-                    opt(p.plus_half[0]),
-                    opt(p.plus_half[1]),
-                    p.strain_rate,
-                    opt(p.plus_half_angle),
-                    opt(p.minus_half)
-                );
-            }
-            t
-        };
-        let precursors = precursor_table(&self.precursors.rows);
-        let chance = precursor_table(&self.precursors.chance);
+        probability
+    }
+
+    /// `hole_alignment.csv`: the cells' mean angle to a hole's tangent, bordering holes and away.
+    fn alignment_table(&self) -> String {
         let mut alignment = String::from("step,cells,where,mean_angle_to_tangent\n");
         for (step, near, away) in &self.alignment {
             for (kind, v) in [("bordering_a_hole", near), ("away_from_holes", away)] {
@@ -229,17 +243,7 @@ impl RunAnalysis {
                 }
             }
         }
-        vec![
-            ("frames.csv", frames),
-            ("hole_precursors.csv", precursors),
-            ("hole_precursors_chance.csv", chance),
-            ("hole_alignment.csv", alignment),
-            ("hole_probability.csv", probability),
-            ("holes.csv", holes),
-            ("hole_areas.csv", areas),
-            ("correlations.csv", corr),
-            ("defects_and_spirals.csv", points),
-        ]
+        alignment
     }
 
     /// C_v(r) and C_Q(r) averaged over the frames measured.
@@ -374,4 +378,38 @@ impl LiveRun {
 /// File name (without extension) of the snapshot of a step.
 fn snapshot_name(step: u64) -> String {
     format!("snapshot_{step:07}")
+}
+
+/// An optional measure as CSV: six decimals, or empty.
+fn opt(v: Option<f64>) -> String {
+    v.map(|x| format!("{x:.6}")).unwrap_or_default()
+}
+
+/// A time as CSV: step × Δt rounded to 1e-9, so 31 prints as 31, not 31.000000000000004.
+fn time(t: f64) -> f64 {
+    (t * 1e9).round() / 1e9
+}
+
+/// `hole_precursors.csv` or its chance baseline: a row per hole and frame before it.
+fn precursor_table(rows: &[crate::analysis::Precursor]) -> String {
+    let mut t = String::from(
+        "hole,frames_before,spiral_core_distance_over_r,plus_half_distance_over_r,\
+         second_plus_half_distance_over_r,max_strain_rate_within_r_half_over_max,\
+         plus_half_pair_angle,minus_half_distance_over_r\n",
+    );
+    for p in rows {
+        let _ = writeln!(
+            t,
+            "{},{},{},{},{},{:.6},{},{}",
+            p.hole,
+            p.frames_before,
+            opt(p.spiral_core),
+            opt(p.plus_half[0]),
+            opt(p.plus_half[1]),
+            p.strain_rate,
+            opt(p.plus_half_angle),
+            opt(p.minus_half)
+        );
+    }
+    t
 }
