@@ -33,11 +33,11 @@ step "unit tests without the \`parallel\` feature (the serial path of par.rs the
 # No --release: the test profile ([profile.test] in Cargo.toml: optimised, debug assertions on).
 cargo test --no-default-features --lib
 
-step "lints and unit tests with the cells' fields stored in f32 (feature \`f32-storage\`, docs/performance.md)"
-# Not the default (it is safe but not faster here); kept compiling and tested, serial and in the
-# test profile, so that the comparison can be made again where memory traffic binds.
+step "lints with the cells' fields stored in f32 (feature \`f32-storage\`, docs/performance.md)"
+# Not the default (it is safe but not faster here); kept compiling, so that the comparison can be
+# made again where memory traffic binds (its unit tests: cargo test --no-default-features
+# --features f32-storage --lib).
 cargo clippy --lib --no-default-features --features f32-storage -- -D warnings
-cargo test --no-default-features --features f32-storage --lib
 
 step "the page's build (www/pkg, www/pkg-threads) and the browser tests' packages"
 # Debian's chromium, firefox-esr and webkit2gtk-driver (with xvfb), and the npm packages of
@@ -48,19 +48,23 @@ for b in /usr/bin/chromium /usr/bin/firefox-esr /usr/bin/WebKitWebDriver; do
     exit 1
   fi
 done
-bash scripts/serve.sh --build-only
+# Without wasm-opt: it changes the bytes, not what the page does, and takes about two minutes of a
+# core for the two builds; the README's serve command runs it (docs/performance.md, Loading).
+NO_WASM_OPT=1 bash scripts/serve.sh --build-only
 (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
 
 step "type check of the page's JavaScript (TypeScript's tsc over www/js, JSDoc types, the core's .d.ts)"
 # www/jsconfig.json: strict, nothing emitted (the page is served as it is, without a build).
 tests/browser/node_modules/.bin/tsc -p www/jsconfig.json
 
-step "browser demo (Chromium: WebGPU on SwiftShader, then WebGL2; the shared checks in Chromium, Firefox and WebKit)"
+step "browser demo (Chromium: WebGPU on SwiftShader; the shared checks in Chromium, Firefox and WebKit)"
 # The native binary the page is compared with (target/release/monolayer): the one the tests step
 # built for the integration tests. Asked for with that step's own command, since a plain
 # `cargo build --bin monolayer` resolves features without the dev-dependencies (proptest turns on
 # bitflags' `std`), which would rebuild bitflags, wgpu and naga here a second time; with the same
 # command nothing is compiled again.
 cargo test --release --features gpu --no-run
-node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/whatif.test.mjs tests/browser/demo.test.mjs \
+# demo.test.mjs on WebGPU only: WebGL2 is drawn by WebKit's run of the shared checks and by
+# Chromium's after its WebGPU device is lost (MODES=webgl2 runs the whole file on it).
+MODES=webgpu node --test --test-reporter=spec tests/browser/url.test.mjs tests/browser/whatif.test.mjs tests/browser/demo.test.mjs \
   tests/browser/viewer.test.mjs tests/browser/engines.test.mjs
