@@ -18,7 +18,7 @@ import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { serve } from './server.mjs';
 import { launch, INSTALLED } from './drivers.mjs';
-import { CHECKS, HANG_MS } from './checks.mjs';
+import { CHECKS, HANG_MS, waiting } from './checks.mjs';
 
 const ROOT = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
 const OUT = path.join(ROOT, 'test-output', 'browser');
@@ -41,6 +41,15 @@ const CANNOT = {
     'the threaded core gives the bits of one thread, on one and two threads':
       'WebKitGTK 2.50 has no SharedArrayBuffer even where the page is cross-origin isolated (crossOriginIsolated is '
       + 'true, SharedArrayBuffer undefined), so the page steps on its single-thread build there',
+  },
+};
+
+// Checks left out of an engine for the suite's time (CI's half hour), each run in two engines
+// of three: ENGINES=firefox ONLY=<part of its name> runs one alone.
+const SPARED = {
+  firefox: {
+    'the guided tour shows each caption at its event, in an embedded page':
+      "the suite's time: the tour (46 s here) runs in Chromium and WebKit",
   },
 };
 
@@ -76,16 +85,20 @@ after(async () => {
 });
 
 // A driver session of Firefox or WebKit hangs now and then: a page stops answering, with no error
-// (seen at "a preset and a field" in two full runs of four, Firefox once and WebKit once, each
-// passing alone and on its second try; the cause is not found). Such a check is tried once more in
-// a new browser, and the log says so; a second hang fails it. Chromium gets no second try.
-// Three minutes: twice the slowest check seen in these engines (WebKit's first hole, 87 s on a loaded machine).
-const ATTEMPT_MS = Number(process.env.ATTEMPT_MS ?? 3 * 60 * 1000);
-async function triedTwiceIfHung(engine, attempt, relaunch) {
+// (seen at "a preset and a field" and at "Download" in three full runs of six, in Firefox twice and
+// WebKit once, each passing alone and on its second try; the cause is not found, and the message
+// says what the check was waiting for). Such a check is tried once more in a new browser, and the
+// log says so; a second hang fails it. Chromium gets no second try. A check's time before it counts
+// as hung: one minute (the others take under 10 s), four for those that play the paper's tissue to
+// its first hole (`long`: 87 s is the slowest seen, WebKit's on a loaded machine).
+const ATTEMPT_MS = Number(process.env.ATTEMPT_MS ?? 60 * 1000);
+const LONG_ATTEMPT_MS = 4 * ATTEMPT_MS;
+async function triedTwiceIfHung(engine, limit, attempt, relaunch) {
   for (let k = 0; ; k++) {
     let timer;
     const hang = new Promise((_, reject) => {
-      timer = setTimeout(() => reject(new Error(`hung: no answer within ${ATTEMPT_MS / 1000} s`)), ATTEMPT_MS);
+      timer = setTimeout(() => reject(new Error(`hung: no answer within ${limit / 1000} s, waiting for ${waiting.what}`
+        + ` (the page answered ${waiting.polls} polls)`)), limit);
     });
     try {
       return await Promise.race([attempt(), hang]);
@@ -112,7 +125,7 @@ for (const engine of ENGINES) {
     });
     for (const check of CHECKS) {
       if (ONLY && !check.name.includes(ONLY)) continue;
-      const why = CANNOT[engine]?.[check.name] ?? (engine === 'chromium' && check.chromium ? `in Chromium, ${check.chromium}` : false);
+      const why = CANNOT[engine]?.[check.name] ?? (ONLY ? undefined : SPARED[engine]?.[check.name]) ?? (engine === 'chromium' && check.chromium ? `in Chromium, ${check.chromium}` : false);
       const skip = why || (!check.core && engine !== 'chromium' && 'Chromium only');
       it(check.name, { skip, timeout: HANG_MS }, async () => {
         const t0 = Date.now();
@@ -122,7 +135,7 @@ for (const engine of ENGINES) {
           await Promise.race([browser?.close().catch(() => {}), new Promise((r) => setTimeout(r, 10_000))]);
           browser = await launch(engine);
         };
-        await triedTwiceIfHung(engine, () => check.run(browser, ctx), relaunch);
+        await triedTwiceIfHung(engine, check.long ? LONG_ATTEMPT_MS : ATTEMPT_MS, () => check.run(browser, ctx), relaunch);
         (m.seconds ??= {})[check.name] = (Date.now() - t0) / 1000;
       });
     }
