@@ -41,7 +41,15 @@ export async function openPage(b, base, query, opts) {
   Object.assign(waiting, { what: `the page ${query} to open`, polls: 0 });
   const p = await b.open(base + query, opts);
   if (!p) return null;
-  await until(p, 'the page to load', () => window.demo && (window.demo.ready || window.demo.error));
+  // Polled here rather than by `until`, so that a page that never gets ready says where it
+  // stopped (window.demo.stage: the page's and the worker's last step of making the tissue).
+  for (const t0 = Date.now(); ;) {
+    const s = await p.evaluate(() => ({ done: !!window.demo && !!(window.demo.ready || window.demo.error), stage: window.demo?.stage }));
+    if (s.done) break;
+    Object.assign(waiting, { what: `the page ${query} to load (last: ${s.stage ?? 'no script yet'})`, polls: waiting.polls + 1 });
+    if (Date.now() - t0 > HANG_MS) throw new Error(`hung: waited ${HANG_MS / 1000} s for ${waiting.what}`);
+    await new Promise((r) => setTimeout(r, 150));
+  }
   const err = await p.evaluate(() => window.demo.error);
   assert(!err, `page error: ${err}`);
   return p;

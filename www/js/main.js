@@ -132,6 +132,8 @@ worker.onmessage = (e) => {
     calls.delete(m.id);
     if (m.error !== undefined) c?.reject(new Error(m.error));
     else c?.resolve(m.value);
+  } else if (m.type === 'stage') {
+    demo.stage = `worker: ${m.text}`;
   } else if (m.type === 'progress') {
     // The GPU engine's kernels compiling (once per device): shown over the view until the
     // engine is chosen.
@@ -690,6 +692,7 @@ demo.playback = viewer.state;
 
 // --- start ----------------------------------------------------------------------------------------
 async function boot() {
+  demo.stage = 'page: loading the core';
   try {
     await init();
   } catch (e) {
@@ -707,6 +710,7 @@ async function boot() {
   changed();
   tell({ type: 'spf', n: page.state.spf });
   showMessage('Looking for WebGPU or WebGL2…');
+  demo.stage = 'page: looking for a renderer';
   loop.resizeCanvas();
   try {
     const made = await makeRenderer(0, false);
@@ -727,6 +731,7 @@ async function boot() {
     if (r && 'destroy_device' in r) r.destroy_device();
     canvas.getContext('webgl2')?.getExtension('WEBGL_lose_context')?.loseContext();
   };
+  demo.stage = 'page: making the tissue';
   if (page.state.tour) await tour.start();
   else await newSim();
   if (demo.error) return;

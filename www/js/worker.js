@@ -149,6 +149,7 @@
  * The messages out.
  * @typedef {{ type: 'ready', stats: Stats }
  *   | { type: 'progress', text: string }
+ *   | { type: 'stage', text: string }
  *   | { type: 'engine', stats: Stats, lost?: string }
  *   | { type: 'frame', parts: FrameParts, stats: Stats, cores: number }
  *   | { type: 'stopped', why: string, active: boolean }
@@ -283,6 +284,13 @@ function fatal(e) {
   state = { kind: 'none' };
 }
 
+// What the worker is waiting on while it makes a tissue, for the page's `demo.stage` (a page
+// that never becomes ready says where it stopped).
+/** @param {string} text */
+function stage(text) {
+  post({ type: 'stage', text });
+}
+
 // Loads the core for the first tissue `m` (the build stays for the worker's life).
 /** @param {NewTissue} m */
 async function loadCore(m) {
@@ -292,6 +300,7 @@ async function loadCore(m) {
   else if (typeof SharedArrayBuffer === 'undefined') why = 'this browser has no SharedArrayBuffer';
   else if (m.engine === 'gpu') why = 'the GPU engine is in the single-thread build';
   else if (m.engine === 'auto') {
+    stage('asking WebGPU for an adapter');
     const found = await gpuAdapterOnce();
     if (!('error' in found) && !found.software) why = 'the GPU engine may step here, and it is in the single-thread build';
   }
@@ -301,9 +310,11 @@ async function loadCore(m) {
       // nightly toolchain built it, and its exports are the single-thread build's without the
       // GPU engine, with initThreadPool.
       const THREADED = '../pkg-threads/monolayer.js';
+      stage('loading the threaded core');
       const threaded = /** @type {Core & { default(): Promise<unknown>, initThreadPool(n: number): Promise<unknown> }} */ (
         await import(THREADED));
       await threaded.default();
+      stage('starting the threaded core\'s threads');
       await threaded.initThreadPool(Math.max(1, m.threads ?? navigator.hardwareConcurrency ?? 1));
       loaded.core = threaded;
       loaded.coreNote = 'threaded build, cross-origin isolated';
@@ -312,6 +323,7 @@ async function loadCore(m) {
       why = `the threaded build did not load (${messageOf(e)})`;
     }
   }
+  stage('loading the single-thread core');
   const single = await import('../pkg/monolayer.js');
   await single.default();
   loaded.core = single;
@@ -1057,6 +1069,7 @@ async function newTissue(m) {
   let startedFrom = 'snapshot';
   if (m.shipped) {
     try {
+      stage('fetching the shipped state');
       const res = await fetch(m.shipped);
       if (!res.ok) throw new Error(`HTTP ${res.status}`);
       s = c.WebSim.from_snapshot(new Uint8Array(await res.arrayBuffer()), ...args);
@@ -1074,6 +1087,7 @@ async function newTissue(m) {
     post({ type: 'fatal', message: `Could not start the simulation: ${messageOf(err)}` });
     return;
   }
+  stage('choosing the engine');
   await chooseEngine({ sim: s, live: null, startedFrom, startedAt: s.step_count() }, m.engine ?? 'auto');
   view.changed = true;
   post({ type: 'ready', stats: stats() });
