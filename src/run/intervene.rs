@@ -31,6 +31,7 @@ use crate::analysis::{
 };
 use crate::formats::{Engine, RunRecord, RunStatus};
 use crate::model::{Monolayer, Params, Perturbation};
+use crate::run::csv;
 use crate::run::error::RunError;
 
 /// χ = ξ_s/ξ_cell of the local-flows arm: the paper's "χ ∼ 1, correlations smaller than a cell".
@@ -557,10 +558,6 @@ fn sd(v: &[f64]) -> Option<f64> {
     (v.len() > 1).then(|| (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt())
 }
 
-fn opt(v: Option<f64>) -> String {
-    v.map(|x| format!("{x:.4}")).unwrap_or_default()
-}
-
 fn interval_cells(i: Option<(f64, f64)>) -> String {
     i.map(|(lo, hi)| format!("{lo:.4},{hi:.4}")).unwrap_or_else(|| ",".into())
 }
@@ -639,7 +636,7 @@ fn traces_csv(plan: &Plan, trace: &[TraceRow]) -> String {
             t.least,
             t.strain_rate,
             t.mean_speed,
-            opt(t.velocity_correlation_length)
+            csv::cell(t.velocity_correlation_length, 4)
         );
     }
     s
@@ -660,8 +657,8 @@ fn summary_csv(rows: &[Share]) -> String {
             r.seeds,
             r.share,
             interval_cells(r.interval),
-            opt(r.seed_sd),
-            opt(r.prevented),
+            csv::cell(r.seed_sd, 4),
+            csv::cell(r.prevented, 4),
             interval_cells(r.prevented_interval)
         );
     }
@@ -696,7 +693,7 @@ fn trace_summary_csv(plan: &Plan, trace: &[TraceRow], o: &InterveneOptions) -> S
                     least[least.len() / 2],
                     mean(&|t| t.strain_rate),
                     mean(&|t| t.mean_speed),
-                    opt((!lengths.is_empty()).then(|| lengths.iter().sum::<f64>() / lengths.len() as f64))
+                    csv::cell((!lengths.is_empty()).then(|| lengths.iter().sum::<f64>() / lengths.len() as f64), 4)
                 );
             }
         }

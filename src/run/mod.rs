@@ -29,6 +29,7 @@ mod bench;
 mod branch;
 mod config;
 mod console;
+mod csv;
 mod error;
 pub mod figures;
 mod files;

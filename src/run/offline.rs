@@ -15,6 +15,7 @@ use crate::analysis::{
     Precursors, AWAY_RADII, BORDER_RADII,
 };
 use crate::model::{Monolayer, Params};
+use crate::run::csv;
 use crate::run::error::RunError;
 use crate::run::files::{check_output_dir, frame_path, write_atomic, write_set};
 
@@ -156,11 +157,11 @@ impl RunAnalysis {
                 s.minus_half_defects,
                 s.spiral_cores,
                 s.max_strain_rate,
-                opt(s.velocity_correlation_length),
-                opt(s.nematic_correlation_length),
+                csv::cell(s.velocity_correlation_length, 6),
+                csv::cell(s.nematic_correlation_length, 6),
                 s.mean_speed,
-                opt(s.aspect_ratio_mean),
-                opt(s.aspect_ratio_p90)
+                csv::cell(s.aspect_ratio_mean, 6),
+                csv::cell(s.aspect_ratio_p90, 6)
             );
         }
         frames
@@ -380,11 +381,6 @@ fn snapshot_name(step: u64) -> String {
     format!("snapshot_{step:07}")
 }
 
-/// An optional measure as CSV: six decimals, or empty.
-fn opt(v: Option<f64>) -> String {
-    v.map(|x| format!("{x:.6}")).unwrap_or_default()
-}
-
 /// A time as CSV: step × Δt rounded to 1e-9, so 31 prints as 31, not 31.000000000000004.
 fn time(t: f64) -> f64 {
     (t * 1e9).round() / 1e9
@@ -403,12 +399,12 @@ fn precursor_table(rows: &[crate::analysis::Precursor]) -> String {
             "{},{},{},{},{},{:.6},{},{}",
             p.hole,
             p.frames_before,
-            opt(p.spiral_core),
-            opt(p.plus_half[0]),
-            opt(p.plus_half[1]),
+            csv::cell(p.spiral_core, 6),
+            csv::cell(p.plus_half[0], 6),
+            csv::cell(p.plus_half[1], 6),
             p.strain_rate,
-            opt(p.plus_half_angle),
-            opt(p.minus_half)
+            csv::cell(p.plus_half_angle, 6),
+            csv::cell(p.minus_half, 6)
         );
     }
     t

@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 
 use super::summary::RunSummary;
 use crate::analysis::{classify, fitted_lifetime, Regime};
+use crate::run::csv;
 
 /// A grid point (all seeds pooled) and its regime.
 #[derive(Clone, Debug)]
@@ -65,10 +66,6 @@ pub fn regime_map(summaries: &[RunSummary]) -> Vec<RegimePoint> {
     points
 }
 
-fn opt(v: Option<f64>) -> String {
-    v.map(|x| format!("{x:.6}")).unwrap_or_default()
-}
-
 /// `summary.csv` (one row per run) and `regimes.csv` (one row per grid point).
 pub fn tables(summaries: &[RunSummary]) -> (String, String) {
     let keys: Vec<String> =
@@ -109,13 +106,13 @@ pub fn tables(summaries: &[RunSummary]) -> (String, String) {
             s.mean_speed * s.microns_per_hour,
             s.mean_speed * 3600.0 / 3.6,
             s.mean_speed * 3600.0 / 5.0,
-            opt(s.velocity_correlation_length),
-            opt(s.nematic_correlation_length),
-            opt(s.min_packing_without_hole),
-            opt(s.min_nonvoid_without_hole),
+            csv::cell(s.velocity_correlation_length, 6),
+            csv::cell(s.nematic_correlation_length, 6),
+            csv::cell(s.min_packing_without_hole, 6),
+            csv::cell(s.min_nonvoid_without_hole, 6),
             s.max_void_regions_with_hole,
-            opt(s.aspect_ratio_mean),
-            opt(s.aspect_ratio_p90),
+            csv::cell(s.aspect_ratio_mean, 6),
+            csv::cell(s.aspect_ratio_p90, 6),
             list(&s.region_lifetimes)
         );
     }
