@@ -23,7 +23,7 @@ use multiversion::multiversion;
 use num_complex::Complex64 as C64;
 
 use crate::model::cell::Cell;
-use crate::model::counters::{Counters, Stage};
+use crate::model::counters::{Counters, Laps, Stage};
 use crate::model::error::SimError;
 use crate::model::forces::force_density;
 use crate::model::free_energy::{area, FreeEnergy};
@@ -176,6 +176,120 @@ pub struct Monolayer {
     solver: FrictionSolver,
     counters: Counters,
     last_solve: SolveStats,
+}
+
+/// Σφ² on the lattice, and with `weights` also n = Σ_j w_j, in one walk over the patches. One
+/// loop per reading, each with its reading a constant, so that none tests it site by site.
+fn lattice_sums(cells: &[Cell], lat: &mut LatticeFields, p: &Params, weights: bool) {
+    let (l, threshold) = (p.box_size, p.presence_threshold);
+    let (phi2, n) = (&mut lat.sum_phi2, &mut lat.weight);
+    let mut with_weights = |kind| {
+        gather_pair((phi2, n), (0.0, 0.0), cells, l, |c, r, phi2, n| {
+            add_each(phi2, c.phi[r.clone()].iter().map(|&p| load(p) * load(p)));
+            add_each(n, c.phi[r].iter().map(|&p| friction_weight(kind, load(p), threshold)));
+        })
+    };
+    match (weights, p.friction_weights) {
+        (false, _) => {
+            gather(phi2, 0.0, cells, l, |c, r, out| add_each(out, c.phi[r].iter().map(|&p| load(p) * load(p))))
+        }
+        (true, FrictionWeights::Phi) => with_weights(FrictionWeights::Phi),
+        (true, FrictionWeights::Presence) => with_weights(FrictionWeights::Presence),
+        (true, FrictionWeights::Subdomain) => with_weights(FrictionWeights::Subdomain),
+    }
+}
+
+/// Each cell's area, μ, shape, Q̂ and force density, cell by cell in one loop, so that each patch
+/// is still in cache for its forces. The friction operator needs n but not the forces: with
+/// cell–cell friction (ξ_cell = `xi_c` > 0) it is set up beside this loop, on one thread while
+/// the others take the cells (and takes cells itself once done).
+#[allow(clippy::too_many_arguments)]
+fn cell_forces(
+    cells: &mut [Cell],
+    lat: &LatticeFields,
+    solver: &mut FrictionSolver,
+    fe: FreeEnergy,
+    p: &Params,
+    zeta: f64,
+    xi_c: f64,
+    laps: &Laps<3>,
+) {
+    let (l, q_mag, q_eps, passive) = (p.box_size, p.q_magnitude, p.q_epsilon, p.passive_force);
+    let sum_phi2 = &lat.sum_phi2;
+    let mut per_cell = || {
+        par::for_each_mut(cells, |_, c| {
+            laps.lap(0, || {
+                c.area = area(&c.phi);
+                fe.chemical_potential(c.patch, &c.phi, c.area, sum_phi2, l, &mut c.mu);
+            });
+            laps.lap(1, || {
+                c.shape = shape_tensor(c.patch, &c.phi);
+                c.q_hat = normalise(c.shape, q_mag, q_eps);
+                force_density(c.patch, &c.phi, &c.mu, c.q_hat, zeta, passive, &mut c.fx, &mut c.fy);
+            });
+        })
+    };
+    if xi_c > 0.0 {
+        let (n, xi_s) = (&lat.weight, &lat.xi_s);
+        par::join(|| laps.lap(2, || solver.prepare(n, xi_s, xi_c)), per_cell);
+    } else {
+        per_cell();
+    }
+}
+
+/// F = Σ_j w_j f_j on the lattice, the friction solve's right-hand side.
+fn force_sum(cells: &[Cell], force: &mut [C64], p: &Params) {
+    let (l, weights, threshold) = (p.box_size, p.friction_weights, p.presence_threshold);
+    gather(force, ZERO, cells, l, |c, r, out| {
+        let (phi, fx, fy) = (&c.phi[r.clone()], &c.fx[r.clone()], &c.fy[r]);
+        let sites = phi.iter().zip(fx.iter().zip(fy));
+        let add = |kind| {
+            add_each(
+                out,
+                sites.map(|(&p, (&x, &y))| {
+                    let w = friction_weight(kind, load(p), threshold);
+                    C64::new(w * load(x), w * load(y))
+                }),
+            )
+        };
+        match weights {
+            FrictionWeights::Phi => add(FrictionWeights::Phi),
+            FrictionWeights::Presence => add(FrictionWeights::Presence),
+            FrictionWeights::Subdomain => add(FrictionWeights::Subdomain),
+        }
+    })
+}
+
+/// The mobility without cell–cell friction: 1/ξ_s(x) when active, 1/ξ_relax in relaxation.
+fn substrate_mobility(lat: &mut LatticeFields, p: &Params, active: bool) {
+    if active {
+        for (mob, xs) in lat.mobility.iter_mut().zip(&lat.xi_s) {
+            *mob = 1.0 / xs;
+        }
+    } else {
+        lat.mobility.fill(1.0 / p.xi_relax);
+    }
+}
+
+/// Each cell's velocity and rate R(φ), then its `then` (Heun's update) as soon as its rate is
+/// known, while its patch is in cache: no cell's update reads another's fields.
+fn motion(cells: &mut [Cell], drag: &Drag, p: &Params, then: Then, laps: &Laps<2>) {
+    let (l, j0, advection) = (p.box_size, p.j0, p.advection);
+    let keep_velocity = !matches!(then, Then::Predict { .. });
+    par::for_each_mut(cells, |_, c| {
+        laps.lap(0, || {
+            let fields = MotionFields {
+                phi: &c.phi,
+                mu: &c.mu,
+                fx: &c.fx,
+                fy: &c.fy,
+                velocity: keep_velocity.then_some((&mut c.vx, &mut c.vy)),
+                rate: &mut c.rate,
+            };
+            velocity_and_rate(c.patch, fields, drag, l, j0, advection);
+        });
+        laps.lap(1, || then.apply(c));
+    })
 }
 
 /// Adds every cell's values onto the lattice array `out`: `add(cell, padded, run)` adds the
@@ -544,93 +658,30 @@ impl Monolayer {
         par::for_each_mut(&mut self.cells, |_, c| c.phi.copy_from_slice(&c.phi0));
     }
 
+    /// One evaluation of the rates R(φ) at the current φ, each cell's `then` applied as soon as
+    /// its rate is known. The stages in order: the lattice sums, each cell's μ and forces, the
+    /// drag (the friction solve, or the substrate's mobility alone), each cell's velocity and rate.
     fn evaluate(&mut self, phase: Phase, then: Then) -> Result<(), SimError> {
         let p = &self.params;
-        let l = p.box_size;
         let active = phase == Phase::Active;
         let zeta = if active { p.zeta } else { 0.0 };
         let xi_c = if active { p.xi_cell } else { 0.0 };
-        let (q_mag, q_eps, passive) = (p.q_magnitude, p.q_epsilon, p.passive_force);
-        let (weights, threshold) = (p.friction_weights, p.presence_threshold);
-        let (j0, advection) = (p.j0, p.advection);
-        let fe = self.free_energy;
-        let counters = &mut self.counters;
-        let cells = &mut self.cells;
-        let lat = &mut self.lattice;
-
-        let solver = &mut self.solver;
         let friction = xi_c > 0.0;
-        // Σφ², and with cell–cell friction n = Σ_j w_j, in one walk over the patches. One loop
-        // per reading, each with its reading a constant, so that none tests it site by site.
-        counters.time(Stage::Gather, || {
-            let (phi2, n) = (&mut lat.sum_phi2, &mut lat.weight);
-            let mut with_weights = |kind| {
-                gather_pair((phi2, n), (0.0, 0.0), cells, l, |c, r, phi2, n| {
-                    add_each(phi2, c.phi[r.clone()].iter().map(|&p| load(p) * load(p)));
-                    add_each(n, c.phi[r].iter().map(|&p| friction_weight(kind, load(p), threshold)));
-                })
-            };
-            // With subdomain weights n counts the patches over each site, and the patches move
-            // only between steps: the corrector keeps the predictor's n.
-            let n_is_current = matches!(then, Then::Correct { .. }) && weights == FrictionWeights::Subdomain;
-            match (friction && !n_is_current, weights) {
-                (false, _) => {
-                    gather(phi2, 0.0, cells, l, |c, r, out| add_each(out, c.phi[r].iter().map(|&p| load(p) * load(p))))
-                }
-                (true, FrictionWeights::Phi) => with_weights(FrictionWeights::Phi),
-                (true, FrictionWeights::Presence) => with_weights(FrictionWeights::Presence),
-                (true, FrictionWeights::Subdomain) => with_weights(FrictionWeights::Subdomain),
-            }
-        });
-        // Cell by cell in one loop, so that each patch is still in cache for its forces. The
-        // friction operator needs n but not the forces: it is set up beside this loop, on one
-        // thread while the others take the cells (and takes cells itself once done).
+        let corrector = matches!(then, Then::Correct { .. });
+        let fe = self.free_energy;
+        let (counters, cells, lat, solver) = (&mut self.counters, &mut self.cells, &mut self.lattice, &mut self.solver);
+
+        // With subdomain weights n counts the patches over each site, and the patches move only
+        // between steps: the corrector keeps the predictor's n.
+        let n_is_current = corrector && p.friction_weights == FrictionWeights::Subdomain;
+        counters.time(Stage::Gather, || lattice_sums(cells, lat, p, friction && !n_is_current));
         counters.time_laps([Stage::ChemicalPotential, Stage::Forces, Stage::FrictionSolve], |laps| {
-            let sum_phi2 = &lat.sum_phi2;
-            let mut per_cell = || {
-                par::for_each_mut(cells, |_, c| {
-                    laps.lap(0, || {
-                        c.area = area(&c.phi);
-                        fe.chemical_potential(c.patch, &c.phi, c.area, sum_phi2, l, &mut c.mu);
-                    });
-                    laps.lap(1, || {
-                        c.shape = shape_tensor(c.patch, &c.phi);
-                        c.q_hat = normalise(c.shape, q_mag, q_eps);
-                        force_density(c.patch, &c.phi, &c.mu, c.q_hat, zeta, passive, &mut c.fx, &mut c.fy);
-                    });
-                })
-            };
-            if friction {
-                let (n, xi_s) = (&lat.weight, &lat.xi_s);
-                par::join(|| laps.lap(2, || solver.prepare(n, xi_s, xi_c)), per_cell);
-            } else {
-                per_cell();
-            }
+            cell_forces(cells, lat, solver, fe, p, zeta, xi_c, laps)
         });
 
         let drag = if friction {
-            counters.time(Stage::Gather, || {
-                gather(&mut lat.force, ZERO, cells, l, |c, r, out| {
-                    let (phi, fx, fy) = (&c.phi[r.clone()], &c.fx[r.clone()], &c.fy[r]);
-                    let sites = phi.iter().zip(fx.iter().zip(fy));
-                    let add = |kind| {
-                        add_each(
-                            out,
-                            sites.map(|(&p, (&x, &y))| {
-                                let w = friction_weight(kind, load(p), threshold);
-                                C64::new(w * load(x), w * load(y))
-                            }),
-                        )
-                    };
-                    match weights {
-                        FrictionWeights::Phi => add(FrictionWeights::Phi),
-                        FrictionWeights::Presence => add(FrictionWeights::Presence),
-                        FrictionWeights::Subdomain => add(FrictionWeights::Subdomain),
-                    }
-                })
-            });
+            counters.time(Stage::Gather, || force_sum(cells, &mut lat.force, p));
             let (tolerance, max_iterations) = (p.friction_tolerance, p.friction_max_iterations);
-            let corrector = matches!(then, Then::Correct { .. });
             let stats = counters
                 .time(Stage::FrictionSolve, || {
                     if corrector {
@@ -649,35 +700,11 @@ impl Monolayer {
             self.last_solve = stats;
             Drag { mobility: &solver.mobility, pull: &solver.pull }
         } else {
-            if active {
-                for (mob, xs) in lat.mobility.iter_mut().zip(&lat.xi_s) {
-                    *mob = 1.0 / xs;
-                }
-            } else {
-                lat.mobility.fill(1.0 / p.xi_relax);
-            }
+            substrate_mobility(lat, p, active);
             Drag { mobility: &lat.mobility, pull: &lat.pull }
         };
 
-        // Each cell takes its Heun update as soon as its rate is known, while its patch is in
-        // cache: no cell's update reads another's fields.
-        let keep_velocity = !matches!(then, Then::Predict { .. });
-        counters.time_laps([Stage::Velocity, Stage::Update], |laps| {
-            par::for_each_mut(cells, |_, c| {
-                laps.lap(0, || {
-                    let fields = MotionFields {
-                        phi: &c.phi,
-                        mu: &c.mu,
-                        fx: &c.fx,
-                        fy: &c.fy,
-                        velocity: keep_velocity.then_some((&mut c.vx, &mut c.vy)),
-                        rate: &mut c.rate,
-                    };
-                    velocity_and_rate(c.patch, fields, &drag, l, j0, advection);
-                });
-                laps.lap(1, || then.apply(c));
-            })
-        });
+        counters.time_laps([Stage::Velocity, Stage::Update], |laps| motion(cells, &drag, p, then, laps));
         Ok(())
     }
 
