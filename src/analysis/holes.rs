@@ -228,15 +228,31 @@ impl HoleTracker {
         large.iter().zip(&open).any(|(&l, &o)| l && o)
     }
 
-    /// Takes the void regions of the next frame, at time `time`.
+    /// Takes the void regions of the next frame, at time `time`: each region claims the holes it
+    /// overlaps (or, failing any overlap, the nearest open hole within `match_distance`), each
+    /// hole continues in the largest region that claims it, and the holes no region continues
+    /// close.
     pub fn update(&mut self, voids: &VoidRegions, time: f64) {
-        let l = voids.l;
-        if self.l != l {
+        if self.l != voids.l {
             assert!(self.prev_labels.is_empty(), "the lattice size changed between frames");
-            self.l = l;
+            self.l = voids.l;
         }
-        let nr = voids.regions.len();
-        // Overlaps between this frame's regions and the previous frame's regions that were holes.
+        let open: Vec<usize> = (0..self.holes.len()).filter(|&h| self.holes[h].closed.is_none()).collect();
+        let mut claims = self.claims_by_overlap(voids);
+        self.claim_by_centroid(voids, &open, &mut claims);
+        let (region_hole, continued) = self.continue_holes(voids, &claims, time);
+        for &h in &open {
+            if !continued[h] {
+                self.holes[h].closed = Some(time);
+            }
+        }
+        self.prev_labels.clone_from(&voids.labels);
+        self.prev_hole = region_hole;
+    }
+
+    /// The holes each of this frame's regions overlaps (sites it shares with the previous
+    /// frame's regions that were holes).
+    fn claims_by_overlap(&mut self, voids: &VoidRegions) -> Vec<Vec<usize>> {
         self.pairs.clear();
         if !self.prev_labels.is_empty() {
             for (cur, prev) in voids.labels.iter().zip(&self.prev_labels) {
@@ -247,8 +263,7 @@ impl HoleTracker {
         }
         self.pairs.sort_unstable();
         self.pairs.dedup();
-        // Holes claimed by each region (by overlap).
-        let mut claims: Vec<Vec<usize>> = vec![Vec::new(); nr];
+        let mut claims: Vec<Vec<usize>> = vec![Vec::new(); voids.regions.len()];
         for &(cur, prev) in &self.pairs {
             if let Some(h) = self.prev_hole[prev as usize] {
                 if !claims[cur as usize].contains(&h) {
@@ -256,30 +271,44 @@ impl HoleTracker {
                 }
             }
         }
-        // Open holes that no region overlaps: match by centroid distance to an unclaimed region.
-        let open: Vec<usize> = (0..self.holes.len()).filter(|&h| self.holes[h].closed.is_none()).collect();
-        for &h in &open {
+        claims
+    }
+
+    /// Open holes that no region overlaps: each is claimed by the nearest unclaimed region within
+    /// `match_distance` of its last centroid, if there is one.
+    fn claim_by_centroid(&self, voids: &VoidRegions, open: &[usize], claims: &mut [Vec<usize>]) {
+        for &h in open {
             if claims.iter().any(|c| c.contains(&h)) {
                 continue;
             }
             let &(_, _, hx, hy) = self.holes[h].history.last().expect("an open hole has a history");
-            let best = (0..nr)
+            let best = (0..voids.regions.len())
                 .filter(|&r| claims[r].is_empty())
-                .map(|r| (periodic_distance(hx, hy, voids.regions[r].x, voids.regions[r].y, l), r))
+                .map(|r| (periodic_distance(hx, hy, voids.regions[r].x, voids.regions[r].y, voids.l), r))
                 .filter(|&(d, _)| d <= self.match_distance)
                 .min_by(|a, b| a.0.total_cmp(&b.0));
             if let Some((_, r)) = best {
                 claims[r].push(h);
             }
         }
-        // Each hole continues in the largest region that claims it.
+    }
+
+    /// Each hole continues in the largest region that claims it; of several holes claiming one
+    /// region (a merge) the oldest goes on and the others close; an unclaimed region larger than
+    /// `nucleation_area` is a new hole. Returns each region's hole and which holes went on.
+    fn continue_holes(
+        &mut self,
+        voids: &VoidRegions,
+        claims: &[Vec<usize>],
+        time: f64,
+    ) -> (Vec<Option<usize>>, Vec<bool>) {
+        let nr = voids.regions.len();
         let mut region_hole: Vec<Option<usize>> = vec![None; nr];
         let mut continued = vec![false; self.holes.len()];
         let mut order: Vec<usize> = (0..nr).collect();
         order.sort_by(|&a, &b| voids.regions[b].area.cmp(&voids.regions[a].area).then(a.cmp(&b)));
         for &r in &order {
             let region = voids.regions[r];
-            // Merge: the oldest of the holes not yet continued keeps going; the others close.
             let mut live: Vec<usize> = claims[r].iter().copied().filter(|&h| !continued[h]).collect();
             live.sort_unstable();
             if let Some(&keep) = live.first() {
@@ -307,13 +336,7 @@ impl HoleTracker {
                 region_hole[r] = Some(id);
             }
         }
-        for &h in &open {
-            if !continued[h] {
-                self.holes[h].closed = Some(time);
-            }
-        }
-        self.prev_labels.clone_from(&voids.labels);
-        self.prev_hole = region_hole;
+        (region_hole, continued)
     }
 }
 
