@@ -81,16 +81,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
     let share = runs::Share::of(&plan, &o.out, o.shard);
     // On Slurm each task runs one; here `--jobs` at a time.
     runs::check_memory(&plan, &share, if o.slurm { 1 } else { o.jobs })?;
-    let ids: Vec<&str> = figures.iter().map(|f| f.id()).collect();
-    crate::run::console::note(format_args!(
-        "figures (scale {}): {} need {} runs{}; {} to run, {} steps",
-        o.scale.name(),
-        ids.join(", "),
-        plan.jobs.len(),
-        o.shard.map(|s| format!(" ({} in shard {}/{})", share.mine.len(), s.index, s.count)).unwrap_or_default(),
-        share.todo.len(),
-        share.steps()
-    ));
+    note_plan(o, &figures, &plan, &share);
     // The longest run and the whole plan, for the estimate and for Slurm's time limits.
     let sample: Vec<&Job> = if share.todo.is_empty() && !o.slurm { Vec::new() } else { plan.jobs.iter().collect() };
     let speed = Speed::measure(&sample, 100, 30)?;
@@ -100,44 +91,10 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         ));
     }
     if o.slurm {
-        if o.stage != Stage::All || o.shard.is_some() {
-            return Err(RunError::Options(
-                "--slurm submits the whole plan: it takes neither --stage nor --shard".into(),
-            ));
-        }
-        let request = slurm::SlurmRequest {
-            out: &o.out,
-            only: o.only.as_deref(),
-            throttle: o.throttle,
-            partition: o.partition.as_deref(),
-            dry_run: o.dry_run,
-        };
-        return slurm::run_on_slurm(&plan, &request, &speed);
+        return submit_to_slurm(o, &plan, &speed);
     }
-    let core_seconds = share.core_seconds(&speed);
-    let workers = o.jobs.min(share.todo.len().max(1));
-    if !share.todo.is_empty() {
-        crate::run::console::note(format_args!(
-            "  estimate: {:.2} core-hours, about {} on {} core(s) (measured before the tissue is confluent: runs with holes cost more)",
-            core_seconds / 3600.0,
-            runs::hours(core_seconds / workers as f64),
-            workers
-        ));
-    }
-    if o.dry_run {
-        crate::run::console::note(format_args!("dry run: nothing run or written"));
+    if !may_run_here(o, &share, &speed)? {
         return Ok(());
-    }
-    // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
-    if matches!(o.scale, Scale::Paper | Scale::Evidence) && !o.yes && o.shard.is_none() && !share.todo.is_empty() {
-        return Err(RunError::Options(format!(
-            "--scale {} runs {} simulations here, about {} on {} core(s): refused without --yes; \
-             on a cluster, --slurm submits them as a job array (--slurm --dry-run prints the scripts)",
-            o.scale.name(),
-            share.todo.len(),
-            runs::hours(core_seconds / workers as f64),
-            workers
-        )));
     }
     if !share.todo.is_empty() {
         runs::execute(&plan, &share, &o.out, o.jobs, o.quiet)?;
@@ -152,6 +109,66 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         draw_figures(&plan, &o.out, o.jobs)?;
     }
     Ok(())
+}
+
+/// The plan in a line: its figures, its runs, this shard's share, and the steps to run.
+fn note_plan(o: &FiguresOptions, figures: &[Figure], plan: &Plan, share: &runs::Share) {
+    let ids: Vec<&str> = figures.iter().map(|f| f.id()).collect();
+    crate::run::console::note(format_args!(
+        "figures (scale {}): {} need {} runs{}; {} to run, {} steps",
+        o.scale.name(),
+        ids.join(", "),
+        plan.jobs.len(),
+        o.shard.map(|s| format!(" ({} in shard {}/{})", share.mine.len(), s.index, s.count)).unwrap_or_default(),
+        share.todo.len(),
+        share.steps()
+    ));
+}
+
+/// The whole plan as a Slurm job array (`--slurm`), which takes neither `--stage` nor `--shard`.
+fn submit_to_slurm(o: &FiguresOptions, plan: &Plan, speed: &Speed) -> Result<(), RunError> {
+    if o.stage != Stage::All || o.shard.is_some() {
+        return Err(RunError::Options("--slurm submits the whole plan: it takes neither --stage nor --shard".into()));
+    }
+    let request = slurm::SlurmRequest {
+        out: &o.out,
+        only: o.only.as_deref(),
+        throttle: o.throttle,
+        partition: o.partition.as_deref(),
+        dry_run: o.dry_run,
+    };
+    slurm::run_on_slurm(plan, &request, speed)
+}
+
+/// The estimate of the runs here; whether they may run: not in a dry run (false), and the
+/// evidence and paper scales only with `--yes` or as a shard (an error that says so).
+fn may_run_here(o: &FiguresOptions, share: &runs::Share, speed: &Speed) -> Result<bool, RunError> {
+    let core_seconds = share.core_seconds(speed);
+    let workers = o.jobs.min(share.todo.len().max(1));
+    if !share.todo.is_empty() {
+        crate::run::console::note(format_args!(
+            "  estimate: {:.2} core-hours, about {} on {} core(s) (measured before the tissue is confluent: runs with holes cost more)",
+            core_seconds / 3600.0,
+            runs::hours(core_seconds / workers as f64),
+            workers
+        ));
+    }
+    if o.dry_run {
+        crate::run::console::note(format_args!("dry run: nothing run or written"));
+        return Ok(false);
+    }
+    // A shard is a Slurm array task's share of the plan: only the whole plan here is refused.
+    if matches!(o.scale, Scale::Paper | Scale::Evidence) && !o.yes && o.shard.is_none() && !share.todo.is_empty() {
+        return Err(RunError::Options(format!(
+            "--scale {} runs {} simulations here, about {} on {} core(s): refused without --yes; \
+             on a cluster, --slurm submits them as a job array (--slurm --dry-run prints the scripts)",
+            o.scale.name(),
+            share.todo.len(),
+            runs::hours(core_seconds / workers as f64),
+            workers
+        )));
+    }
+    Ok(true)
 }
 
 /// Stages 2 (the runs, all finished) to 5 from the runs in `out/runs`: the figures, their CSVs,
