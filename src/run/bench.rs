@@ -64,15 +64,7 @@ fn best(v: &[f64]) -> f64 {
 /// Times the relaxation, then for every χ the active steps on each thread count, and (when the
 /// thread counts include 1 and 2) the ceiling of two independent one-thread simulations.
 pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
-    if o.threads.is_empty() || o.threads.contains(&0) {
-        return Err(RunError::Options(format!("--threads {:?}: every count must be ≥ 1", o.threads)));
-    }
-    if o.blocks == 0 || o.blocks > o.steps {
-        return Err(RunError::invalid("--blocks", o.blocks, format!("in [1, --steps = {}]", o.steps)));
-    }
-    if o.chis.is_empty() {
-        return Err(RunError::Empty { name: "--chi", need: "value" });
-    }
+    check_options(o)?;
     let pools = o.threads.iter().map(|&n| pool(n)).collect::<Result<Vec<_>, _>>()?;
     let ceiling = o.threads.contains(&1) && o.threads.contains(&2);
     let p = &o.params;
@@ -90,119 +82,176 @@ pub fn bench(o: &BenchOptions) -> Result<(), RunError> {
         if ceiling { ", and two one-thread simulations side by side (the ceiling)" } else { "" }
     ))?;
     let base = Params { relax_steps: o.relax_steps, ..p.clone() };
-    let (relaxed, relax_ms) = match &o.from_relaxed {
-        Some(file) => {
-            let m = relaxed_start(file, &base, o.seed)?;
-            out(format_args!("relaxation: read from {} (step {}), not timed", file.display(), m.step_count()))?;
-            (m, None)
-        }
-        None => {
-            let mut m = Monolayer::new(base.clone(), o.seed).map_err(RunError::from)?;
-            let t = Instant::now();
-            pools[0].install(|| m.advance(o.relax_steps)).map_err(RunError::from)?;
-            let relax_ms = 1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64;
-            out(format_args!(
-                "relaxation, {} thread(s): {relax_ms:.3} ms/step\n{}",
-                o.threads[0],
-                m.counters().report()
-            ))?;
-            (m, Some(relax_ms))
-        }
-    };
+    let (relaxed, relax_ms) = relaxed_tissue(o, &base, &pools[0])?;
     for &chi in &o.chis {
         let mut p = base.clone();
         p.set_chi(chi);
-        let start = |pool: &rayon::ThreadPool| -> Result<Monolayer, RunError> {
-            let mut m = relaxed.clone();
-            m.set_params(p.clone()).map_err(RunError::from)?;
-            // The first solve starts from rest; time the steady state.
-            pool.install(|| m.advance(5)).map_err(RunError::from)?;
-            m.counters_mut().reset();
-            Ok(m)
-        };
-        // One copy per thread count; they follow the same trajectory (the bits do not depend on
-        // the thread count), so block k costs each the same work.
-        let mut runs = pools.iter().map(start).collect::<Result<Vec<_>, _>>()?;
-        let one = pool(1)?;
-        let mut pair = if ceiling { vec![start(&one)?, start(&one)?] } else { Vec::new() };
-        let mut block_ms = vec![Vec::new(); pools.len()];
-        let mut pair_ms = Vec::new();
-        let mut seconds = vec![0.0; pools.len()];
-        let mut stopped = None;
-        'blocks: for k in 0..o.blocks {
-            let steps = o.steps * (k + 1) / o.blocks - o.steps * k / o.blocks;
-            for (((m, pool), times), total) in runs.iter_mut().zip(&pools).zip(&mut block_ms).zip(&mut seconds) {
-                let t = Instant::now();
-                let r = pool.install(|| m.advance(steps));
-                *total += t.elapsed().as_secs_f64();
-                if let Err(e) = r {
-                    stopped = Some(RunError::from(e));
-                    break 'blocks;
-                }
-                times.push(1e3 * t.elapsed().as_secs_f64() / steps as f64);
-            }
-            if ceiling {
-                let t = Instant::now();
-                let results: Vec<Result<(), RunError>> = std::thread::scope(|s| {
-                    let handles: Vec<_> = pair
-                        .iter_mut()
-                        .map(|m| {
-                            s.spawn(move || {
-                                let one = pool(1)?;
-                                one.install(|| m.advance(steps)).map_err(RunError::from)
-                            })
-                        })
-                        .collect();
-                    handles.into_iter().map(|h| h.join().unwrap_or_else(|_| Err(RunError::Panicked))).collect()
-                });
-                if let Some(Err(e)) = results.into_iter().find(|r| r.is_err()) {
-                    stopped = Some(e);
-                    break 'blocks;
-                }
-                pair_ms.push(1e3 * t.elapsed().as_secs_f64() / steps as f64);
-            }
-        }
-        for (((m, times), threads), total) in runs.iter().zip(&block_ms).zip(&o.threads).zip(&seconds) {
-            let c = m.counters();
-            out(format_args!(
-                "χ = {chi}, ζ = {}, {threads} thread(s): {:.3} ms/step over {} steps; blocks: median {:.3}, best {:.3}\n{}",
-                m.params().zeta,
-                1e3 * total / c.steps.max(1) as f64,
-                c.steps,
-                median(times),
-                best(times),
-                c.report()
-            ))?;
-        }
-        if let (Some(relax_ms), true) = (relax_ms.filter(|_| o.relax_steps > 0), !block_ms[0].is_empty()) {
-            out(format_args!("  {}", paper_length_line(o.threads[0], relax_ms, median(&block_ms[0]))))?;
-        }
-        for (times, threads) in block_ms.iter().zip(&o.threads).skip(1) {
-            let ratios: Vec<f64> = block_ms[0].iter().zip(times).map(|(t0, t)| t0 / t).collect();
-            out(format_args!(
-                "  speed-up of {threads} over {} thread(s): median block {:.2}×, best blocks {:.2}×",
-                o.threads[0],
-                median(&ratios),
-                best(&block_ms[0]) / best(times)
-            ))?;
-        }
-        if ceiling && pair_ms.len() == block_ms[0].len() {
-            let i1 = o.threads.iter().position(|&n| n == 1).expect("checked");
-            let i2 = o.threads.iter().position(|&n| n == 2).expect("checked");
-            // Two simulations side by side make two steps in one pair block: their throughput
-            // over one simulation alone is the most any split of one simulation could reach.
-            let ceilings: Vec<f64> = block_ms[i1].iter().zip(&pair_ms).map(|(t1, tp)| 2.0 * t1 / tp).collect();
-            let speedups: Vec<f64> = block_ms[i1].iter().zip(&block_ms[i2]).map(|(t1, t2)| t1 / t2).collect();
-            let fractions: Vec<f64> = speedups.iter().zip(&ceilings).map(|(s, c)| s / c).collect();
-            out(format_args!(
-                "  ceiling (two one-thread simulations side by side): median block {:.2}×; two threads reach {:.2} of it (median block)",
-                median(&ceilings),
-                median(&fractions)
-            ))?;
-        }
-        if let Some(e) = stopped {
+        let timed = time_blocks(o, &pools, &relaxed, &p, ceiling)?;
+        report(o, chi, &timed, relax_ms)?;
+        if let Some(e) = timed.stopped {
             return Err(e.context(format!("χ = {chi}: stopped")));
         }
+    }
+    Ok(())
+}
+
+/// Thread counts ≥ 1, blocks in [1, steps], at least one χ.
+fn check_options(o: &BenchOptions) -> Result<(), RunError> {
+    if o.threads.is_empty() || o.threads.contains(&0) {
+        return Err(RunError::Options(format!("--threads {:?}: every count must be ≥ 1", o.threads)));
+    }
+    if o.blocks == 0 || o.blocks > o.steps {
+        return Err(RunError::invalid("--blocks", o.blocks, format!("in [1, --steps = {}]", o.steps)));
+    }
+    if o.chis.is_empty() {
+        return Err(RunError::Empty { name: "--chi", need: "value" });
+    }
+    Ok(())
+}
+
+/// The relaxed tissue the active steps start from: read from `--from-relaxed` (not timed), or
+/// relaxed here on the first thread count, with its ms per step.
+fn relaxed_tissue(
+    o: &BenchOptions,
+    base: &Params,
+    pool: &rayon::ThreadPool,
+) -> Result<(Monolayer, Option<f64>), RunError> {
+    if let Some(file) = &o.from_relaxed {
+        let m = relaxed_start(file, base, o.seed)?;
+        out(format_args!("relaxation: read from {} (step {}), not timed", file.display(), m.step_count()))?;
+        return Ok((m, None));
+    }
+    let mut m = Monolayer::new(base.clone(), o.seed).map_err(RunError::from)?;
+    let t = Instant::now();
+    pool.install(|| m.advance(o.relax_steps)).map_err(RunError::from)?;
+    let relax_ms = 1e3 * t.elapsed().as_secs_f64() / o.relax_steps.max(1) as f64;
+    out(format_args!("relaxation, {} thread(s): {relax_ms:.3} ms/step\n{}", o.threads[0], m.counters().report()))?;
+    Ok((m, Some(relax_ms)))
+}
+
+/// One χ's timings: per thread count its copy of the tissue, its ms per step block by block and
+/// its total seconds; the side-by-side pair's ms per step (the ceiling); the error that stopped
+/// the blocks, if one did.
+struct Timed {
+    runs: Vec<Monolayer>,
+    block_ms: Vec<Vec<f64>>,
+    seconds: Vec<f64>,
+    pair_ms: Vec<f64>,
+    stopped: Option<RunError>,
+}
+
+/// The active steps of parameters `p` in `o.blocks` blocks, each block taken in turn by every
+/// thread count (and by the pair, with `ceiling`), so that a drift of the machine's speed meets
+/// them all alike.
+fn time_blocks(
+    o: &BenchOptions,
+    pools: &[rayon::ThreadPool],
+    relaxed: &Monolayer,
+    p: &Params,
+    ceiling: bool,
+) -> Result<Timed, RunError> {
+    let start = |pool: &rayon::ThreadPool| -> Result<Monolayer, RunError> {
+        let mut m = relaxed.clone();
+        m.set_params(p.clone()).map_err(RunError::from)?;
+        // The first solve starts from rest; time the steady state.
+        pool.install(|| m.advance(5)).map_err(RunError::from)?;
+        m.counters_mut().reset();
+        Ok(m)
+    };
+    // One copy per thread count; they follow the same trajectory (the bits do not depend on the
+    // thread count), so block k costs each the same work.
+    let runs = pools.iter().map(start).collect::<Result<Vec<_>, _>>()?;
+    let one = pool(1)?;
+    let mut pair = if ceiling { vec![start(&one)?, start(&one)?] } else { Vec::new() };
+    let mut t = Timed {
+        runs,
+        block_ms: vec![Vec::new(); pools.len()],
+        seconds: vec![0.0; pools.len()],
+        pair_ms: Vec::new(),
+        stopped: None,
+    };
+    'blocks: for k in 0..o.blocks {
+        let steps = o.steps * (k + 1) / o.blocks - o.steps * k / o.blocks;
+        for (((m, pool), times), total) in t.runs.iter_mut().zip(pools).zip(&mut t.block_ms).zip(&mut t.seconds) {
+            let clock = Instant::now();
+            let r = pool.install(|| m.advance(steps));
+            *total += clock.elapsed().as_secs_f64();
+            if let Err(e) = r {
+                t.stopped = Some(RunError::from(e));
+                break 'blocks;
+            }
+            times.push(1e3 * clock.elapsed().as_secs_f64() / steps as f64);
+        }
+        if ceiling {
+            let clock = Instant::now();
+            if let Err(e) = side_by_side(&mut pair, steps) {
+                t.stopped = Some(e);
+                break 'blocks;
+            }
+            t.pair_ms.push(1e3 * clock.elapsed().as_secs_f64() / steps as f64);
+        }
+    }
+    Ok(t)
+}
+
+/// `steps` steps of each simulation of `pair`, each on a thread of its own, at the same time.
+fn side_by_side(pair: &mut [Monolayer], steps: u64) -> Result<(), RunError> {
+    let results: Vec<Result<(), RunError>> = std::thread::scope(|s| {
+        let handles: Vec<_> = pair
+            .iter_mut()
+            .map(|m| {
+                s.spawn(move || {
+                    let one = pool(1)?;
+                    one.install(|| m.advance(steps)).map_err(RunError::from)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|_| Err(RunError::Panicked))).collect()
+    });
+    results.into_iter().find(|r| r.is_err()).unwrap_or(Ok(()))
+}
+
+/// One χ's lines: each thread count's ms per step with its stages, the paper-length projection,
+/// the speed-ups over the first thread count, and the fraction of the ceiling two threads reach.
+fn report(o: &BenchOptions, chi: f64, t: &Timed, relax_ms: Option<f64>) -> Result<(), RunError> {
+    for (((m, times), threads), total) in t.runs.iter().zip(&t.block_ms).zip(&o.threads).zip(&t.seconds) {
+        let c = m.counters();
+        out(format_args!(
+            "χ = {chi}, ζ = {}, {threads} thread(s): {:.3} ms/step over {} steps; blocks: median {:.3}, best {:.3}\n{}",
+            m.params().zeta,
+            1e3 * total / c.steps.max(1) as f64,
+            c.steps,
+            median(times),
+            best(times),
+            c.report()
+        ))?;
+    }
+    let first = &t.block_ms[0];
+    if let (Some(relax_ms), true) = (relax_ms.filter(|_| o.relax_steps > 0), !first.is_empty()) {
+        out(format_args!("  {}", paper_length_line(o.threads[0], relax_ms, median(first))))?;
+    }
+    for (times, threads) in t.block_ms.iter().zip(&o.threads).skip(1) {
+        let ratios: Vec<f64> = first.iter().zip(times).map(|(t0, t)| t0 / t).collect();
+        out(format_args!(
+            "  speed-up of {threads} over {} thread(s): median block {:.2}×, best blocks {:.2}×",
+            o.threads[0],
+            median(&ratios),
+            best(first) / best(times)
+        ))?;
+    }
+    let i1 = o.threads.iter().position(|&n| n == 1);
+    let i2 = o.threads.iter().position(|&n| n == 2);
+    if let (Some(i1), Some(i2), true) = (i1, i2, !t.pair_ms.is_empty() && t.pair_ms.len() == first.len()) {
+        // Two simulations side by side make two steps in one pair block: their throughput over
+        // one simulation alone is the most any split of one simulation could reach.
+        let ceilings: Vec<f64> = t.block_ms[i1].iter().zip(&t.pair_ms).map(|(t1, tp)| 2.0 * t1 / tp).collect();
+        let speedups: Vec<f64> = t.block_ms[i1].iter().zip(&t.block_ms[i2]).map(|(t1, t2)| t1 / t2).collect();
+        let fractions: Vec<f64> = speedups.iter().zip(&ceilings).map(|(s, c)| s / c).collect();
+        out(format_args!(
+            "  ceiling (two one-thread simulations side by side): median block {:.2}×; two threads reach {:.2} of it (median block)",
+            median(&ceilings),
+            median(&fractions)
+        ))?;
     }
     Ok(())
 }
