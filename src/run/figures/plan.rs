@@ -244,6 +244,67 @@ pub struct Plan {
     pub sets: Vec<String>,
 }
 
+/// The points each of `figures` draws (the paper's captions), with how many seeds each takes
+/// at this scale, in the order the figures draw them; `zeta0` and `gamma0` are the base's, for
+/// the figures whose caption states neither.
+fn wanted_points(figures: &[Figure], spec: &ScaleSpec, zeta0: f64, gamma0: f64) -> Vec<(Point, u64, Figure)> {
+    let mut wanted: Vec<(Point, u64, Figure)> = Vec::new();
+    let mut want = |f: Figure, friction: Friction, zeta: f64, gamma: f64, size, seeds| {
+        wanted.push((Point { friction, zeta, gamma, size }, seeds, f));
+    };
+    for &f in figures {
+        match f {
+            // The paper does not state ζ for Figs. 1c–d and S2: the base's (UNSTATED_ZETA unless
+            // `--set zeta=…`).
+            Figure::Fig1c | Figure::Fig1d | Figure::FigS2 | Figure::Mechanism => {
+                for chi in CHI_REGIMES {
+                    want(f, Friction::Chi(chi), zeta0, gamma0, None, spec.few);
+                }
+            }
+            Figure::Fig2 => {
+                for chi in CHI_FIG2 {
+                    for zeta in ZETAS {
+                        want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
+                    }
+                }
+            }
+            Figure::Fig3ab => {
+                for chi in CHI_FIG3AB {
+                    for zeta in ZETAS {
+                        want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
+                    }
+                }
+            }
+            Figure::Fig3c => {
+                for chi in CHI_FIG3C {
+                    for zeta in ZETAS {
+                        want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
+                    }
+                }
+            }
+            Figure::Fig3d => {
+                for chi in CHI_REGIMES {
+                    for zeta in ZETAS {
+                        want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
+                    }
+                }
+            }
+            Figure::FigS1 => {
+                for chi in CHI_S1 {
+                    want(f, Friction::Chi(chi), zeta0, gamma0, spec.correlation_box, spec.correlations);
+                }
+                want(f, Friction::Dry, zeta0, gamma0, spec.correlation_box, spec.correlations);
+            }
+            Figure::FigS3 => {
+                for gamma in GAMMAS_S3 {
+                    want(f, Friction::Chi(0.001), 0.3, gamma, None, spec.few);
+                }
+            }
+        }
+    }
+    wanted
+}
+
 impl Plan {
     /// The runs `figures` need at `scale`, with `sets` (`KEY=VALUE`) over the scale's base.
     /// Every run's parameters are validated here, before anything runs.
@@ -253,62 +314,7 @@ impl Plan {
         scale_sets.extend(spec.overrides.iter().map(|s| s.to_string()));
         let base = load_params_over(&scale_sets, sets)?;
         base.validate().map_err(|e| RunError::from(e).context("--set"))?;
-        let zeta0 = base.zeta;
-        let gamma0 = base.gamma;
-        let mut wanted: Vec<(Point, u64, Figure)> = Vec::new();
-        let mut want = |f: Figure, friction: Friction, zeta: f64, gamma: f64, size, seeds| {
-            wanted.push((Point { friction, zeta, gamma, size }, seeds, f));
-        };
-        for &f in figures {
-            match f {
-                // The paper does not state ζ for Figs. 1c–d and S2: the base's (UNSTATED_ZETA
-                // unless `--set zeta=…`).
-                Figure::Fig1c | Figure::Fig1d | Figure::FigS2 | Figure::Mechanism => {
-                    for chi in CHI_REGIMES {
-                        want(f, Friction::Chi(chi), zeta0, gamma0, None, spec.few);
-                    }
-                }
-                Figure::Fig2 => {
-                    for chi in CHI_FIG2 {
-                        for zeta in ZETAS {
-                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
-                        }
-                    }
-                }
-                Figure::Fig3ab => {
-                    for chi in CHI_FIG3AB {
-                        for zeta in ZETAS {
-                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
-                        }
-                    }
-                }
-                Figure::Fig3c => {
-                    for chi in CHI_FIG3C {
-                        for zeta in ZETAS {
-                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
-                        }
-                    }
-                }
-                Figure::Fig3d => {
-                    for chi in CHI_REGIMES {
-                        for zeta in ZETAS {
-                            want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
-                        }
-                    }
-                }
-                Figure::FigS1 => {
-                    for chi in CHI_S1 {
-                        want(f, Friction::Chi(chi), zeta0, gamma0, spec.correlation_box, spec.correlations);
-                    }
-                    want(f, Friction::Dry, zeta0, gamma0, spec.correlation_box, spec.correlations);
-                }
-                Figure::FigS3 => {
-                    for gamma in GAMMAS_S3 {
-                        want(f, Friction::Chi(0.001), 0.3, gamma, None, spec.few);
-                    }
-                }
-            }
-        }
+        let wanted = wanted_points(figures, &spec, base.zeta, base.gamma);
         let mut jobs: Vec<Job> = Vec::new();
         let mut points: Vec<(Point, Vec<Figure>)> = Vec::new();
         let mut figure_points: Vec<(Figure, Vec<Point>)> = figures.iter().map(|&f| (f, Vec::new())).collect();
@@ -321,6 +327,7 @@ impl Plan {
             let params = point_params(&base, &point)?;
             for seed in 1..=seeds {
                 let name = run_name(&point, &params, seed);
+                // A run two figures share is one job, listed for both.
                 match jobs.iter().position(|j| j.name == name) {
                     Some(k) => {
                         if !points[k].1.contains(&figure) {
