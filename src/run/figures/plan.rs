@@ -249,58 +249,37 @@ pub struct Plan {
 /// the figures whose caption states neither.
 fn wanted_points(figures: &[Figure], spec: &ScaleSpec, zeta0: f64, gamma0: f64) -> Vec<(Point, u64, Figure)> {
     let mut wanted: Vec<(Point, u64, Figure)> = Vec::new();
-    let mut want = |f: Figure, friction: Friction, zeta: f64, gamma: f64, size, seeds| {
-        wanted.push((Point { friction, zeta, gamma, size }, seeds, f));
+    // Every χ of `chis` at every ζ of `zetas` (γ the base's, the base's size), `seeds` each.
+    let grid = |f: Figure, chis: &[f64], zetas: &[f64], seeds: u64| -> Vec<(Point, u64, Figure)> {
+        let point = |chi, zeta| Point { friction: Friction::Chi(chi), zeta, gamma: gamma0, size: None };
+        chis.iter().flat_map(|&chi| zetas.iter().map(move |&zeta| (point(chi, zeta), seeds, f))).collect()
     };
     for &f in figures {
-        match f {
+        let points = match f {
             // The paper does not state ζ for Figs. 1c–d and S2: the base's (UNSTATED_ZETA unless
             // `--set zeta=…`).
             Figure::Fig1c | Figure::Fig1d | Figure::FigS2 | Figure::Mechanism => {
-                for chi in CHI_REGIMES {
-                    want(f, Friction::Chi(chi), zeta0, gamma0, None, spec.few);
-                }
+                grid(f, &CHI_REGIMES, &[zeta0], spec.few)
             }
-            Figure::Fig2 => {
-                for chi in CHI_FIG2 {
-                    for zeta in ZETAS {
-                        want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
-                    }
-                }
-            }
-            Figure::Fig3ab => {
-                for chi in CHI_FIG3AB {
-                    for zeta in ZETAS {
-                        want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
-                    }
-                }
-            }
-            Figure::Fig3c => {
-                for chi in CHI_FIG3C {
-                    for zeta in ZETAS {
-                        want(f, Friction::Chi(chi), zeta, gamma0, None, spec.many);
-                    }
-                }
-            }
-            Figure::Fig3d => {
-                for chi in CHI_REGIMES {
-                    for zeta in ZETAS {
-                        want(f, Friction::Chi(chi), zeta, gamma0, None, spec.few);
-                    }
-                }
-            }
-            Figure::FigS1 => {
-                for chi in CHI_S1 {
-                    want(f, Friction::Chi(chi), zeta0, gamma0, spec.correlation_box, spec.correlations);
-                }
-                want(f, Friction::Dry, zeta0, gamma0, spec.correlation_box, spec.correlations);
-            }
-            Figure::FigS3 => {
-                for gamma in GAMMAS_S3 {
-                    want(f, Friction::Chi(0.001), 0.3, gamma, None, spec.few);
-                }
-            }
-        }
+            Figure::Fig2 => grid(f, &CHI_FIG2, &ZETAS, spec.many),
+            Figure::Fig3ab => grid(f, &CHI_FIG3AB, &ZETAS, spec.few),
+            Figure::Fig3c => grid(f, &CHI_FIG3C, &ZETAS, spec.many),
+            Figure::Fig3d => grid(f, &CHI_REGIMES, &ZETAS, spec.few),
+            Figure::FigS1 => CHI_S1
+                .iter()
+                .map(|&chi| Friction::Chi(chi))
+                .chain([Friction::Dry])
+                .map(|friction| {
+                    let point = Point { friction, zeta: zeta0, gamma: gamma0, size: spec.correlation_box };
+                    (point, spec.correlations, f)
+                })
+                .collect(),
+            Figure::FigS3 => GAMMAS_S3
+                .iter()
+                .map(|&gamma| (Point { friction: Friction::Chi(0.001), zeta: 0.3, gamma, size: None }, spec.few, f))
+                .collect(),
+        };
+        wanted.extend(points);
     }
     wanted
 }
