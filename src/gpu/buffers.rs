@@ -197,9 +197,10 @@ pub struct GpuParams {
 
 impl GpuParams {
     /// The same coefficients as the CPU derives (`FreeEnergy::new`), rounded once to f32; ζ and
-    /// ξ_cell are zero during relaxation, as in `Monolayer::evaluate`.
+    /// ξ_cell as the phase has them (`Phase::zeta_and_xi_cell`, the CPU's rule).
     pub fn new(p: &Params, phase: Phase) -> Self {
         let fe = FreeEnergy::new(p);
+        let (zeta, xi_cell) = phase.zeta_and_xi_cell(p);
         GpuParams {
             box_size: p.box_size as u32,
             n_cells: p.n_cells as u32,
@@ -218,7 +219,7 @@ impl GpuParams {
             repulsion: fe.repulsion as f32,
             q_magnitude: p.q_magnitude as f32,
             q_epsilon: p.q_epsilon as f32,
-            zeta: if phase == Phase::Active { p.zeta as f32 } else { 0.0 },
+            zeta: zeta as f32,
             friction_weights: match p.friction_weights {
                 FrictionWeights::Phi => 0,
                 FrictionWeights::Presence => 1,
@@ -233,7 +234,7 @@ impl GpuParams {
             dt: p.dt as f32,
             phi_min: p.phi_min as f32,
             phi_max: p.phi_max as f32,
-            xi_cell: if phase == Phase::Active { p.xi_cell as f32 } else { 0.0 },
+            xi_cell: xi_cell as f32,
             friction_tolerance: (p.friction_tolerance * RECURSIVE_RESIDUAL_MARGIN) as f32,
             relax_patch_size: p.relax_patch_size as u32,
             patch_margin: p.patch_margin as u32,
@@ -457,7 +458,7 @@ impl DeviceState {
                 }
             })
             .collect();
-        let solves_friction = m.phase() == Phase::Active && m.params().xi_cell > 0.0;
+        let solves_friction = m.phase().zeta_and_xi_cell(m.params()).1 > 0.0;
         Ok(DeviceState { layout, params, solves_friction, buffers })
     }
 
@@ -470,7 +471,7 @@ impl DeviceState {
     /// it takes effect before the next submission.
     pub fn set_phase(&mut self, ctx: &GpuContext, p: &Params, phase: Phase, xi_s: &[f64]) {
         self.params = GpuParams::new(p, phase);
-        self.solves_friction = phase == Phase::Active && p.xi_cell > 0.0;
+        self.solves_friction = phase.zeta_and_xi_cell(p).1 > 0.0;
         ctx.queue.write_buffer(self.buffer(Slot::Params), 0, bytemuck::bytes_of(&self.params));
         ctx.queue.write_buffer(self.buffer(Slot::Drag), 0, bytemuck::cast_slice(&drag(p, phase, xi_s)));
     }

@@ -48,6 +48,17 @@ pub enum Phase {
     Active,
 }
 
+impl Phase {
+    /// ζ and ξ_cell as this phase has them: the relaxation has neither activity nor cell–cell
+    /// friction. Both engines read them here.
+    pub(crate) fn zeta_and_xi_cell(self, p: &Params) -> (f64, f64) {
+        match self {
+            Phase::Active => (p.zeta, p.xi_cell),
+            Phase::Relaxation => (0.0, 0.0),
+        }
+    }
+}
+
 /// Fields on the whole L×L lattice, row-major (index y·L + x).
 #[derive(Clone, Debug)]
 pub struct LatticeFields {
@@ -200,18 +211,17 @@ fn lattice_sums(cells: &[Cell], lat: &mut LatticeFields, p: &Params, weights: bo
 }
 
 /// Each cell's area, μ, shape, Q̂ and force density, cell by cell in one loop, so that each patch
-/// is still in cache for its forces. The friction operator needs n but not the forces: with
-/// cell–cell friction (ξ_cell = `xi_c` > 0) it is set up beside this loop, on one thread while
+/// is still in cache for its forces, with ζ and ξ_cell as the phase has them
+/// ([`Phase::zeta_and_xi_cell`]). The friction operator needs n but not the forces: with cell–cell
+/// friction (ξ_cell > 0) it is set up beside this loop, on one thread while
 /// the others take the cells (and takes cells itself once done).
-#[allow(clippy::too_many_arguments)]
 fn cell_forces(
     cells: &mut [Cell],
     lat: &LatticeFields,
     solver: &mut FrictionSolver,
     fe: FreeEnergy,
     p: &Params,
-    zeta: f64,
-    xi_c: f64,
+    (zeta, xi_c): (f64, f64),
     laps: &Laps<3>,
 ) {
     let (l, q_mag, q_eps, passive) = (p.box_size, p.q_magnitude, p.q_epsilon, p.passive_force);
@@ -664,8 +674,7 @@ impl Monolayer {
     fn evaluate(&mut self, phase: Phase, then: Then) -> Result<(), SimError> {
         let p = &self.params;
         let active = phase == Phase::Active;
-        let zeta = if active { p.zeta } else { 0.0 };
-        let xi_c = if active { p.xi_cell } else { 0.0 };
+        let (zeta, xi_c) = phase.zeta_and_xi_cell(p);
         let friction = xi_c > 0.0;
         let corrector = matches!(then, Then::Correct { .. });
         let fe = self.free_energy;
@@ -676,7 +685,7 @@ impl Monolayer {
         let n_is_current = corrector && p.friction_weights == FrictionWeights::Subdomain;
         counters.time(Stage::Gather, || lattice_sums(cells, lat, p, friction && !n_is_current));
         counters.time_laps([Stage::ChemicalPotential, Stage::Forces, Stage::FrictionSolve], |laps| {
-            cell_forces(cells, lat, solver, fe, p, zeta, xi_c, laps)
+            cell_forces(cells, lat, solver, fe, p, (zeta, xi_c), laps)
         });
 
         let drag = if friction {
