@@ -14,8 +14,7 @@ use std::collections::VecDeque;
 
 use crate::analysis::{periodic_distance, HoleTracker};
 use crate::formats::snapshot;
-use crate::model::{Monolayer, Params};
-use crate::model::{SimError, State};
+use crate::model::{Monolayer, Params, SimError, State};
 
 /// Active steps between two saved states: a multiple of the readouts' rows
 /// (`ROW_EVERY` of the readouts), so that the GPU engine hands over every state to be saved.

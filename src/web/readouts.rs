@@ -6,8 +6,7 @@
 
 use crate::analysis::{Analysis, Detail, HoleTracker};
 use crate::formats::RunRecord;
-use crate::model::Monolayer;
-use crate::model::SimError;
+use crate::model::{Monolayer, SimError};
 
 use super::history::Nucleation;
 use super::version::code_version;

@@ -13,8 +13,7 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::analysis::{score_field, Analysis, Defect, PlusOne, SHIPPED_MODEL};
 use crate::formats::FrameData;
-use crate::model::Monolayer;
-use crate::model::{gradient, Real};
+use crate::model::{gradient, Monolayer, Real};
 
 /// Which field the page shows under the cells' outlines. Exported to JS (`FieldKind.Speed`, …)
 /// so that the page and the core name the fields the same way.
@@ -406,8 +405,7 @@ pub fn elongation<T: Real>(patch: crate::model::Patch, phi: &[T], shape: [f64; 2
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::Params;
-    use crate::model::{shape_tensor, Patch};
+    use crate::model::{shape_tensor, Params, Patch};
 
     /// A small tissue a few steps into activity: velocities, forces and Q̂ are all non-zero.
     fn small_monolayer() -> Monolayer {

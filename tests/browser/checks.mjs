@@ -23,15 +23,17 @@ const DEFAULT_START = SHIPPED_STATES.find((r) => r.preset === DEFAULT_PRESET && 
 // and its answer stayed false (`polls` grows), or a call to the page never returned.
 export const waiting = { what: '', polls: 0 };
 
-// Polls fn(arg) in the page until it is truthy; fails only a page that is stuck ("hung").
+// Polls fn(arg) in the page until it is truthy; fails only a page that is stuck ("hung"). While
+// not done, fn may return { pending: text } to say what the page is doing: a hang quotes it.
 export async function until(p, what, fn, arg) {
   const t0 = Date.now();
   Object.assign(waiting, { what, polls: 0 });
   for (;;) {
     const v = await p.evaluate(fn, arg);
     waiting.polls++;
-    if (v) return v;
-    if (Date.now() - t0 > HANG_MS) throw new Error(`hung: waited ${HANG_MS / 1000} s for ${what}`);
+    if (v && v.pending === undefined) return v;
+    if (v) waiting.what = `${what} (last: ${v.pending})`;
+    if (Date.now() - t0 > HANG_MS) throw new Error(`hung: waited ${HANG_MS / 1000} s for ${waiting.what}`);
     await new Promise((r) => setTimeout(r, 150));
   }
 }
@@ -41,15 +43,9 @@ export async function openPage(b, base, query, opts) {
   Object.assign(waiting, { what: `the page ${query} to open`, polls: 0 });
   const p = await b.open(base + query, opts);
   if (!p) return null;
-  // Polled here rather than by `until`, so that a page that never gets ready says where it
-  // stopped (window.demo.stage: the page's and the worker's last step of making the tissue).
-  for (const t0 = Date.now(); ;) {
-    const s = await p.evaluate(() => ({ done: !!window.demo && !!(window.demo.ready || window.demo.error), stage: window.demo?.stage }));
-    if (s.done) break;
-    Object.assign(waiting, { what: `the page ${query} to load (last: ${s.stage ?? 'no script yet'})`, polls: waiting.polls + 1 });
-    if (Date.now() - t0 > HANG_MS) throw new Error(`hung: waited ${HANG_MS / 1000} s for ${waiting.what}`);
-    await new Promise((r) => setTimeout(r, 150));
-  }
+  // While it gets ready, the page names the step of making the tissue it is at (window.demo.stage).
+  await until(p, `the page ${query} to load`, () => (window.demo && (window.demo.ready || window.demo.error))
+    || { pending: window.demo?.stage ?? 'no script yet' });
   const err = await p.evaluate(() => window.demo.error);
   assert(!err, `page error: ${err}`);
   return p;

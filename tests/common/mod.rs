@@ -22,7 +22,7 @@ pub fn relaxed_full_size() -> &'static Monolayer {
         let bytes = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
         let state = monolayer::formats::snapshot::decode_relaxed(&bytes, &p, 1)
             .unwrap_or_else(|e| panic!("{}: {e} (tests/relaxed_state.rs says how to remake it)", file.display()));
-        let mut m = Monolayer::from_state(p.clone(), 1, state).expect("the shipped state fits the defaults");
+        let mut m = Monolayer::from_saved(p.clone(), 1, state).expect("the shipped state fits the defaults");
         // A state carries φ, not the forces and velocities of its last step: evaluated here for
         // the tests that read them (the trajectory is the same with or without it).
         m.evaluate_now().expect("the shipped state evaluates");
