@@ -177,6 +177,10 @@ struct FiguresArgs {
     /// A parameter for every run, over the scale's: --set q_magnitude=0.4.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Only the figures' points this matches, repeatable: --point chi=0.01,zeta=0.5 --point zeta=0.3
+    /// (keys chi, zeta, gamma; a key not given matches any value; default: every point).
+    #[arg(long = "point", value_name = "KEY=VALUE,…")]
+    point: Vec<String>,
     /// Simulations at a time, one per core (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
@@ -707,6 +711,7 @@ fn figures(a: FiguresArgs) -> Result<(), RunError> {
         scale: a.scale,
         only: a.only,
         sets: a.set,
+        points: a.point,
         jobs: match a.jobs {
             Some(n) => check_threads("--jobs", n)?,
             None => cores(),

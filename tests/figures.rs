@@ -10,7 +10,7 @@ use monolayer::run::figures::{Figure, Plan, Scale};
 
 #[test]
 fn the_paper_plan_has_the_papers_counts_and_shares_runs() {
-    let plan = Plan::new(Scale::Paper, &Figure::ALL, &[]).unwrap();
+    let plan = Plan::new(Scale::Paper, &Figure::ALL, &[], &[]).unwrap();
     let count = |f: Figure, pick: &dyn Fn(&monolayer::run::figures::Point) -> bool| {
         plan.runs_of(f).filter(|(_, p)| pick(p)).count()
     };
@@ -49,7 +49,7 @@ fn the_paper_plan_has_the_papers_counts_and_shares_runs() {
 #[test]
 fn the_evidence_plan_is_the_papers_protocol_with_enough_seeds() {
     use monolayer::run::figures::{Friction, Point, S1_INITIAL_GAP};
-    let plan = Plan::new(Scale::Evidence, &Figure::ALL, &[]).unwrap();
+    let plan = Plan::new(Scale::Evidence, &Figure::ALL, &[], &[]).unwrap();
     assert_eq!(plan.frame_interval, 1000);
     assert!(plan.jobs.iter().all(|j| j.params.relax_steps == 10_000 && j.params.active_steps == 100_000));
     let at =
@@ -82,6 +82,44 @@ fn the_evidence_plan_is_the_papers_protocol_with_enough_seeds() {
     assert!(
         help.contains("evidence") && help.contains("100,000 active steps") && help.contains("every 1,000"),
         "{help}"
+    );
+}
+
+/// `--point` keeps part of each figure's grid: the plan's runs at those points only, the same
+/// runs (names, seeds, steps) the whole plan has there; a selection that matches nothing is
+/// refused with the points there are, and a key that is not a point's, by name.
+#[test]
+fn a_point_selection_keeps_only_those_points_of_the_plan() {
+    let whole = Plan::new(Scale::Evidence, &[Figure::Fig2], &[], &[]).unwrap();
+    let picked = ["chi=0.01,zeta=0.5".to_string(), "chi=0.001".to_string()];
+    let part = Plan::new(Scale::Evidence, &[Figure::Fig2], &[], &picked).unwrap();
+    // (0.01, 0.5) and χ = 0.001 at its three ζ: 4 points × 4 seeds.
+    assert_eq!(part.jobs.len(), 16);
+    assert_eq!(part.points_of(Figure::Fig2).len(), 4);
+    for j in &part.jobs {
+        let same = whole.jobs.iter().find(|w| w.name == j.name).expect("a run of the whole plan");
+        assert_eq!((same.seed, same.params.total_steps()), (j.seed, j.params.total_steps()));
+        assert!(j.name.starts_with("chi0.001_") || j.name.starts_with("chi0.01_zeta0.5_"), "{}", j.name);
+    }
+    let e = Plan::new(Scale::Evidence, &[Figure::Fig2], &[], &["chi=0.1".into()]).unwrap_err().to_string();
+    assert!(e.contains("--point chi=0.1") && e.contains("chi=0.005,zeta=0.4,gamma=0.06"), "{e}");
+    let e = Plan::new(Scale::Evidence, &[Figure::Fig2], &[], &["xi=1".into()]).unwrap_err().to_string();
+    assert!(e.contains("`xi`") && e.contains("chi, zeta, gamma"), "{e}");
+    let e = Plan::new(Scale::Evidence, &[Figure::Fig2], &[], &["zeta=high".into()]).unwrap_err().to_string();
+    assert!(e.contains("zeta takes a number"), "{e}");
+    // The dry limit by name (Fig. S1), and the Slurm tasks get the selection.
+    let dry = Plan::new(Scale::Evidence, &[Figure::FigS1], &[], &["chi=dry".into()]).unwrap();
+    assert!(!dry.jobs.is_empty() && dry.jobs.iter().all(|j| j.name.starts_with("dry")));
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("f");
+    let args =
+        ["figures", "--out", out.to_str().unwrap(), "--only", "2", "--point", "zeta=0.5", "--slurm", "--dry-run"];
+    let o = monolayer(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("--point zeta=0.5 --stage runs") && text.contains("--point zeta=0.5 --stage figures"),
+        "{text}"
     );
 }
 
@@ -118,7 +156,7 @@ fn slurm_dry_run_prints_an_array_with_a_throttle_and_an_afterok_aggregation() {
     let o = monolayer(&["figures", "--out", out.to_str().unwrap(), "--slurm", "--dry-run", "--throttle", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
-    let plan = Plan::new(Scale::Smoke, &Figure::ALL, &[]).unwrap();
+    let plan = Plan::new(Scale::Smoke, &Figure::ALL, &[], &[]).unwrap();
     let n = plan.jobs.len();
     assert!(text.contains(&format!("#SBATCH --array=0-{}%3", n - 1)), "{text}");
     assert!(text.contains("--output=") && text.contains("run-%A_%a.out"), "{text}");

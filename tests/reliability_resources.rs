@@ -266,7 +266,7 @@ fn figures_jobs_are_bounded() {
 #[test]
 fn the_estimate_survives_a_plan_whose_first_job_blows_up() {
     use monolayer::run::figures::{Figure, Plan, Scale, Speed};
-    let plan = Plan::new(Scale::Smoke, &[Figure::Fig1c], &["gamma=0.04".to_string()]).unwrap();
+    let plan = Plan::new(Scale::Smoke, &[Figure::Fig1c], &["gamma=0.04".to_string()], &[]).unwrap();
     let first = &plan.jobs[0];
     assert_eq!(first.params.gamma, 0.04, "the first job is the unstable γ = 0.04");
     let speed = Speed::measure(&[first], 100, 30).unwrap();

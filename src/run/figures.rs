@@ -24,7 +24,9 @@ mod slurm;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-pub use plan::{Figure, Friction, Plan, Point, Scale, ScaleSpec, S1_BOX, S1_INITIAL_GAP, UNSTATED_ZETA};
+pub use plan::{
+    Figure, Friction, Plan, Point, PointSelection, Scale, ScaleSpec, S1_BOX, S1_INITIAL_GAP, UNSTATED_ZETA,
+};
 pub use runs::Speed;
 
 use crate::run::error::RunError;
@@ -49,6 +51,8 @@ pub struct FiguresOptions {
     /// `--only` as given.
     pub only: Option<String>,
     pub sets: Vec<String>,
+    /// `--point` as given: only the plan's points one of these matches.
+    pub points: Vec<String>,
     pub jobs: usize,
     pub yes: bool,
     pub stage: Stage,
@@ -70,7 +74,7 @@ pub fn figures(o: &FiguresOptions) -> Result<(), RunError> {
         return Err(RunError::invalid("--jobs", 0, "≥ 1"));
     }
     // 1. The plan.
-    let plan = Plan::new(o.scale, &figures, &o.sets)?;
+    let plan = Plan::new(o.scale, &figures, &o.sets, &o.points)?;
     if !o.dry_run {
         crate::run::files::remove_dead_temporaries(&o.out);
     }

@@ -242,6 +242,81 @@ pub struct Plan {
     pub figure_points: Vec<(Figure, Vec<Point>)>,
     /// The user's `--set` overrides, as given (passed on to Slurm tasks).
     pub sets: Vec<String>,
+    /// The user's `--point` selections, as given (passed on to Slurm tasks); empty: every point.
+    pub selected: Vec<String>,
+}
+
+/// `--point chi=0.01,zeta=0.5`: keeps the plan's points with these values (keys `chi`, which also
+/// takes `dry`, `zeta` and `gamma`; a key not given matches every value), so a figure can be
+/// drawn from part of its grid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointSelection {
+    text: String,
+    friction: Option<Friction>,
+    zeta: Option<f64>,
+    gamma: Option<f64>,
+}
+
+impl PointSelection {
+    pub fn parse(text: &str) -> Result<PointSelection, RunError> {
+        let mut sel = PointSelection { text: text.to_string(), friction: None, zeta: None, gamma: None };
+        for pair in text.split(',') {
+            let (key, value) = crate::run::config::parse_assignment("--point", pair)?;
+            let number = || match value {
+                toml::Value::Float(x) if x.is_finite() => Ok(x),
+                toml::Value::Integer(i) => Ok(i as f64),
+                _ => Err(RunError::Parse(format!("--point {text}: {key} takes a number, not {value}"))),
+            };
+            match key.as_str() {
+                "chi" if value.as_str() == Some("dry") => sel.friction = Some(Friction::Dry),
+                "chi" => sel.friction = Some(Friction::Chi(number()?)),
+                "zeta" => sel.zeta = Some(number()?),
+                "gamma" => sel.gamma = Some(number()?),
+                _ => {
+                    return Err(RunError::Parse(format!(
+                        "--point {text}: `{key}` is not a key of the figures' points (chi, zeta, gamma)"
+                    )))
+                }
+            }
+        }
+        Ok(sel)
+    }
+
+    fn matches(&self, p: &Point) -> bool {
+        let same = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
+        let friction = match (self.friction, p.friction) {
+            (None, _) | (Some(Friction::Dry), Friction::Dry) => true,
+            (Some(Friction::Chi(a)), Friction::Chi(b)) => same(a, b),
+            _ => false,
+        };
+        friction && self.zeta.is_none_or(|z| same(z, p.zeta)) && self.gamma.is_none_or(|g| same(g, p.gamma))
+    }
+}
+
+/// `wanted` with only the points one of `selections` matches (all of them if there are none); a
+/// selection that matches none of the figures' points is refused with the points there are.
+fn select(
+    wanted: Vec<(Point, u64, Figure)>,
+    selections: &[PointSelection],
+) -> Result<Vec<(Point, u64, Figure)>, RunError> {
+    if selections.is_empty() {
+        return Ok(wanted);
+    }
+    if let Some(unmatched) = selections.iter().find(|s| !wanted.iter().any(|(p, _, _)| s.matches(p))) {
+        let mut there: Vec<String> = Vec::new();
+        for (p, _, _) in &wanted {
+            let t = format!("chi={},zeta={},gamma={}", p.friction.label(), p.zeta, p.gamma);
+            if !there.contains(&t) {
+                there.push(t);
+            }
+        }
+        return Err(RunError::Parse(format!(
+            "--point {}: no point of these figures matches; their points are {}",
+            unmatched.text,
+            there.join(" ")
+        )));
+    }
+    Ok(wanted.into_iter().filter(|(p, _, _)| selections.iter().any(|s| s.matches(p))).collect())
 }
 
 /// The points each of `figures` draws (the paper's captions), with how many seeds each takes
@@ -285,15 +360,17 @@ fn wanted_points(figures: &[Figure], spec: &ScaleSpec, zeta0: f64, gamma0: f64) 
 }
 
 impl Plan {
-    /// The runs `figures` need at `scale`, with `sets` (`KEY=VALUE`) over the scale's base.
+    /// The runs `figures` need at `scale`, with `sets` (`KEY=VALUE`) over the scale's base, at
+    /// the points one of `selected` (`--point`) matches, or at all of them if it is empty.
     /// Every run's parameters are validated here, before anything runs.
-    pub fn new(scale: Scale, figures: &[Figure], sets: &[String]) -> Result<Plan, RunError> {
+    pub fn new(scale: Scale, figures: &[Figure], sets: &[String], selected: &[String]) -> Result<Plan, RunError> {
         let spec = scale.spec();
         let mut scale_sets: Vec<String> = vec![format!("zeta={UNSTATED_ZETA}")];
         scale_sets.extend(spec.overrides.iter().map(|s| s.to_string()));
         let base = load_params_over(&scale_sets, sets)?;
         base.validate().map_err(|e| RunError::from(e).context("--set"))?;
-        let wanted = wanted_points(figures, &spec, base.zeta, base.gamma);
+        let selections = selected.iter().map(|t| PointSelection::parse(t)).collect::<Result<Vec<_>, _>>()?;
+        let wanted = select(wanted_points(figures, &spec, base.zeta, base.gamma), &selections)?;
         let mut jobs: Vec<Job> = Vec::new();
         let mut points: Vec<(Point, Vec<Figure>)> = Vec::new();
         let mut figure_points: Vec<(Figure, Vec<Point>)> = figures.iter().map(|&f| (f, Vec::new())).collect();
@@ -330,6 +407,7 @@ impl Plan {
             points,
             figure_points,
             sets: sets.to_vec(),
+            selected: selected.to_vec(),
         })
     }
 

@@ -130,6 +130,13 @@ fn markdown(drawn: &Drawn) -> String {
         b.zeta,
         Params::default().zeta
     );
+    if !plan.selected.is_empty() {
+        let _ = writeln!(
+            s,
+            "- Only part of each figure's points: those `--point {}` matches; the figures draw nothing of the rest.",
+            plan.selected.join("` or `--point ")
+        );
+    }
     if failed.is_empty() {
         let _ = writeln!(s, "- Every run finished.\n");
     } else {

@@ -143,6 +143,9 @@ fn common_args(plan: &Plan, out: &Path, o: &SlurmOptions) -> String {
     for s in &plan.sets {
         let _ = write!(a, " --set {}", quote(s));
     }
+    for p in &plan.selected {
+        let _ = write!(a, " --point {}", quote(p));
+    }
     a
 }
 
