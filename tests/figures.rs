@@ -198,4 +198,16 @@ fn the_smoke_scale_draws_every_figure_and_resumes_without_running_again() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("0 to run"), "{}", stderr(&o));
     assert_eq!(csv_files(&out), csvs);
+    // Part of Fig. 2's grid from the same runs: only those points drawn, and the report says so.
+    let part = dir.path().join("part");
+    std::fs::create_dir_all(&part).unwrap();
+    std::os::unix::fs::symlink(out.join("runs"), part.join("runs")).unwrap();
+    let args = ["figures", "--out", part.to_str().unwrap(), "--scale", "smoke", "--only", "2", "--point", "zeta=0.5"];
+    let o = monolayer(&[&args[..], &["--stage", "figures"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let fits = std::fs::read_to_string(part.join("fig2_fits.csv")).unwrap();
+    let zetas: Vec<&str> = fits.lines().skip(1).map(|l| l.split(',').nth(1).unwrap()).collect();
+    assert!(!zetas.is_empty() && zetas.iter().all(|z| *z == "0.5"), "{fits}");
+    let md = std::fs::read_to_string(part.join("figures.md")).unwrap();
+    assert!(md.contains("--point zeta=0.5") && md.contains("**Drawn at the selected points only**"), "{md}");
 }

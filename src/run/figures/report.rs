@@ -164,6 +164,14 @@ fn markdown(drawn: &Drawn) -> String {
         let _ = writeln!(s, "Files: {}, and `{stem}.svg` beside the PNG.\n", files.join(", "));
         let _ = writeln!(s, "**The paper:** {paper}\n");
         let _ = writeln!(s, "**Here:** {here} {}.\n", m.runs);
+        if !plan.selected.is_empty() {
+            let points: Vec<String> = plan
+                .points_of(m.figure)
+                .iter()
+                .map(|p| format!("(χ = {}, ζ = {}, γ = {})", p.friction.label(), p.zeta, p.gamma))
+                .collect();
+            let _ = writeln!(s, "**Drawn at the selected points only** (`--point`): {}.\n", points.join(", "));
+        }
         let _ = writeln!(s, "**Measured:**\n");
         for line in &m.measured {
             let _ = writeln!(s, "- {line}");
