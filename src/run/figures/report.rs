@@ -5,7 +5,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use super::draw::Drawn;
+use super::draw::{Drawn, Made};
 use super::plan::{Figure, Plan, S1_INITIAL_GAP};
 use crate::model::Params;
 use crate::run::error::RunError;
@@ -148,35 +148,41 @@ fn markdown(drawn: &Drawn) -> String {
         );
     }
     for m in &drawn.figures {
-        let (title, paper, here) = about(m.figure, plan);
-        let stem = m.figure.stem();
-        let _ = writeln!(s, "## {title}\n");
-        let _ = writeln!(s, "![{title}]({stem}.png)\n");
-        let files: Vec<String> = m
-            .files
-            .iter()
-            .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-            .filter(|n| n.ends_with(".csv"))
-            .map(|n| format!("[{n}]({n})"))
-            .collect();
-        // The SVG is written beside the PNG, but not linked: a copy of the report may keep only
-        // the PNGs (docs/evidence/ does), and a link must not lead nowhere.
-        let _ = writeln!(s, "Files: {}, and `{stem}.svg` beside the PNG.\n", files.join(", "));
-        let _ = writeln!(s, "**The paper:** {paper}\n");
-        let _ = writeln!(s, "**Here:** {here} {}.\n", m.runs);
-        if !plan.selected.is_empty() {
-            let points: Vec<String> = plan
-                .points_of(m.figure)
-                .iter()
-                .map(|p| format!("(χ = {}, ζ = {}, γ = {})", p.friction.label(), p.zeta, p.gamma))
-                .collect();
-            let _ = writeln!(s, "**Drawn at the selected points only** (`--point`): {}.\n", points.join(", "));
-        }
-        let _ = writeln!(s, "**Measured:**\n");
-        for line in &m.measured {
-            let _ = writeln!(s, "- {line}");
-        }
-        s.push('\n');
+        figure_section(&mut s, m, plan);
     }
     s
+}
+
+/// One figure's section: its picture, its files, what the paper says, how it was measured here
+/// (and at which points, if `--point` chose some), and the numbers.
+fn figure_section(s: &mut String, m: &Made, plan: &Plan) {
+    let (title, paper, here) = about(m.figure, plan);
+    let stem = m.figure.stem();
+    let _ = writeln!(s, "## {title}\n");
+    let _ = writeln!(s, "![{title}]({stem}.png)\n");
+    let files: Vec<String> = m
+        .files
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .filter(|n| n.ends_with(".csv"))
+        .map(|n| format!("[{n}]({n})"))
+        .collect();
+    // The SVG is written beside the PNG, but not linked: a copy of the report may keep only
+    // the PNGs (docs/evidence/ does), and a link must not lead nowhere.
+    let _ = writeln!(s, "Files: {}, and `{stem}.svg` beside the PNG.\n", files.join(", "));
+    let _ = writeln!(s, "**The paper:** {paper}\n");
+    let _ = writeln!(s, "**Here:** {here} {}.\n", m.runs);
+    if !plan.selected.is_empty() {
+        let points: Vec<String> = plan
+            .points_of(m.figure)
+            .iter()
+            .map(|p| format!("(χ = {}, ζ = {}, γ = {})", p.friction.label(), p.zeta, p.gamma))
+            .collect();
+        let _ = writeln!(s, "**Drawn at the selected points only** (`--point`): {}.\n", points.join(", "));
+    }
+    let _ = writeln!(s, "**Measured:**\n");
+    for line in &m.measured {
+        let _ = writeln!(s, "- {line}");
+    }
+    s.push('\n');
 }
