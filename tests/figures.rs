@@ -106,7 +106,9 @@ fn a_point_selection_keeps_only_those_points_of_the_plan() {
     let e = Plan::new(Scale::Evidence, &[Figure::Fig2], &[], &["xi=1".into()]).unwrap_err().to_string();
     assert!(e.contains("`xi`") && e.contains("chi, zeta, gamma"), "{e}");
     let e = Plan::new(Scale::Evidence, &[Figure::Fig2], &[], &["zeta=high".into()]).unwrap_err().to_string();
-    assert!(e.contains("zeta takes a number"), "{e}");
+    assert!(e.contains("--point zeta=high") && e.contains("`zeta`") && e.contains("finite number"), "{e}");
+    let e = Plan::new(Scale::Evidence, &[Figure::Fig2], &[], &["chi=0.01,chi=0.005".into()]).unwrap_err().to_string();
+    assert!(e.contains("sets `chi` twice"), "{e}");
     // The dry limit by name (Fig. S1), and the Slurm tasks get the selection.
     let dry = Plan::new(Scale::Evidence, &[Figure::FigS1], &[], &["chi=dry".into()]).unwrap();
     assert!(!dry.jobs.is_empty() && dry.jobs.iter().all(|j| j.name.starts_with("dry")));

@@ -29,6 +29,19 @@ pub fn parse_assignment(flag: &str, arg: &str) -> Result<(String, toml::Value), 
     Ok((k, parse_value(v)))
 }
 
+/// `K1=V1,K2=V2,…` as given to `flag` (e.g. `--point`): one value per key, a key given twice
+/// refused.
+pub fn parse_assignments(flag: &str, arg: &str) -> Result<toml::Table, RunError> {
+    let mut table = toml::Table::new();
+    for pair in arg.split(',') {
+        let (k, v) = parse_assignment(flag, pair)?;
+        if table.insert(k.clone(), v).is_some() {
+            return Err(RunError::Options(format!("{flag} {arg}: sets `{k}` twice")));
+        }
+    }
+    Ok(table)
+}
+
 /// `KEY=V1,V2,…` as given to `flag` (e.g. `--grid`).
 pub fn parse_list(flag: &str, arg: &str) -> Result<(String, Vec<toml::Value>), RunError> {
     let (k, vs) = split(flag, arg, "V1,V2,…")?;

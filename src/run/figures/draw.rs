@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::measures::{Measures, RunData};
-use super::plan::{Figure, Friction, Plan, Point};
+use super::plan::{same, Figure, Friction, Plan, Point};
 use super::plot::{self, Marker, Panel, Series};
 use crate::analysis::{classify, correlation_length, fitted_lifetime, Precursor, Regime, DEPTH};
 use crate::run::error::RunError;
@@ -74,10 +74,6 @@ fn num(x: f64) -> String {
     } else {
         "inf".into()
     }
-}
-
-fn same(a: f64, b: f64) -> bool {
-    (a - b).abs() <= 1e-12 * a.abs().max(b.abs())
 }
 
 fn is_chi(p: &Point, chi: f64) -> bool {

@@ -9,7 +9,7 @@
 use std::collections::BTreeSet;
 
 use crate::model::Params;
-use crate::run::config::load_params_over;
+use crate::run::config::{load_params_over, number, parse_assignments};
 use crate::run::error::RunError;
 use crate::run::sweep::Job;
 
@@ -203,6 +203,12 @@ impl Friction {
 /// it was the parameters' default (now ζ = 0.5, where `run` opens holes soonest).
 pub const UNSTATED_ZETA: f64 = 0.3;
 
+/// Two values of a point's parameter are the same (written the same in decimal, read back within
+/// rounding).
+pub(super) fn same(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-12 * a.abs().max(b.abs())
+}
+
 /// A parameter point of the plan; the rest of the parameters are the scale's base.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Point {
@@ -260,18 +266,13 @@ pub struct PointSelection {
 impl PointSelection {
     pub fn parse(text: &str) -> Result<PointSelection, RunError> {
         let mut sel = PointSelection { text: text.to_string(), friction: None, zeta: None, gamma: None };
-        for pair in text.split(',') {
-            let (key, value) = crate::run::config::parse_assignment("--point", pair)?;
-            let number = || match value {
-                toml::Value::Float(x) if x.is_finite() => Ok(x),
-                toml::Value::Integer(i) => Ok(i as f64),
-                _ => Err(RunError::Parse(format!("--point {text}: {key} takes a number, not {value}"))),
-            };
+        for (key, value) in parse_assignments("--point", text)? {
+            let real = || number(&key, &value).map_err(|e| e.context(format!("--point {text}")));
             match key.as_str() {
                 "chi" if value.as_str() == Some("dry") => sel.friction = Some(Friction::Dry),
-                "chi" => sel.friction = Some(Friction::Chi(number()?)),
-                "zeta" => sel.zeta = Some(number()?),
-                "gamma" => sel.gamma = Some(number()?),
+                "chi" => sel.friction = Some(Friction::Chi(real()?)),
+                "zeta" => sel.zeta = Some(real()?),
+                "gamma" => sel.gamma = Some(real()?),
                 _ => {
                     return Err(RunError::Parse(format!(
                         "--point {text}: `{key}` is not a key of the figures' points (chi, zeta, gamma)"
@@ -283,7 +284,6 @@ impl PointSelection {
     }
 
     fn matches(&self, p: &Point) -> bool {
-        let same = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
         let friction = match (self.friction, p.friction) {
             (None, _) | (Some(Friction::Dry), Friction::Dry) => true,
             (Some(Friction::Chi(a)), Friction::Chi(b)) => same(a, b),

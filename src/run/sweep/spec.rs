@@ -21,7 +21,7 @@ use std::path::Path;
 use serde::Deserialize;
 
 use crate::model::Params;
-use crate::run::config::{number, params_from_table, parse_assignment, parse_list};
+use crate::run::config::{number, params_from_table, parse_assignments, parse_list};
 use crate::run::error::RunError;
 
 /// A sweep as written in its file (or assembled from the command line).
@@ -96,14 +96,7 @@ impl SweepSpec {
 
     /// `K1=V1,K2=V2,…` from the command line as one point (values in TOML syntax, one each).
     pub fn add_point(&mut self, arg: &str) -> Result<(), RunError> {
-        let mut point = toml::Table::new();
-        for pair in arg.split(',') {
-            let (k, v) = parse_assignment("--point", pair)?;
-            if point.insert(k.clone(), v).is_some() {
-                return Err(RunError::Options(format!("--point {arg}: sets `{k}` twice")));
-            }
-        }
-        self.points.push(point);
+        self.points.push(parse_assignments("--point", arg)?);
         Ok(())
     }
 
