@@ -75,7 +75,8 @@ const drawn = (p) => p.evaluate(() => window.demo.drawn ?? 0);
 // Each check: { name, core (run in every engine), long (plays the paper's tissue to its first
 // hole), skip: { engine: why }, chromium: where
 // demo.test.mjs covers it, run(browser, ctx) }. ctx: { base (the page, cross-origin isolated),
-// plainBase (the page without COOP/COEP), engine, nativeRun (a native run's directory and
+// plainBase (the page without COOP/COEP), stallBase (the page whose threaded core never starts its
+// threads), engine, nativeRun (a native run's directory and
 // frames), metrics (reported), launch(opts) (another browser of this engine) }.
 export const CHECKS = [
   {
@@ -446,6 +447,45 @@ export const CHECKS = [
       assert.equal(one.fingerprint, two.fingerprint, 'one thread and two part');
       assert.equal(single.step, two.step);
       assert.equal(single.fingerprint, two.fingerprint, 'the threaded build and the single-thread one part');
+    },
+  },
+  {
+    name: "a threaded core whose threads never start is replaced by the single-thread build, with the same bits",
+    core: true,
+    async run(b, ctx) {
+      // ctx.stallBase's server never answers the fetch() by which each of the threaded core's
+      // thread Workers gets its script, so the pool never starts: the stall Firefox shows now
+      // and then, there with the worker blocked, here waiting.
+      const query = '/?preset=persistent&seed=1&paused&threads=2';
+      const p = await openPage(b, ctx.stallBase, query);
+      const r = await p.evaluate(async () => {
+        const call = window.demo.call;
+        await call('step', 60);
+        const s = await call('stats');
+        return { step: s.step, fingerprint: await call('fingerprint'), threads: s.threads, note: s.coreNote,
+          stalled: window.demo.threadStartStalled, notices: window.demo.notices, engineText: document.getElementById('engine').textContent };
+      });
+      await p.close();
+      const q = await openPage(b, ctx.base, query);
+      const normal = await q.evaluate(async () => {
+        await window.demo.call('step', 60);
+        const s = await window.demo.call('stats');
+        return { step: s.step, fingerprint: await window.demo.call('fingerprint'), threads: s.threads,
+          startMs: window.demo.threadStartMs, stalled: window.demo.threadStartStalled };
+      });
+      await q.close();
+      ctx.metrics.threadStart = { stalled: r, normalStartMs: normal.startMs };
+      console.log(`       ${ctx.engine}: the threaded core's threads started in ${normal.startMs?.toFixed(0)} ms; stalled: ${r.note}`);
+      assert.match(r.note, /^single-thread build: the threaded core's threads did not start within \d+ s$/, r.note);
+      assert.equal(r.threads, 1);
+      assert.equal(r.stalled, r.note.replace('single-thread build: ', ''));
+      assert(r.notices.some((n) => n.includes('did not start')), `no notice: ${JSON.stringify(r.notices)}`);
+      assert(r.engineText.includes('did not start'), r.engineText);
+      assert.equal(normal.threads, 2);
+      assert.equal(r.step, normal.step);
+      assert.equal(r.fingerprint, normal.fingerprint, 'the replacement steps other bits than the threaded core');
+      assert.equal(normal.stalled, undefined, 'a normal start was taken for a stall');
+      assert(normal.startMs < 20_000, `a normal start took ${normal.startMs} ms`);
     },
   },
   {

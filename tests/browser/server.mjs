@@ -10,6 +10,7 @@
 //   const server = await serve({ isolated: false }); // as a host that sends no such headers
 //   const server = await serve({ gzip: false });     // nothing compressed on the wire
 //   const server = await serve({ sent: (path, bytes) => … });   // each body as sent
+//   const server = await serve({ stall: (path, req) => … });  // true: that request is never answered
 //   const base = `http://127.0.0.1:${server.address().port}`;   …   server.close();
 
 import { createServer } from 'node:http';
@@ -25,11 +26,16 @@ const TYPES = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/cs
 const GZIP = new Set(['.html', '.js', '.css', '.wasm', '.bin']);
 
 /** Serves www/; resolves to the listening http.Server. */
-export function serve({ isolated = true, gzip = true, sent = null } = {}) {
+export function serve({ isolated = true, gzip = true, sent = null, stall = null } = {}) {
   const gzipped = new Map(); // file → { mtime, body }
+  const stalled = new Set();
   const server = createServer(async (req, res) => {
     const url = new URL(req.url, 'http://x');
     const rel = decodeURIComponent(url.pathname === '/' ? '/index.html' : url.pathname);
+    if (stall?.(rel, req)) {
+      stalled.add(res);
+      return;
+    }
     const file = path.join(WWW, path.normalize(rel));
     if (!file.startsWith(WWW)) return res.writeHead(403).end();
     try {
@@ -60,5 +66,11 @@ export function serve({ isolated = true, gzip = true, sent = null } = {}) {
       res.writeHead(404).end();
     }
   });
+  // A stalled answer would keep close() waiting on its connection.
+  const close = server.close.bind(server);
+  server.close = (done) => {
+    stalled.forEach((res) => res.destroy());
+    return close(done);
+  };
   return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
 }

@@ -84,9 +84,51 @@ function notify(lines) {
 }
 
 // --- the simulation's worker ------------------------------------------------------------------------
-const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+// The threaded core's start (wasm-bindgen-rayon: a Worker per thread, then rayon's pool) now and
+// then never ends in Firefox: the worker stays blocked at "starting the threaded core's threads".
+// The page does not wait on it for ever. A worker still starting them after this long is replaced
+// by one told everything the first was told, to step on the single-thread build (the same bits,
+// slower). A normal start takes well under a second (`demo.threadStartMs`).
+const THREAD_START_LIMIT_MS = 20_000;
+const threadStart = {
+  /** @type {ReturnType<typeof setTimeout> | undefined} */ timer: undefined,
+  startedAt: 0,
+  /** What the worker was told until its first 'ready', to tell a replacement; null after it.
+   * @type {WorkerIn[] | null} */
+  told: [],
+};
+const newWorker = () => new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+let worker = newWorker();
 /** @param {WorkerIn} m */
-const tell = (m) => worker.postMessage(m);
+const tell = (m) => {
+  threadStart.told?.push(m);
+  worker.postMessage(m);
+};
+
+// Follows the worker's stages: a start of the threaded core's threads is timed, and the worker
+// replaced if it does not end in THREAD_START_LIMIT_MS.
+/** @param {boolean} starting */
+function watchThreadStart(starting) {
+  if (threadStart.timer !== undefined) {
+    clearTimeout(threadStart.timer);
+    threadStart.timer = undefined;
+    demo.threadStartMs = performance.now() - threadStart.startedAt;
+  }
+  if (!starting) return;
+  threadStart.startedAt = performance.now();
+  threadStart.timer = setTimeout(replaceStalledWorker, THREAD_START_LIMIT_MS);
+}
+
+function replaceStalledWorker() {
+  threadStart.timer = undefined;
+  const why = `the threaded core's threads did not start within ${THREAD_START_LIMIT_MS / 1000} s`;
+  demo.threadStartStalled = why;
+  worker.terminate();
+  worker = newWorker();
+  listen(worker);
+  for (const m of threadStart.told ?? []) worker.postMessage(m.type === 'new' ? { ...m, singleThread: why } : m);
+  notify([`The page's threaded core did not start (${why}): it steps on one thread.`]);
+}
 /** @type {Map<number, { resolve: (v: any) => void, reject: (e: Error) => void }>} */
 const calls = new Map();
 let nextCall = 0;
@@ -118,10 +160,21 @@ function hideProgress() {
   progressShown = false;
 }
 
-worker.onerror = (/** @type {ErrorEvent} */ e) => fatal('The simulation worker failed', e.message ?? e);
+/** @param {Worker} w */
+function listen(w) {
+  w.onerror = (/** @type {ErrorEvent} */ e) => {
+    watchThreadStart(false);
+    fatal('The simulation worker failed', e.message ?? e);
+  };
+  w.onmessage = onWorkerMessage;
+}
+listen(worker);
+
 /** @param {MessageEvent<WorkerOut>} e */
-worker.onmessage = (e) => {
+function onWorkerMessage(e) {
   const m = e.data;
+  if (m.type === 'stage' || m.type === 'ready' || m.type === 'fatal') watchThreadStart(m.type === 'stage' && m.threadStart === true);
+  if (m.type === 'ready') threadStart.told = null;
   if (m.type === 'frame') {
     page.stats = m.stats;
     page.cores = m.cores;
@@ -163,7 +216,7 @@ worker.onmessage = (e) => {
   } else if (m.type === 'fatal') {
     fatal('The simulation stopped', m.message);
   }
-};
+}
 
 // Which engine steps the tissue, said plainly: the CPU core compiled to WebAssembly gives the
 // native program's bits for the same parameters and seed; the GPU engine steps the same model

@@ -89,8 +89,10 @@
 
 /**
  * The messages in.
+ * `singleThread`: why this worker must not start the threaded core (the page's worker before it
+ * did not finish starting its threads; main.js), said in `coreNote`.
  * @typedef {{ type: 'new', size: Size, params: ModelParams, seed: number, shipped: string | null,
- *   engine: EngineChoice, threads: number | null }} NewTissue
+ *   engine: EngineChoice, threads: number | null, singleThread?: string }} NewTissue
  * @typedef {NewTissue
  *   | { type: 'engine', engine: EngineChoice }
  *   | { type: 'play', on: boolean }
@@ -149,7 +151,7 @@
  * The messages out.
  * @typedef {{ type: 'ready', stats: Stats }
  *   | { type: 'progress', text: string }
- *   | { type: 'stage', text: string }
+ *   | { type: 'stage', text: string, threadStart?: boolean }
  *   | { type: 'engine', stats: Stats, lost?: string }
  *   | { type: 'frame', parts: FrameParts, stats: Stats, cores: number }
  *   | { type: 'stopped', why: string, active: boolean }
@@ -285,25 +287,33 @@ function fatal(e) {
 }
 
 // What the worker is waiting on while it makes a tissue, for the page's `demo.stage` (a page
-// that never becomes ready says where it stopped).
-/** @param {string} text */
-function stage(text) {
-  post({ type: 'stage', text });
+// that never becomes ready says where it stopped). `threadStart` marks the start of the threaded
+// core's threads, which the page watches (main.js, THREAD_START_LIMIT_MS).
+/** @param {string} text @param {boolean} [threadStart] */
+function stage(text, threadStart = false) {
+  post({ type: 'stage', text, threadStart });
+}
+
+// Why the tissue `m` is to be stepped by the single-thread build; undefined: by the threaded one.
+/** @param {NewTissue} m @returns {Promise<string | undefined>} */
+async function singleThreadReason(m) {
+  if (m.singleThread) return m.singleThread;
+  if (!self.crossOriginIsolated) return 'the page is not cross-origin isolated';
+  if (typeof SharedArrayBuffer === 'undefined') return 'this browser has no SharedArrayBuffer';
+  if (m.engine === 'gpu') return 'the GPU engine is in the single-thread build';
+  if (m.engine === 'auto') {
+    stage('asking WebGPU for an adapter');
+    const found = await gpuAdapterOnce();
+    if (!('error' in found) && !found.software) return 'the GPU engine may step here, and it is in the single-thread build';
+  }
+  return undefined;
 }
 
 // Loads the core for the first tissue `m` (the build stays for the worker's life).
 /** @param {NewTissue} m */
 async function loadCore(m) {
   if (loaded.core) return;
-  let why;
-  if (!self.crossOriginIsolated) why = 'the page is not cross-origin isolated';
-  else if (typeof SharedArrayBuffer === 'undefined') why = 'this browser has no SharedArrayBuffer';
-  else if (m.engine === 'gpu') why = 'the GPU engine is in the single-thread build';
-  else if (m.engine === 'auto') {
-    stage('asking WebGPU for an adapter');
-    const found = await gpuAdapterOnce();
-    if (!('error' in found) && !found.software) why = 'the GPU engine may step here, and it is in the single-thread build';
-  }
+  let why = await singleThreadReason(m);
   if (!why) {
     try {
       // A specifier the type check does not follow: the threaded build exists only where the
@@ -314,7 +324,7 @@ async function loadCore(m) {
       const threaded = /** @type {Core & { default(): Promise<unknown>, initThreadPool(n: number): Promise<unknown> }} */ (
         await import(THREADED));
       await threaded.default();
-      stage('starting the threaded core\'s threads');
+      stage('starting the threaded core\'s threads', true);
       await threaded.initThreadPool(Math.max(1, m.threads ?? navigator.hardwareConcurrency ?? 1));
       loaded.core = threaded;
       loaded.coreNote = 'threaded build, cross-origin isolated';
