@@ -127,8 +127,9 @@ function replaceStalledWorker() {
   worker = newWorker();
   listen(worker);
   for (const m of threadStart.told ?? []) worker.postMessage(m.type === 'new' ? { ...m, singleThread: why } : m);
-  notify([`The page's threaded core did not start (${why}): it steps on one thread.`]);
+  notify([`The threaded core's threads did not start within ${THREAD_START_LIMIT_MS / 1000} s: the page steps on one thread instead (the same results, slower).`]);
 }
+
 /** @type {Map<number, { resolve: (v: any) => void, reject: (e: Error) => void }>} */
 const calls = new Map();
 let nextCall = 0;
