@@ -106,7 +106,8 @@ after(async () => {
 // guard against Firefox collecting them) did not change it: 3 hangs in 30 runs. The page now
 // replaces such a worker after THREAD_START_LIMIT_MS (main.js) with one on the single-thread build
 // (the check "a threaded core whose threads never start" holds it), so that stall costs a check
-// 20 s and no longer hangs it; a check that needs two threads would then fail. A hung check is
+// 20 s and no longer hangs it; the checks that need the threaded core then open their page once
+// more (twiceIfStalled in checks.mjs). A hung check is
 // tried once more in a new browser, and the log says so; a second hang fails it. Chromium gets no second try. A check's time before it counts
 // as hung: one minute (the others take under 10 s), four for those that play the paper's tissue to
 // its first hole (`long`: 87 s is the slowest seen, WebKit's on a loaded machine).

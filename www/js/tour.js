@@ -54,8 +54,11 @@ export const TOUR = [
     id: 'verdict', title: 'What the paper claims, and what this model found', field: 'tissue', next: true,
     // The verdict is docs/figures.md's "the argument" row (a browser test holds them together).
     text: 'The paper argues that holes open from the collective motion of the cells, not from a tissue that thins '
-      + 'first. What this model found — not shown in this model: a forecast from the motion beats thinning alone on '
-      + 'held-out seeds only one frame ahead (AUC +0.022 ± 0.012), not 3–5 frames ahead nor on covered sites.',
+      + 'first. What this model found — by correlation not shown: a forecast from the motion beats thinning alone on '
+      + 'held-out seeds only one frame ahead (AUC +0.022 ± 0.012), not 3–5 frames ahead nor on covered sites; by '
+      + 'intervention supported: activity switched off 1–5 frames before prevents every tear the replicas make, and '
+      + 'the thinned site refills. "What if?" asks it of the hole you just watched: it replays it with the motion '
+      + 'switched off.',
   },
 ];
 
