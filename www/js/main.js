@@ -122,12 +122,11 @@ function watchThreadStart(starting) {
 function replaceStalledWorker() {
   threadStart.timer = undefined;
   const why = `the threaded core's threads did not start within ${THREAD_START_LIMIT_MS / 1000} s`;
-  demo.threadStartStalled = why;
   worker.terminate();
   worker = newWorker();
   listen(worker);
   for (const m of threadStart.told ?? []) worker.postMessage(m.type === 'new' ? { ...m, singleThread: why } : m);
-  notify([`The threaded core's threads did not start within ${THREAD_START_LIMIT_MS / 1000} s: the page steps on one thread instead (the same results, slower).`]);
+  notify([`${why[0].toUpperCase()}${why.slice(1)}: the page steps on one thread instead (the same results, slower).`]);
 }
 
 /** @type {Map<number, { resolve: (v: any) => void, reject: (e: Error) => void }>} */
@@ -174,8 +173,6 @@ listen(worker);
 /** @param {MessageEvent<WorkerOut>} e */
 function onWorkerMessage(e) {
   const m = e.data;
-  if (m.type === 'stage' || m.type === 'ready' || m.type === 'fatal') watchThreadStart(m.type === 'stage' && m.threadStart === true);
-  if (m.type === 'ready') threadStart.told = null;
   if (m.type === 'frame') {
     page.stats = m.stats;
     page.cores = m.cores;
@@ -187,6 +184,7 @@ function onWorkerMessage(e) {
     if (m.error !== undefined) c?.reject(new Error(m.error));
     else c?.resolve(m.value);
   } else if (m.type === 'stage') {
+    watchThreadStart(m.threadStart === true);
     demo.stage = `worker: ${m.text}`;
   } else if (m.type === 'progress') {
     // The GPU engine's kernels compiling (once per device): shown over the view until the
@@ -201,6 +199,8 @@ function onWorkerMessage(e) {
     if (m.lost) notify([`${m.lost[0].toUpperCase()}${m.lost.slice(1)}.`]);
     onEngine?.();
   } else if (m.type === 'ready') {
+    watchThreadStart(false);
+    threadStart.told = null;
     hideProgress();
     page.stats = m.stats;
     showEngine(m.stats);
@@ -215,6 +215,7 @@ function onWorkerMessage(e) {
     showMessage(`The simulation stopped: ${m.why}\n\n${hint}`, true);
     demo.simError = m.why;
   } else if (m.type === 'fatal') {
+    watchThreadStart(false);
     fatal('The simulation stopped', m.message);
   }
 }
