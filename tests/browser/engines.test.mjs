@@ -107,9 +107,9 @@ after(async () => {
 // replaces such a worker after THREAD_START_LIMIT_MS (main.js) with one on the single-thread build
 // (the check "a threaded core whose threads never start" holds it), so that stall costs a check
 // 20 s and no longer hangs it; the checks that need the threaded core then open their page once
-// more (twiceIfStalled in checks.mjs). A hung check is
-// tried once more in a new browser, and the log says so; a second hang fails it. Chromium gets no second try. A check's time before it counts
-// as hung: one minute (the others take under 10 s), four for those that play the paper's tissue to
+// more (twiceIfStalled in checks.mjs). A hung check is tried once more in a new browser, and the
+// log says so; a second hang fails it. Chromium gets no second try. A check's time before it
+// counts as hung: one minute (the others take under 10 s), four for those that play the paper's tissue to
 // its first hole (`long`: 87 s is the slowest seen, WebKit's on a loaded machine).
 const ATTEMPT_MS = Number(process.env.ATTEMPT_MS ?? 60 * 1000);
 const LONG_ATTEMPT_MS = 4 * ATTEMPT_MS;
