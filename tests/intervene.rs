@@ -99,6 +99,15 @@ fn the_intervention_runs_every_arm_and_the_replicas_tear_where_the_parent_tore()
     for r in summary.iter().filter(|r| r["arm"] != "control" && r["sites"] == "nucleation") {
         assert!(!r["prevented"].is_empty(), "prevented share read against the replicas: {r:?}");
     }
+    // By point: one parent, one point, so each row is the whole table's at the nucleation sites.
+    let by_point = rows(&out.join("intervention_by_point.csv"));
+    let nucleation: Vec<_> = summary.iter().filter(|r| r["sites"] == "nucleation").collect();
+    assert_eq!(by_point.len(), nucleation.len());
+    for r in nucleation {
+        let b = by_point.iter().find(|b| b["arm"] == r["arm"] && b["k"] == r["k"]).unwrap();
+        assert_eq!((&b["chi"], &b["zeta"]), (&"0.001".to_string(), &"2.5".to_string()), "{b:?}");
+        assert_eq!((&b["nucleations"], &b["tear_share"]), (&r["cases"], &r["tear_share"]), "{b:?} against {r:?}");
+    }
     assert!(out.join("intervention.png").is_file() && out.join("intervention.svg").is_file());
     let traces = rows(&out.join("intervention_trace_summary.csv"));
     let speed = |arm: &str| {

@@ -590,6 +590,35 @@ fn cases_csv(plan: &Plan) -> String {
     s
 }
 
+/// Per parameter point (χ, ζ) of the parents, arm and lead: the nucleations and the mean over
+/// them of the share of their branches that tore at the site, as `intervention.csv` takes it
+/// over all points (its `nucleation` rows; too few per point for intervals).
+fn by_point_csv(plan: &Plan, outcomes: &[Outcome], o: &InterveneOptions) -> String {
+    let point = |c: &Case| {
+        let p = &plan.parents[c.parent].record.params;
+        (p.chi(), p.zeta)
+    };
+    let mut points: Vec<(f64, f64)> = plan.cases.iter().map(point).collect();
+    points.sort_by(|a, b| a.partial_cmp(b).expect("finite parameters"));
+    points.dedup();
+    let mut s = String::from("chi,zeta,arm,k,nucleations,tear_share\n");
+    for &arm in &o.arms {
+        let shares = unit_shares(&plan.cases, outcomes, arm, false);
+        for &(chi, zeta) in &points {
+            for &k in &o.leads {
+                let values: Vec<f64> = (0..plan.cases.len())
+                    .filter(|&i| plan.cases[i].k == k && point(&plan.cases[i]) == (chi, zeta))
+                    .filter_map(|i| shares[i])
+                    .collect();
+                let all: Vec<usize> = (0..values.len()).collect();
+                let share = csv::cell(mean_at(&values, &all), 4);
+                let _ = writeln!(s, "{chi},{zeta},{},{k},{},{share}", arm.name(), values.len());
+            }
+        }
+    }
+    s
+}
+
 fn outcomes_csv(plan: &Plan, outcomes: &[Outcome]) -> String {
     let mut s = String::from("case,run,seed,k,arm,replica,site,x,y,tore,tear_step\n");
     for o in outcomes {
@@ -951,6 +980,7 @@ fn score_and_write(
             for (name, text) in [
                 ("intervention.csv", summary_csv(&shares)),
                 ("intervention_cases.csv", cases_csv(plan)),
+                ("intervention_by_point.csv", by_point_csv(plan, outcomes.as_slice(), o)),
                 ("intervention_outcomes.csv", outcomes_csv(plan, &outcomes)),
                 ("intervention_traces.csv", traces_csv(plan, &trace)),
                 ("intervention_trace_summary.csv", trace_summary_csv(plan, &trace, o)),
